@@ -1,0 +1,1 @@
+"""LiDAR packet decoding: vendor packet bytes -> per-packet timing columns."""
