@@ -1,0 +1,41 @@
+"""`open_log`: pick the backend for a path by its form and its magic bytes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from syncaudit.errors import LogOpenError
+from syncaudit.logs.base import LogReader
+from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.rosbags_log import RosbagsLog
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def open_log(path: str | Path) -> LogReader:
+    """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`) or a ROS 1 `.bag`."""
+    path = Path(path)
+    if not path.exists():
+        raise LogOpenError(f"{path}: no such file or directory")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise LogOpenError(
+                f"{path}: directory has no metadata.yaml, so it is not a ROS 2 bag "
+                "(pass the .db3/.mcap file itself to read it without metadata)"
+            )
+        return RosbagsLog(path, ros1=False)
+    with path.open("rb") as handle:
+        head = handle.read(16)
+    if not head:
+        raise LogOpenError(f"{path}: file is empty")
+    if head.startswith(MCAP_MAGIC):
+        return McapLog(path)
+    if head.startswith(ROSBAG1_MAGIC):
+        return RosbagsLog(path, ros1=True)
+    if head.startswith(SQLITE_MAGIC):
+        return RosbagsLog(path, ros1=False)
+    raise LogOpenError(
+        f"{path}: unknown log format (expected MCAP, ROS 2 .db3/.mcap, or ROS 1 .bag)"
+    )
