@@ -1,0 +1,48 @@
+"""LiDAR columns: per packet (from the decoders) and per revolution (from the tracker)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.lidar.packets import PacketTiming
+
+
+@dataclass(frozen=True, slots=True)
+class PacketColumns:
+    """Every packet of one LiDAR topic: where it sits in the log plus its decoded timing."""
+
+    topic: str
+    driver_stamp_ns: NDArray[np.int64]
+    """(n,) per-packet stamp set by the LiDAR driver on receipt (checkpoint 242), host clock."""
+    log_time_ns: NDArray[np.int64]
+    """(n,) log time of the scan message that carried the packet."""
+    scan_index: NDArray[np.int64]
+    """(n,) index of that scan message in the topic."""
+    timing: PacketTiming
+    """Sensor-clock timing and azimuths per packet and block."""
+
+    @property
+    def t1_raw_ns(self) -> NDArray[np.int64]:
+        """Driver stamp minus sensor time: t1 plus any host/sensor clock offset."""
+        return self.driver_stamp_ns - self.timing.sensor_time_ns
+
+
+@dataclass(frozen=True, slots=True)
+class RevolutionColumns:
+    """One row per complete or partial revolution, split at the zero-crossing azimuth."""
+
+    zero_crossing_sensor_ns: NDArray[np.int64]
+    """(r,) sensor time at which the beam crossed the zero-crossing azimuth."""
+    omega_deg_s: NDArray[np.float64]
+    """(r,) mean angular velocity over the revolution (from time/azimuth trajectory)."""
+    packets: NDArray[np.int64]
+    """(r,) packets whose first block lies in the revolution."""
+    dropped_packets: NDArray[np.int64]
+    """(r,) packets missing inside the revolution, from gaps in the packet cadence."""
+    crossing_sensor_ns: NDArray[np.int64]
+    """(r, k) sensor time at which the beam crossed each target azimuth (-1 if not seen)."""
+    target_azimuth_deg: NDArray[np.float64]
+    """(k,) the target azimuths (absolute, degrees) the crossings refer to."""
