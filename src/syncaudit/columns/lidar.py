@@ -46,3 +46,12 @@ class RevolutionColumns:
     """(r, k) sensor time at which the beam crossed each target azimuth (-1 if not seen)."""
     target_azimuth_deg: NDArray[np.float64]
     """(k,) the target azimuths (absolute, degrees) the crossings refer to."""
+    zero_packet_sensor_ns: NDArray[np.int64]
+    """(r,) sensor time stamp of the packet in which the zero crossing fell."""
+    zero_packet_driver_ns: NDArray[np.int64]
+    """(r,) driver stamp (242) of that packet."""
+
+    @property
+    def count(self) -> int:
+        """Number of revolutions."""
+        return int(self.zero_crossing_sensor_ns.shape[0])

@@ -1,0 +1,194 @@
+"""`inspect_log`: what a log holds for a sync audit, as the `info` command shows it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
+from syncaudit.errors import NoDataError, SyncauditError
+from syncaudit.lidar.scan import LidarScan, scan_lidar
+from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.logs import LogReader, open_log
+from syncaudit.rig import CameraConfig, Rig
+
+CHECKPOINTS_BY_TYPE: dict[str, tuple[int, ...]] = {
+    "syncaudit_msgs/msg/TriggerEvent": (240, 242, 244, 246, 248),
+    "builtin_interfaces/msg/Time": (246,),
+    "sensor_msgs/msg/TimeReference": (246,),
+}
+"""Checkpoints of the trigger chain each trigger message type records."""
+
+
+@dataclass(frozen=True, slots=True)
+class TopicRow:
+    """One line of the topic table."""
+
+    name: str
+    msgtype: str
+    count: int | None
+    rate_hz: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class LidarRow:
+    """What the packets of one LiDAR topic say."""
+
+    topic: str
+    vendor: str
+    model: str
+    scans: int
+    packets: int
+    revolutions: int
+    rpm: float
+    packets_per_revolution: float
+    dropped_packets: int
+    dual_return: bool
+    clock_offset_s: float | None
+    clock_synchronised: bool | None
+    t1_p50_us: float | None
+    t1_p99_us: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class CameraRow:
+    """What the topics of one camera say."""
+
+    name: str
+    image_topic: str | None
+    frames: int
+    rate_hz: float | None
+    exposure_metadata: str | None
+    stamp_semantics: str
+    trigger_topic: str | None
+    checkpoints: tuple[int, ...]
+
+
+@dataclass(slots=True)
+class InfoReport:
+    """The `info` summary of one log."""
+
+    path: str
+    container: str
+    start_ns: int | None
+    end_ns: int | None
+    duration_s: float | None
+    messages: int | None
+    topics: list[TopicRow] = field(default_factory=list)
+    lidars: list[LidarRow] = field(default_factory=list)
+    cameras: list[CameraRow] = field(default_factory=list)
+    guessed: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form; NaN becomes None."""
+        return _clean(asdict(self))
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+def lidar_row(scan: LidarScan) -> LidarRow:
+    """The table row of a scanned LiDAR topic."""
+    clock = scan.clock
+    return LidarRow(
+        topic=scan.topic,
+        vendor=scan.vendor,
+        model=scan.model,
+        scans=scan.scans,
+        packets=scan.packets,
+        revolutions=scan.revolutions.count,
+        rpm=scan.rpm,
+        packets_per_revolution=scan.packets_per_revolution,
+        dropped_packets=scan.dropped_packets,
+        dual_return=scan.dual_return,
+        clock_offset_s=None if clock is None else clock.raw_median_ns / 1e9,
+        clock_synchronised=None if clock is None else clock.synchronised,
+        t1_p50_us=None if clock is None else clock.t1_p50_ns / 1e3,
+        t1_p99_us=None if clock is None else clock.t1_p99_ns / 1e3,
+    )
+
+
+def inspect_log(path: str | Path, rig: Rig | None = None) -> InfoReport:
+    """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records."""
+    with open_log(path) as log:
+        return _inspect(log, rig)
+
+
+def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
+    summary = log.summary
+    duration = summary.duration_s
+    report = InfoReport(
+        path=summary.path,
+        container=summary.container,
+        start_ns=summary.start_ns,
+        end_ns=summary.end_ns,
+        duration_s=duration,
+        messages=summary.message_count,
+    )
+    for info in sorted(log.topics.values(), key=lambda t: t.name):
+        rate = info.count / duration if info.count and duration else None
+        report.topics.append(TopicRow(info.name, info.msgtype, info.count, rate))
+    if not summary.message_count:
+        raise NoDataError(f"{summary.path}: the log holds no messages")
+    lidar_topics = (
+        [rig.lidar.topic]
+        if rig
+        else [t.name for t in log.topics.values() if is_packet_topic(t.msgtype)]
+    )
+    if rig is None and lidar_topics:
+        report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
+    for topic in lidar_topics:
+        try:
+            scan = scan_lidar(
+                log,
+                topic,
+                zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
+                azimuth_increases=rig.lidar.azimuth_increases if rig else True,
+                ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
+            )
+        except SyncauditError as exc:
+            report.warnings.append(f"{topic}: {exc}")
+            continue
+        report.lidars.append(lidar_row(scan))
+    cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)
+    if not (rig and rig.cameras) and cameras:
+        report.guessed.append(
+            "cameras by topic type and name: " + ", ".join(c.name for c in cameras)
+        )
+    for cam in cameras:
+        report.cameras.append(_camera_row(log, cam, duration))
+    report.warnings.extend(w.message for w in log.warnings)
+    if not report.lidars:
+        report.warnings.append("no LiDAR packet topic found: the sync audit needs one")
+    if not report.cameras:
+        report.warnings.append("no camera topic found: only the LiDAR side can be audited")
+    return report
+
+
+def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> CameraRow:
+    image = log.topics.get(cam.image_topic) if cam.image_topic else None
+    exposure = log.topics.get(cam.exposure_topic) if cam.exposure_topic else None
+    trigger = log.topics.get(cam.trigger_topic) if cam.trigger_topic else None
+    frames = image.count or 0 if image else 0
+    return CameraRow(
+        name=cam.name,
+        image_topic=cam.image_topic,
+        frames=frames,
+        rate_hz=frames / duration if frames and duration else None,
+        exposure_metadata=exposure.msgtype if exposure and exposure.msgtype in EXPOSURE_TYPES else None,
+        stamp_semantics=cam.stamp,
+        trigger_topic=cam.trigger_topic,
+        checkpoints=CHECKPOINTS_BY_TYPE.get(trigger.msgtype, ())
+        if trigger and trigger.msgtype in TRIGGER_TYPES
+        else (),
+    )

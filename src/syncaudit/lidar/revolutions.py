@@ -1,0 +1,195 @@
+"""Revolutions of a spinning LiDAR from its packets' (sensor time, azimuth) trajectory.
+
+The tracker is fed decoded packets chunk by chunk (a scan message at a time) and keeps
+only per-revolution state, so memory stays flat however long the log. It unwraps the
+azimuth into a monotonic angle, finds every crossing of the zero-crossing azimuth (the
+revolution boundaries) and of each target azimuth (camera centres) by linear
+interpolation between blocks, and counts packets and cadence gaps per revolution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.lidar.packets import PacketTiming
+
+FULL_TURN_DEG = 360.0
+MAX_BLOCK_STEP_DEG = 90.0
+"""Steps larger than this between consecutive blocks are gaps, not rotation samples."""
+
+
+@dataclass(slots=True)
+class _Carry:
+    """The last sample of the previous chunk, so interpolation spans chunk borders."""
+
+    time_ns: int
+    unwrapped_deg: float
+    packet_sensor_ns: int
+    packet_driver_ns: int
+
+
+@dataclass(slots=True)
+class RevolutionTracker:
+    """Streaming revolution finder; `feed` packets in time order, then `finish`."""
+
+    zero_azimuth_deg: float = 0.0
+    direction: int = 1
+    """+1 where the vendor azimuth grows with rotation, -1 where it shrinks."""
+    target_azimuth_deg: tuple[float, ...] = ()
+    _carry: _Carry | None = None
+    _omega_deg_ns: float = math.nan
+    _period_ns: float = math.nan
+    _last_packet_ns: int | None = None
+    _zero: dict[int, tuple[int, int, int]] = field(default_factory=dict)
+    _targets: dict[tuple[int, int], int] = field(default_factory=dict)
+    _packets: dict[int, int] = field(default_factory=dict)
+    _dropped: dict[int, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.direction not in (1, -1):
+            raise ValueError("direction must be +1 or -1")
+
+    @property
+    def _zero_oriented(self) -> float:
+        return (self.direction * self.zero_azimuth_deg) % FULL_TURN_DEG
+
+    def feed(self, timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> None:
+        """Add one chunk of packets (in time order) with their driver stamps."""
+        if timing.n_packets == 0:
+            return
+        n, b = timing.block_time_ns.shape
+        times = timing.block_time_ns.reshape(-1)
+        azimuth = timing.block_azimuth_deg.reshape(-1)
+        packet_of = np.repeat(np.arange(n, dtype=np.int64), b)
+        keep = np.isfinite(azimuth)
+        keep[1:] &= np.diff(times) > 0  # dual returns repeat a block's time: keep the first
+        times, azimuth, packet_of = times[keep], azimuth[keep], packet_of[keep]
+        if times.size == 0:
+            return
+        unwrapped = self._unwrap(times, self.direction * azimuth)
+        self._count_packets(timing.sensor_time_ns, unwrapped, packet_of)
+        self._find_crossings(times, unwrapped, packet_of, timing.sensor_time_ns, driver_stamp_ns)
+        last = int(packet_of[-1])
+        self._carry = _Carry(
+            int(times[-1]),
+            float(unwrapped[-1]),
+            int(timing.sensor_time_ns[last]),
+            int(driver_stamp_ns[last]),
+        )
+
+    def _unwrap(
+        self, times: NDArray[np.int64], oriented: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Monotonic angle: each step is the forward angle, plus whole turns across gaps."""
+        if self._carry is None:
+            prev_t, prev_u = int(times[0]), float(oriented[0] % FULL_TURN_DEG)
+        else:
+            prev_t, prev_u = self._carry.time_ns, self._carry.unwrapped_deg
+        step = np.diff(np.concatenate(([prev_u], oriented))) % FULL_TURN_DEG
+        dts = np.diff(np.concatenate(([prev_t], times))).astype(np.float64)
+        moving = (dts > 0) & (step > 0) & (step < MAX_BLOCK_STEP_DEG)
+        if np.any(moving):
+            self._omega_deg_ns = float(np.median(step[moving] / dts[moving]))
+        if math.isfinite(self._omega_deg_ns):
+            expected = self._omega_deg_ns * dts
+            step = step + FULL_TURN_DEG * np.round((expected - step) / FULL_TURN_DEG)
+        return prev_u + np.cumsum(step)
+
+    def _count_packets(
+        self,
+        sensor_ns: NDArray[np.int64],
+        unwrapped: NDArray[np.float64],
+        packet_of: NDArray[np.int64],
+    ) -> None:
+        """Packets per revolution, and packets missing from gaps in the sensor-time cadence."""
+        packets, first = np.unique(packet_of, return_index=True)
+        rev = np.floor((unwrapped[first] - self._zero_oriented) / FULL_TURN_DEG).astype(np.int64)
+        stamps = sensor_ns[packets]
+        prev = self._last_packet_ns
+        gaps = np.diff(stamps if prev is None else np.concatenate(([prev], stamps)))
+        positive = gaps[gaps > 0]
+        if positive.size:
+            median = float(np.median(positive))
+            self._period_ns = (
+                median if not math.isfinite(self._period_ns) else min(median, self._period_ns)
+            )
+        missing = np.zeros(stamps.size, dtype=np.int64)
+        if math.isfinite(self._period_ns) and gaps.size:
+            miss = np.maximum(np.rint(gaps / self._period_ns).astype(np.int64) - 1, 0)
+            missing[stamps.size - miss.size :] = miss
+        revs, inverse = np.unique(rev, return_inverse=True)
+        counts = np.bincount(inverse)
+        drops = np.bincount(inverse, weights=missing).astype(np.int64)
+        for k, count, drop in zip(revs.tolist(), counts.tolist(), drops.tolist(), strict=True):
+            self._packets[k] = self._packets.get(k, 0) + count
+            self._dropped[k] = self._dropped.get(k, 0) + drop
+        self._last_packet_ns = int(stamps[-1])
+
+    def _find_crossings(
+        self,
+        times: NDArray[np.int64],
+        unwrapped: NDArray[np.float64],
+        packet_of: NDArray[np.int64],
+        sensor_ns: NDArray[np.int64],
+        driver_ns: NDArray[np.int64],
+    ) -> None:
+        """Record zero crossings (revolution starts) and target crossings in this span."""
+        if self._carry is not None:
+            times = np.concatenate(([self._carry.time_ns], times))
+            unwrapped = np.concatenate(([self._carry.unwrapped_deg], unwrapped))
+            packet_of = np.concatenate(([-1], packet_of))
+        base = int(times[0])
+        rel = (times - base).astype(np.float64)
+        z = self._zero_oriented
+        lo, hi = float(unwrapped[0]), float(unwrapped[-1])
+        offsets = [0.0] + [
+            (self.direction * t - z) % FULL_TURN_DEG for t in self.target_azimuth_deg
+        ]
+        for j, offset in enumerate(offsets):
+            k_lo = math.ceil((lo - z - offset) / FULL_TURN_DEG)
+            k_hi = math.floor((hi - z - offset) / FULL_TURN_DEG)
+            if k_hi < k_lo:
+                continue
+            ks = np.arange(k_lo, k_hi + 1)
+            angles = z + offset + FULL_TURN_DEG * ks
+            t_cross = np.rint(np.interp(angles, unwrapped, rel)).astype(np.int64) + base
+            if j > 0:
+                for k, t in zip(ks.tolist(), t_cross.tolist(), strict=True):
+                    self._targets[(k, j - 1)] = t
+                continue
+            at = np.minimum(np.searchsorted(unwrapped, angles, side="left"), packet_of.size - 1)
+            for k, t, p in zip(ks.tolist(), t_cross.tolist(), packet_of[at].tolist(), strict=True):
+                if p < 0 and self._carry is not None:
+                    self._zero[k] = (t, self._carry.packet_sensor_ns, self._carry.packet_driver_ns)
+                else:
+                    self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
+
+    def finish(self) -> RevolutionColumns:
+        """Per-revolution columns for every revolution whose start was seen."""
+        ks = sorted(self._zero)
+        zero = np.array([self._zero[k][0] for k in ks], dtype=np.int64)
+        omega = np.full(len(ks), np.nan)
+        if len(ks) > 1:
+            consecutive = np.diff(np.array(ks)) == 1
+            period_s = np.diff(zero).astype(np.float64) / 1e9
+            omega[:-1] = np.where(consecutive, FULL_TURN_DEG / period_s, np.nan)
+        n_targets = len(self.target_azimuth_deg)
+        crossings = np.array(
+            [[self._targets.get((k, j), -1) for j in range(n_targets)] for k in ks],
+            dtype=np.int64,
+        ).reshape(len(ks), n_targets)
+        return RevolutionColumns(
+            zero_crossing_sensor_ns=zero,
+            omega_deg_s=omega,
+            packets=np.array([self._packets.get(k, 0) for k in ks], dtype=np.int64),
+            dropped_packets=np.array([self._dropped.get(k, 0) for k in ks], dtype=np.int64),
+            crossing_sensor_ns=crossings,
+            target_azimuth_deg=np.array(self.target_azimuth_deg, dtype=np.float64),
+            zero_packet_sensor_ns=np.array([self._zero[k][1] for k in ks], dtype=np.int64),
+            zero_packet_driver_ns=np.array([self._zero[k][2] for k in ks], dtype=np.int64),
+        )

@@ -1,0 +1,137 @@
+"""Rig configuration: which topics hold what, where each camera looks, and the thresholds.
+
+Loaded from YAML or TOML and validated by pydantic; `schemas/rig.schema.json` is its JSON
+schema. Angles are degrees; latencies microseconds (`_us`) as people write them in
+configs; the analysis converts to int64 nanoseconds.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from syncaudit.errors import ConfigError
+
+StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LidarConfig(_Strict):
+    """The spinning LiDAR whose zero crossing triggers the cameras."""
+
+    topic: str
+    vendor: Literal["velodyne", "hesai", "ouster"] | None = None
+    """Detected from the message type and packets when omitted."""
+    metadata_topic: str | None = None
+    """Ouster only: the std_msgs/String topic with the sensor metadata JSON."""
+    zero_azimuth_deg: float = Field(0.0, ge=0.0, lt=360.0)
+    """Packet azimuth at which a revolution starts and the trigger chain fires."""
+    azimuth_increases: bool = True
+    """True where the packet azimuth grows as the head spins (Velodyne, Hesai, Ouster)."""
+    azimuth_of_x_axis_deg: float | None = None
+    """Packet azimuth of the LiDAR frame's +X axis; used to turn camera yaws into azimuths."""
+    azimuth_clockwise_from_above: bool = True
+    """Whether packet azimuth grows clockwise seen from above (to convert yaws)."""
+
+
+class CameraConfig(_Strict):
+    """One camera triggered from the LiDAR."""
+
+    name: str = Field(min_length=1)
+    image_topic: str | None = None
+    info_topic: str | None = None
+    exposure_topic: str | None = None
+    """CameraExposure, flir ImageMetaData or WFOVImage topic."""
+    trigger_topic: str | None = None
+    """TriggerEvent, builtin_interfaces/Time or sensor_msgs/TimeReference topic."""
+    azimuth_deg: float | None = Field(None, ge=0.0, lt=360.0)
+    """Centre of the HFOV as a packet azimuth of the LiDAR (what theta is measured in)."""
+    yaw_deg: float | None = None
+    """Centre of the HFOV as a yaw in the LiDAR frame (CCW from +X); converted to azimuth."""
+    frame_id: str | None = None
+    """Camera frame in /tf_static, to take the yaw from the log."""
+    hfov_deg: float = Field(90.0, gt=0.0, le=360.0)
+    stamp: StampSemantics = "exposure_start"
+    """What the image header stamp marks; drivers differ."""
+    assumed_exposure_us: float | None = Field(None, gt=0.0)
+    """Exposure to assume where the log has no exposure metadata (marked as assumed)."""
+
+
+class Thresholds(_Strict):
+    """Limits of the self-adaptive method; crossing either asks for a delay correction."""
+
+    error_mean_us: float = Field(1000.0, gt=0.0)
+    """Eq. 5 limit. Default 1 ms: at 600 rpm the beam sweeps 3.6 deg per ms, about 4 % of a
+    90 deg HFOV, where moving objects start to tear between LiDAR and image."""
+    error_var_us2: float = Field(250_000.0, gt=0.0)
+    """Eq. 6 limit. Default (500 us)^2: jitter beyond half the mean limit."""
+
+
+class AnalysisConfig(_Strict):
+    """How the analysis averages and what it assumes where the log is silent."""
+
+    window_frames: int = Field(20, ge=2, le=100_000)
+    """N of Eq. 3, 5 and 6 (running exposure average and rolling error statistics)."""
+    assumed_t2_us: float | None = Field(None, ge=0.0)
+    assumed_t3_us: float | None = Field(None, ge=0.0)
+    assumed_t4_us: float | None = Field(None, ge=0.0)
+    clock_sync_tolerance_ms: float = Field(50.0, gt=0.0)
+    """Median driver-minus-sensor time above this (or below -1 ms) = clocks not synchronised."""
+    correction: Literal["recompute", "shift"] = "recompute"
+
+
+class Rig(_Strict):
+    """A whole rig: one triggering LiDAR, its cameras, thresholds and analysis settings."""
+
+    lidar: LidarConfig
+    cameras: list[CameraConfig] = Field(default_factory=list)
+    thresholds: Thresholds = Field(default_factory=Thresholds)
+    analysis: AnalysisConfig = Field(default_factory=AnalysisConfig)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> Rig:
+        names = [c.name for c in self.cameras]
+        if len(names) != len(set(names)):
+            raise ValueError(f"camera names must be unique, got {names}")
+        return self
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read and validate a rig file (.yaml/.yml/.toml/.json); ConfigError on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read rig file ({exc.strerror})") from exc
+    try:
+        if path.suffix == ".toml":
+            raw = tomllib.loads(text)
+        elif path.suffix == ".json":
+            raw = json.loads(text)
+        else:
+            raw = yaml.safe_load(text)
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ConfigError(f"{path}: not valid {path.suffix.lstrip('.') or 'YAML'}: {first}") from exc
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: a rig file must be a mapping with a 'lidar' key")
+    try:
+        return Rig.model_validate(raw)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        more = f" (+{exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
+        raise ConfigError(f"{path}: {where}: {err['msg']}{more}") from exc
+
+
+def rig_json_schema() -> dict[str, object]:
+    """The JSON schema of rig files, as exported to schemas/rig.schema.json."""
+    return Rig.model_json_schema()
