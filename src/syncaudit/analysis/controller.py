@@ -1,0 +1,296 @@
+"""The self-adaptive delay controller of the method (part A), as it runs online per camera.
+
+Per frame the camera driver knows the trigger-chain latencies t1..t4, the exposure
+duration t5_i, the frame's signed synchronisation error (t_l - t_estimated) and the
+alignment time t_rotate = theta / omega. The controller keeps the last N of each in ring
+buffers and computes
+
+* Eq. 3  t5 = mean of the last N exposure durations,
+* Eq. 2  t_sleep = t_rotate - (t1 + t2 + t3 + t4 + t5 / 2) from running averages,
+* Eq. 5  t_error_avg = mean of |error| over the last N frames,
+* Eq. 6  t_error_var = (sum(|error|^2) / N - t_error_avg^2) * N / (N - 1),
+
+and adjusts the delay when Eq. 5 exceeds the first threshold or Eq. 6 the second. Sums are
+kept as exact Python integers, so Eq. 5/6 are exact rationals turned into floats once, and
+the controller is deterministic whatever the order of floating point operations.
+
+After an adjustment the error window is cleared: errors measured with the old delay say
+nothing about the new one, and acting on them again would overshoot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class ControllerConfig(BaseModel):
+    """Tuning of the self-adaptive delay; defaults assume a 10 Hz LiDAR (600 RPM)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    window_frames: int = Field(default=10, ge=2)
+    """N of Eq. 3, 5 and 6. Ten frames is one second at 10 Hz: the running exposure average
+    follows a tunnel entry within a second, and averaging ten frames cuts latency jitter by
+    about 3x. N >= 2 because Eq. 6 divides by N - 1."""
+
+    mean_error_threshold_ns: int = Field(default=250_000, ge=0)
+    """First threshold (Eq. 5). 250 us is 0.9 deg of rotation at 600 RPM; trigger-chain
+    jitter of tens of microseconds gives a mean |error| well below it, so the controller
+    only acts on a real bias."""
+
+    variance_threshold_ns2: float = Field(default=4.0e10, ge=0.0)
+    """Second threshold (Eq. 6), in ns^2: (200 us)^2. The variance of |error| from normal
+    jitter of std s is about 0.36 s^2, so this is crossed only by instability (e.g. an
+    exposure changing faster than Eq. 3 follows), not by ordinary jitter."""
+
+    mode: Literal["recompute", "shift"] = "recompute"
+    """'recompute': new delay from Eq. 2 with fresh running averages (the method's first
+    option; follows the light). 'shift': old delay minus the mean signed error of the
+    window (corrects biases Eq. 2 cannot see, such as a mis-measured latency)."""
+
+    min_frames: int = Field(default=10, ge=2)
+    """Frames observed (since start or since the last adjustment) before thresholds are
+    judged; defaults to a full window so Eq. 5/6 are never taken from a handful of frames."""
+
+    @model_validator(mode="after")
+    def _min_within_window(self) -> ControllerConfig:
+        if self.min_frames > self.window_frames:
+            raise ValueError("min_frames must not exceed window_frames")
+        return self
+
+
+@dataclass(frozen=True, slots=True)
+class FrameObservation:
+    """What the camera driver measured for one frame (all integer nanoseconds)."""
+
+    t1_ns: int
+    """240 -> 242: packet captured -> LiDAR driver."""
+    t2_ns: int
+    """242 -> 244: LiDAR driver -> camera driver."""
+    t3_ns: int
+    """244 -> 246 minus the applied delay: camera driver -> camera sensor."""
+    t4_ns: int
+    """246 -> 248: camera told -> exposure starts."""
+    exposure_ns: int
+    """t5_i, the frame's exposure duration."""
+    error_ns: int
+    """Signed synchronisation error t_l - t_estimated (positive: camera late)."""
+    t_rotate_ns: int
+    """theta / omega for this camera, as measured for this revolution."""
+
+
+@dataclass(frozen=True, slots=True)
+class WindowStats:
+    """Statistics of the current error window (Eq. 5, Eq. 6 and the signed mean)."""
+
+    frames: int
+    error_mean_ns: float
+    """Eq. 5: mean of |error|."""
+    error_var_ns2: float
+    """Eq. 6: unbiased variance of |error|; NaN below two frames."""
+    signed_error_mean_ns: float
+
+
+@dataclass(frozen=True, slots=True)
+class Adjustment:
+    """One change of the delay and why it happened."""
+
+    frame_index: int
+    """0-based index of the observation after which the delay changed."""
+    old_delay_ns: int
+    new_delay_ns: int
+    reason: Literal["mean", "variance", "mean+variance", "initial"]
+    stats: WindowStats
+
+
+class RingBuffer:
+    """The last `capacity` integers, with exact running sum and sum of squares."""
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.capacity = capacity
+        self._data: NDArray[np.int64] = np.zeros(capacity, dtype=np.int64)
+        self._next = 0
+        self._size = 0
+        self.sum = 0
+        self.sum_sq = 0
+
+    def __len__(self) -> int:
+        return self._size
+
+    def push(self, value: int) -> None:
+        """Append `value`, evicting the oldest when full."""
+        value = int(value)
+        if self._size == self.capacity:
+            old = int(self._data[self._next])
+            self.sum -= old
+            self.sum_sq -= old * old
+        else:
+            self._size += 1
+        self._data[self._next] = value
+        self._next = (self._next + 1) % self.capacity
+        self.sum += value
+        self.sum_sq += value * value
+
+    def clear(self) -> None:
+        """Forget every value."""
+        self._next = 0
+        self._size = 0
+        self.sum = 0
+        self.sum_sq = 0
+
+    def values(self) -> NDArray[np.int64]:
+        """The held values, oldest first (a copy)."""
+        if self._size < self.capacity:
+            return self._data[: self._size].copy()
+        return np.roll(self._data, -self._next)
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(int(v) for v in self.values())
+
+    def mean(self) -> float:
+        """Mean of the held values; NaN when empty."""
+        return self.sum / self._size if self._size else float("nan")
+
+
+def eq5_mean_abs(sum_abs: int, n: int) -> float:
+    """Eq. 5 from the exact sum of |error| over n frames."""
+    return sum_abs / n if n else float("nan")
+
+
+def eq6_variance(sum_abs: int, sum_sq: int, n: int) -> float:
+    """Eq. 6 from exact sums: (S2/N - (S/N)^2) * N/(N-1) = (N*S2 - S^2) / (N*(N-1))."""
+    if n < 2:
+        return float("nan")
+    return (n * sum_sq - sum_abs * sum_abs) / (n * (n - 1))
+
+
+def eq2_delay_ns(
+    t_rotate_ns: float, t1_ns: float, t2_ns: float, t3_ns: float, t4_ns: float, t5_ns: float
+) -> float:
+    """Eq. 2: t_sleep = t_rotate - (t1 + t2 + t3 + t4 + t5 / 2)."""
+    return t_rotate_ns - (t1_ns + t2_ns + t3_ns + t4_ns + t5_ns / 2.0)
+
+
+class DelayController:
+    """Online self-adaptive trigger delay for one camera (Eq. 2, 3, 5, 6 + thresholds)."""
+
+    def __init__(self, config: ControllerConfig, initial_delay_ns: int | None = None) -> None:
+        """`initial_delay_ns` is the delay used until the first adjustment; None: compute
+        it by Eq. 2 from the first observation."""
+        self.config = config
+        n = config.window_frames
+        self._t1 = RingBuffer(n)
+        self._t2 = RingBuffer(n)
+        self._t3 = RingBuffer(n)
+        self._t4 = RingBuffer(n)
+        self._t5 = RingBuffer(n)
+        self._t_rotate = RingBuffer(n)
+        self._abs_error = RingBuffer(n)
+        self._signed_error = RingBuffer(n)
+        self._delay_ns: int | None = None if initial_delay_ns is None else int(initial_delay_ns)
+        self.frames_seen = 0
+        self.adjustments: list[Adjustment] = []
+        self.last_stats: WindowStats | None = None
+        """Error statistics of the window judged at the last update."""
+
+    @property
+    def delay_ns(self) -> int | None:
+        """The delay in force for the next trigger (None before any observation when no
+        initial delay was given)."""
+        return self._delay_ns
+
+    def mean_t5_ns(self) -> float:
+        """Eq. 3: running average of the last N exposure durations."""
+        return self._t5.mean()
+
+    def eq2_delay_ns(self) -> float:
+        """Eq. 2 with the running averages of t_rotate, t1..t4 and t5 (Eq. 3)."""
+        return eq2_delay_ns(
+            self._t_rotate.mean(),
+            self._t1.mean(),
+            self._t2.mean(),
+            self._t3.mean(),
+            self._t4.mean(),
+            self._t5.mean(),
+        )
+
+    def window_stats(self) -> WindowStats:
+        """Eq. 5, Eq. 6 and the signed mean over the current error window."""
+        n = len(self._abs_error)
+        return WindowStats(
+            frames=n,
+            error_mean_ns=eq5_mean_abs(self._abs_error.sum, n),
+            error_var_ns2=eq6_variance(self._abs_error.sum, self._abs_error.sum_sq, n),
+            signed_error_mean_ns=self._signed_error.mean(),
+        )
+
+    def _clamp(self, delay_ns: float) -> int:
+        """Round to ns and clamp to [0, t_rotate]: a negative sleep cannot be waited, and
+        a sleep past t_rotate would aim at the next camera's sector."""
+        upper = max(0, round(self._t_rotate.mean()))
+        return min(max(0, round(delay_ns)), upper)
+
+    def update(self, frame: FrameObservation) -> int:
+        """Feed one frame's observation; return the delay (ns) for the next trigger."""
+        self._t1.push(frame.t1_ns)
+        self._t2.push(frame.t2_ns)
+        self._t3.push(frame.t3_ns)
+        self._t4.push(frame.t4_ns)
+        self._t5.push(frame.exposure_ns)
+        self._t_rotate.push(frame.t_rotate_ns)
+        self._abs_error.push(abs(int(frame.error_ns)))
+        self._signed_error.push(int(frame.error_ns))
+        index = self.frames_seen
+        self.frames_seen += 1
+        stats = self.window_stats()
+        self.last_stats = stats
+
+        if self._delay_ns is None:
+            # No configured delay: start from Eq. 2 (the method's initial t_sleep); the
+            # error of this frame belongs to no delay of ours, so the window restarts.
+            self._set_delay(index, self._clamp(self.eq2_delay_ns()), "initial", stats)
+            return self._require_delay()
+
+        if stats.frames < self.config.min_frames:
+            return self._require_delay()
+        over_mean = stats.error_mean_ns > self.config.mean_error_threshold_ns
+        over_var = stats.error_var_ns2 > self.config.variance_threshold_ns2
+        if not (over_mean or over_var):
+            return self._require_delay()
+        reason: Literal["mean", "variance", "mean+variance"] = (
+            "mean+variance" if over_mean and over_var else "mean" if over_mean else "variance"
+        )
+        if self.config.mode == "recompute":
+            new_delay = self._clamp(self.eq2_delay_ns())
+        else:
+            new_delay = self._clamp(self._require_delay() - stats.signed_error_mean_ns)
+        self._set_delay(index, new_delay, reason, stats)
+        return new_delay
+
+    def _set_delay(
+        self,
+        index: int,
+        new_delay_ns: int,
+        reason: Literal["mean", "variance", "mean+variance", "initial"],
+        stats: WindowStats,
+    ) -> None:
+        old = self._delay_ns
+        self._delay_ns = new_delay_ns
+        self.adjustments.append(
+            Adjustment(index, new_delay_ns if old is None else old, new_delay_ns, reason, stats)
+        )
+        self._abs_error.clear()
+        self._signed_error.clear()
+
+    def _require_delay(self) -> int:
+        if self._delay_ns is None:  # pragma: no cover - set by the first update
+            raise RuntimeError("controller has no delay yet")
+        return self._delay_ns
