@@ -1,0 +1,1053 @@
+"""Hesai LiDAR: zero-copy ROS packet-message views, packet timing decode, packet encoder.
+
+Three layers, all vectorised over packets:
+
+1. ROS messages. `pandar_msgs/msg/PandarScan` (fixed 1500-byte packet buffers) is viewed
+   as numpy strided arrays straight over the serialized bytes; `nebula_msgs/msg/NebulaPackets`
+   (variable-length packets) is walked once. Both have exact inverses (`build_*`).
+2. Packets. `decode_hesai` detects the model from the bytes and returns `PacketTiming`:
+   the packet's sensor time (date-time + microseconds in the tail), each block's azimuth and
+   the time of the block's first firing from the user manuals' block timing rules.
+3. Simulation. `encode_hesai` writes real-format packets and `hesai_revolution_schedule`
+   lays out one revolution of packets whose block times follow the same rules.
+
+Byte layouts follow the Hesai user manuals and the packet formats of tier4/nebula and
+HesaiLidar_SDK_2.0 (read, not copied). Units: azimuths in degrees, times in int64 ns.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Final, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.errors import DecodeError
+from syncaudit.lidar.packets import PacketTiming
+
+__all__ = [
+    "HESAI_LAYOUTS",
+    "PANDAR_PACKET_BYTES",
+    "HesaiLayout",
+    "HesaiRevolution",
+    "RosHeader",
+    "build_nebula_packets",
+    "build_pandar_scan",
+    "decode_hesai",
+    "detect_hesai_model",
+    "encode_hesai",
+    "hesai_returns",
+    "hesai_revolution_schedule",
+    "nebula_packets",
+    "pandar_scan_packets",
+    "ros_header",
+    "stack_packets",
+]
+
+PANDAR_PACKET_BYTES: Final = 1500
+"""Size of `pandar_msgs/PandarPacket.data` (uint8[1500])."""
+
+_NS_PER_S: Final = 1_000_000_000
+_PANDAR_ELEMENT_BYTES: Final = 4 + 4 + PANDAR_PACKET_BYTES + 4  # stamp, data, size
+_ENCODINGS: Final = ("cdr", "ros1")
+
+Bytes = bytes | bytearray | memoryview | NDArray[np.uint8]
+
+# ============================================================================ ROS messages
+
+
+class RosHeader(NamedTuple):
+    """`std_msgs/Header` of a message: stamp, frame id and (ROS 1 only) sequence number."""
+
+    stamp_ns: int
+    frame_id: str
+    seq: int = 0
+
+
+def _u8(raw: Bytes) -> NDArray[np.uint8]:
+    """Raw message bytes as a 1-D uint8 array without copying."""
+    if isinstance(raw, np.ndarray):
+        if raw.dtype != np.uint8 or raw.ndim != 1:
+            raise DecodeError("message bytes must be a 1-D uint8 array")
+        return raw
+    return np.frombuffer(raw, dtype=np.uint8)
+
+
+def _check_encoding(encoding: str) -> None:
+    if encoding not in _ENCODINGS:
+        raise ValueError(f"encoding must be one of {_ENCODINGS}, not {encoding!r}")
+
+
+class _Cursor:
+    """Reads a serialized ROS message header: CDR (XCDR1, aligned) or ROS 1 (packed)."""
+
+    def __init__(self, buf: NDArray[np.uint8], encoding: str) -> None:
+        _check_encoding(encoding)
+        self.buf = buf
+        self.mem = buf.data
+        self.cdr = encoding == "cdr"
+        if self.cdr:
+            if buf.size < 4:
+                raise DecodeError(f"CDR message of {buf.size} bytes has no encapsulation header")
+            if buf[0] != 0 or buf[1] not in (0, 1):
+                raise DecodeError(
+                    f"unsupported CDR encapsulation {int(buf[0]):#04x}{int(buf[1]):02x} "
+                    "(plain XCDR1 expected)"
+                )
+            self.endian = "<" if buf[1] == 1 else ">"
+            self.origin = 4
+        else:
+            self.endian = "<"
+            self.origin = 0
+        self.pos = self.origin
+
+    def align(self, n: int) -> None:
+        """Skip CDR padding so that the next read is n-aligned relative to the origin."""
+        if self.cdr:
+            self.pos += -(self.pos - self.origin) % n
+
+    def need(self, n: int, what: str) -> None:
+        if self.pos + n > self.buf.size:
+            raise DecodeError(
+                f"message truncated reading {what}: needs {self.pos + n} bytes, has {self.buf.size}"
+            )
+
+    def u32(self, what: str) -> int:
+        self.align(4)
+        self.need(4, what)
+        (v,) = struct.unpack_from(self.endian + "I", self.mem, self.pos)
+        self.pos += 4
+        return int(v)
+
+    def time_ns(self, what: str) -> int:
+        """builtin_interfaces/Time (int32 sec) in CDR, `time` (uint32 sec) in ROS 1."""
+        self.align(4)
+        self.need(8, what)
+        fmt = self.endian + ("iI" if self.cdr else "II")
+        sec, nsec = struct.unpack_from(fmt, self.mem, self.pos)
+        if nsec >= _NS_PER_S:
+            raise DecodeError(f"{what}: nanoseconds field {nsec} is not below 1e9")
+        self.pos += 8
+        return int(sec) * _NS_PER_S + int(nsec)
+
+    def header(self) -> RosHeader:
+        seq = 0 if self.cdr else self.u32("header.seq")
+        stamp_ns = self.time_ns("header.stamp")
+        n = self.u32("header.frame_id length")
+        self.need(n, "header.frame_id")
+        raw = bytes(self.mem[self.pos : self.pos + n])
+        if self.cdr:
+            if n == 0 or raw[-1] != 0:
+                raise DecodeError("header.frame_id is not a NUL-terminated CDR string")
+            raw = raw[:-1]
+        self.pos += n
+        try:
+            frame_id = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise DecodeError(f"header.frame_id is not UTF-8: {exc}") from None
+        return RosHeader(stamp_ns, frame_id, seq)
+
+
+def ros_header(raw: Bytes, encoding: str = "cdr") -> RosHeader:
+    """The leading `std_msgs/Header` of a serialized message (PandarScan, NebulaPackets...)."""
+    return _Cursor(_u8(raw), encoding).header()
+
+
+def _pandar_dtype(endian: str, cdr: bool) -> np.dtype[np.void]:
+    """One serialized PandarPacket: 1512 bytes in both encodings (1508 is already 4-aligned)."""
+    return np.dtype(
+        [
+            ("sec", endian + ("i4" if cdr else "u4")),
+            ("nsec", endian + "u4"),
+            ("data", "u1", (PANDAR_PACKET_BYTES,)),
+            ("size", endian + "u4"),
+        ]
+    )
+
+
+def pandar_scan_packets(
+    raw: Bytes, encoding: str = "cdr"
+) -> tuple[NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint32]]:
+    """View one serialized `pandar_msgs/msg/PandarScan` as packet columns, without copying data.
+
+    Returns the per-packet driver stamps (n,) int64 ns, the packet buffers (n, 1500) uint8 as a
+    strided view into `raw`, and the payload lengths (n,). `encoding` is "cdr" (ROS 2 XCDR1,
+    4-byte encapsulation header, alignment relative to after it) or "ros1" (packed).
+    """
+    cur = _Cursor(_u8(raw), encoding)
+    cur.header()
+    n = cur.u32("packets length")
+    cur.align(4)
+    end = cur.pos + n * _PANDAR_ELEMENT_BYTES
+    if end > cur.buf.size:
+        raise DecodeError(
+            f"PandarScan declares {n} packets ({end} bytes) but the message has {cur.buf.size}"
+        )
+    if cur.buf.size - end > 3:
+        raise DecodeError(f"PandarScan has {cur.buf.size - end} unexplained trailing bytes")
+    rec = cur.buf[cur.pos : end].view(_pandar_dtype(cur.endian, cur.cdr))
+    nsec = rec["nsec"]
+    if n and int(nsec.max()) >= _NS_PER_S:
+        raise DecodeError("PandarPacket stamp has a nanoseconds field not below 1e9")
+    stamp_ns = rec["sec"].astype(np.int64) * _NS_PER_S + nsec.astype(np.int64)
+    size = rec["size"]
+    if cur.endian == ">":
+        size = size.astype(np.uint32)  # native byte order for callers
+    if n and int(size.max()) > PANDAR_PACKET_BYTES:
+        raise DecodeError(f"PandarPacket.size {int(size.max())} exceeds the 1500-byte buffer")
+    data: NDArray[np.uint8] = rec["data"]
+    return stamp_ns, data, size
+
+
+def nebula_packets(
+    raw: Bytes, encoding: str = "cdr"
+) -> tuple[NDArray[np.int64], NDArray[np.uint8] | list[NDArray[np.uint8]]]:
+    """View one serialized `nebula_msgs/msg/NebulaPackets`: stamps (n,) ns and the packets.
+
+    The packets come back as one zero-copy (n, L) strided view when all have the same length
+    (the usual case: one sensor, one packet size), else as a list of zero-copy 1-D views.
+    `stack_packets` turns either form into the (data, size) pair `decode_hesai` takes.
+    """
+    cur = _Cursor(_u8(raw), encoding)
+    cur.header()
+    n = cur.u32("packets length")
+    stamp_ns = np.empty(n, dtype=np.int64)
+    offset = np.empty(n, dtype=np.int64)
+    length = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        stamp_ns[i] = cur.time_ns(f"packet {i} stamp")
+        length[i] = cur.u32(f"packet {i} data length")
+        cur.need(int(length[i]), f"packet {i} data")
+        offset[i] = cur.pos
+        cur.pos += int(length[i])
+    if cur.buf.size - cur.pos > 3:
+        raise DecodeError(f"NebulaPackets has {cur.buf.size - cur.pos} unexplained trailing bytes")
+    buf = cur.buf
+    if n == 0:
+        return stamp_ns, np.empty((0, 0), dtype=np.uint8)
+    step = np.diff(offset)
+    if (length == length[0]).all() and (n == 1 or (step == step[0]).all()):
+        first = int(offset[0])
+        stride = int(step[0]) if n > 1 else int(length[0])
+        view = np.lib.stride_tricks.as_strided(
+            buf[first:], shape=(n, int(length[0])), strides=(stride, 1), writeable=False
+        )
+        return stamp_ns, view
+    return stamp_ns, [
+        buf[o : o + ln] for o, ln in zip(offset.tolist(), length.tolist(), strict=True)
+    ]
+
+
+def stack_packets(
+    packets: NDArray[np.uint8] | Sequence[NDArray[np.uint8]],
+) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
+    """Packets (an (n, L) array or a list of 1-D arrays) as (data (n, Lmax), size (n,))."""
+    if isinstance(packets, np.ndarray):
+        if packets.ndim != 2:
+            raise DecodeError("packets array must be 2-D (n, L)")
+        return packets, np.full(packets.shape[0], packets.shape[1], dtype=np.uint32)
+    size = np.array([p.shape[0] for p in packets], dtype=np.uint32)
+    data = np.zeros((len(packets), int(size.max()) if len(packets) else 0), dtype=np.uint8)
+    for i, p in enumerate(packets):
+        data[i, : p.shape[0]] = p
+    return data, size
+
+
+def _header_bytes(header: RosHeader, encoding: str) -> bytes:
+    """Serialized std_msgs/Header; CDR output includes the encapsulation header."""
+    _check_encoding(encoding)
+    sec, nsec = divmod(int(header.stamp_ns), _NS_PER_S)
+    name = header.frame_id.encode("utf-8")
+    if encoding == "cdr":
+        out = b"\x00\x01\x00\x00" + struct.pack("<iII", sec, nsec, len(name) + 1) + name + b"\0"
+        return out + b"\0" * (-(len(out) - 4) % 4)
+    return struct.pack("<IIII", header.seq, sec, nsec, len(name)) + name
+
+
+def _split_stamps(stamp_ns: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    stamp = np.asarray(stamp_ns, dtype=np.int64)
+    return stamp // _NS_PER_S, stamp % _NS_PER_S
+
+
+def build_pandar_scan(
+    header: RosHeader,
+    packet_stamp_ns: NDArray[np.int64],
+    data: NDArray[np.uint8],
+    size: NDArray[np.uint32],
+    encoding: str = "cdr",
+) -> bytes:
+    """Serialize a `pandar_msgs/msg/PandarScan`; inverse of `pandar_scan_packets`.
+
+    `data` is (n, L) with L <= 1500; bytes past L are written as zeros.
+    """
+    data = np.asarray(data, dtype=np.uint8)
+    n = data.shape[0]
+    if data.ndim != 2 or data.shape[1] > PANDAR_PACKET_BYTES:
+        raise ValueError("data must be (n, L) with L <= 1500")
+    if np.shape(packet_stamp_ns) != (n,) or np.shape(size) != (n,):
+        raise ValueError("packet_stamp_ns and size must be (n,)")
+    if n and int(np.max(size)) > PANDAR_PACKET_BYTES:
+        raise ValueError("size exceeds 1500 bytes")
+    rec = np.zeros(n, dtype=_pandar_dtype("<", encoding == "cdr"))
+    rec["sec"], rec["nsec"] = _split_stamps(packet_stamp_ns)
+    rec["data"][:, : data.shape[1]] = data
+    rec["size"] = size
+    return _header_bytes(header, encoding) + struct.pack("<I", n) + rec.tobytes()
+
+
+def build_nebula_packets(
+    header: RosHeader,
+    packet_stamp_ns: NDArray[np.int64],
+    packets: NDArray[np.uint8] | Sequence[NDArray[np.uint8]],
+    encoding: str = "cdr",
+) -> bytes:
+    """Serialize a `nebula_msgs/msg/NebulaPackets`; inverse of `nebula_packets`."""
+    n = len(packets)
+    if np.shape(packet_stamp_ns) != (n,):
+        raise ValueError("packet_stamp_ns must be (n,)")
+    sec, nsec = _split_stamps(packet_stamp_ns)
+    out = bytearray(_header_bytes(header, encoding))
+    out += struct.pack("<I", n)
+    cdr = encoding == "cdr"
+    for i in range(n):
+        if cdr:
+            out += b"\0" * (-(len(out) - 4) % 4)
+        payload = np.asarray(packets[i], dtype=np.uint8)
+        out += struct.pack("<iII" if cdr else "<III", int(sec[i]), int(nsec[i]), payload.size)
+        out += payload.tobytes()
+    return bytes(out)
+
+
+# ============================================================================ packet layouts
+
+
+@dataclass(frozen=True, slots=True)
+class HesaiLayout:
+    """Byte layout and block timing of one Hesai model's point-cloud packet.
+
+    Offsets are bytes from the packet start (blocks) or from the tail start (tail fields).
+    Block timing: the time of a block's first firing is the packet time t0 plus
+    `anchor_ns + sign * floor(period_num_ns * m / period_den)`, where m counts firing rounds
+    after the block (`anchored_last`, sign -1) or before it (sign +1) in the packet.
+    """
+
+    model: str
+    protocol: tuple[int, int] | None
+    """Pre-header protocol version (major, minor); None for Pandar40P/64 (no version)."""
+    header_bytes: int
+    n_blocks: int
+    n_channels: int
+    block_prefix_bytes: int
+    """Bytes before the channel units in a block (flag, azimuth, fine azimuth)."""
+    azimuth_offset: int
+    """Offset of the uint16 azimuth within a block."""
+    fine_azimuth: bool
+    """AT128: a uint8 of 1/256 azimuth units follows the uint16 azimuth."""
+    unit_bytes: int
+    body_trailer_bytes: int
+    """Bytes between the last block and the tail (body CRC)."""
+    fs_bytes_if_flagged: int
+    """Functional-safety section before the tail when header flag bit 2 is set (QT128)."""
+    tail_bytes: int
+    tail_return_mode: int
+    tail_motor_rpm: int
+    tail_date_time: int
+    tail_timestamp_us: int
+    tail_factory: int
+    tail_mode_flag: int | None
+    trailer_bytes: int
+    """Bytes the encoder writes after the tail (UDP sequence, tail CRC)."""
+    header_flags: int
+    """Header flags byte the encoder writes (bit 0 UDP sequence, bit 2 functional safety)."""
+    year_base: int
+    """Year byte offset the sensor writes: 2000 (Pandar40P/64) or 1900; 0 = Unix seconds."""
+    azimuth_units_per_deg: int
+    anchor_ns: int
+    period_num_ns: int
+    period_den: int
+    anchored_last: bool
+    valid_sizes: tuple[int, ...] = ()
+    """Exact packet sizes accepted when the model has no self-describing header."""
+
+    @property
+    def block_bytes(self) -> int:
+        """Size of one block."""
+        return self.block_prefix_bytes + self.n_channels * self.unit_bytes
+
+    @property
+    def body_end(self) -> int:
+        """Offset just past the last block."""
+        return self.header_bytes + self.n_blocks * self.block_bytes
+
+    @property
+    def round_period_ns(self) -> float:
+        """Time between firing rounds, ns."""
+        return self.period_num_ns / self.period_den
+
+    def block_offset_ns(self, n_returns: NDArray[np.int64]) -> NDArray[np.int64]:
+        """(n, B) offset of each block's first firing from the packet time, ns."""
+        r = np.asarray(n_returns, dtype=np.int64)[:, None]
+        block = np.arange(self.n_blocks, dtype=np.int64)[None, :]
+        rounds = self.n_blocks // r
+        k = block // r
+        if self.anchored_last:
+            m = rounds - 1 - k
+            return self.anchor_ns - (self.period_num_ns * m) // self.period_den
+        return self.anchor_ns + (self.period_num_ns * k) // self.period_den
+
+
+def _general(
+    model: str,
+    protocol: tuple[int, int],
+    n_blocks: int,
+    n_channels: int,
+    tail: dict[str, int],
+    **kw: int | bool,
+) -> HesaiLayout:
+    """Layout of a model using the 12-byte 'general' header (0xEE 0xFF + version)."""
+    layout = HesaiLayout(
+        model=model,
+        protocol=protocol,
+        header_bytes=12,
+        n_blocks=n_blocks,
+        n_channels=n_channels,
+        block_prefix_bytes=int(kw.pop("block_prefix_bytes", 2)),
+        azimuth_offset=0,
+        fine_azimuth=bool(kw.pop("fine_azimuth", False)),
+        unit_bytes=4,
+        body_trailer_bytes=int(kw.pop("body_trailer_bytes", 0)),
+        fs_bytes_if_flagged=int(kw.pop("fs_bytes_if_flagged", 0)),
+        tail_bytes=tail["len"],
+        tail_return_mode=tail["return_mode"],
+        tail_motor_rpm=tail["motor"],
+        tail_date_time=tail["date"],
+        tail_timestamp_us=tail["us"],
+        tail_factory=tail["factory"],
+        tail_mode_flag=tail.get("mode_flag"),
+        trailer_bytes=int(kw.pop("trailer_bytes", 4)),
+        header_flags=int(kw.pop("header_flags", 0x01)),
+        year_base=int(kw.pop("year_base", 1900)),
+        azimuth_units_per_deg=int(kw.pop("azimuth_units_per_deg", 100)),
+        anchor_ns=int(kw.pop("anchor_ns")),
+        period_num_ns=int(kw.pop("period_num_ns")),
+        period_den=int(kw.pop("period_den", 1)),
+        anchored_last=bool(kw.pop("anchored_last", True)),
+    )
+    if kw:
+        raise TypeError(f"unknown layout fields {sorted(kw)}")
+    return layout
+
+
+# Tail of Pandar40P and Pandar64: reserved 5, shutdown 1, reserved 2, motor, us, mode,
+# factory, date.
+_TAIL_40P: Final = {"len": 22, "motor": 8, "us": 10, "return_mode": 14, "factory": 15, "date": 16}
+# PandarXT16/32/32M (protocol 6.1): reserved 9, shutdown 1, mode, motor, date, us, factory.
+_TAIL_XT: Final = {"len": 24, "return_mode": 10, "motor": 11, "date": 13, "us": 19, "factory": 23}
+
+HESAI_LAYOUTS: Final[dict[str, HesaiLayout]] = {
+    # 10 blocks of 0xFFEE + azimuth + 40 x 3 B; manual: block end = t0 - 28.58 us
+    # - 55.56 us per later round; first laser fires 54.67 us before the block end.
+    "Pandar40P": HesaiLayout(
+        model="Pandar40P",
+        protocol=None,
+        header_bytes=0,
+        n_blocks=10,
+        n_channels=40,
+        block_prefix_bytes=4,
+        azimuth_offset=2,
+        fine_azimuth=False,
+        unit_bytes=3,
+        body_trailer_bytes=0,
+        fs_bytes_if_flagged=0,
+        tail_bytes=_TAIL_40P["len"],
+        tail_return_mode=_TAIL_40P["return_mode"],
+        tail_motor_rpm=_TAIL_40P["motor"],
+        tail_date_time=_TAIL_40P["date"],
+        tail_timestamp_us=_TAIL_40P["us"],
+        tail_factory=_TAIL_40P["factory"],
+        tail_mode_flag=None,
+        trailer_bytes=0,
+        header_flags=0,
+        year_base=2000,
+        azimuth_units_per_deg=100,
+        anchor_ns=-(28_580 + 54_670),
+        period_num_ns=55_560,
+        period_den=1,
+        anchored_last=True,
+        valid_sizes=(1262, 1266),
+    ),
+    # 8-byte header (0xEEFF, lasers, blocks, reserved, dis unit, reserved 2); block end =
+    # t0 - 42.58 us - 55.56 us per later round; first laser fires 54.668 us before the end.
+    "Pandar64": HesaiLayout(
+        model="Pandar64",
+        protocol=None,
+        header_bytes=8,
+        n_blocks=6,
+        n_channels=64,
+        block_prefix_bytes=2,
+        azimuth_offset=0,
+        fine_azimuth=False,
+        unit_bytes=3,
+        body_trailer_bytes=0,
+        fs_bytes_if_flagged=0,
+        tail_bytes=_TAIL_40P["len"],
+        tail_return_mode=_TAIL_40P["return_mode"],
+        tail_motor_rpm=_TAIL_40P["motor"],
+        tail_date_time=_TAIL_40P["date"],
+        tail_timestamp_us=_TAIL_40P["us"],
+        tail_factory=_TAIL_40P["factory"],
+        tail_mode_flag=None,
+        trailer_bytes=0,
+        header_flags=0,
+        year_base=2000,
+        azimuth_units_per_deg=100,
+        anchor_ns=-(42_580 + 54_668),
+        period_num_ns=55_560,
+        period_den=1,
+        anchored_last=True,
+        valid_sizes=(1194, 1198),
+    ),
+    # Protocol 3.1; block start = t0 + 25.71 us + 166.67 us per earlier round.
+    "PandarQT64": _general(
+        "PandarQT64",
+        (3, 1),
+        4,
+        64,
+        {"len": 24, "motor": 10, "us": 12, "return_mode": 16, "factory": 17, "date": 18},
+        anchor_ns=25_710,
+        period_num_ns=500_000,
+        period_den=3,
+        anchored_last=False,
+    ),
+    # Protocol 6.1, 8 blocks; t0 triggers the last round, block start = t0 + 5.632 us
+    # - 50 us per later round.
+    "PandarXT16": _general(
+        "PandarXT16", (6, 1), 8, 16, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+    ),
+    "PandarXT32": _general(
+        "PandarXT32", (6, 1), 8, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+    ),
+    "PandarXT32M": _general(
+        "PandarXT32M", (6, 1), 6, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+    ),
+    # Protocol 3.2 (QT128C2X): body CRC, optional functional safety (17 B), tail with mode
+    # flag; block start = t0 + 9 us - 111.11 us per later round (see decode_hesai notes).
+    "PandarQT128": _general(
+        "PandarQT128",
+        (3, 2),
+        2,
+        128,
+        {
+            "len": 26,
+            "mode_flag": 5,
+            "return_mode": 12,
+            "motor": 13,
+            "date": 15,
+            "us": 21,
+            "factory": 25,
+        },
+        body_trailer_bytes=4,
+        fs_bytes_if_flagged=17,
+        trailer_bytes=8,
+        header_flags=0x05,
+        anchor_ns=9_000,
+        period_num_ns=111_110,
+    ),
+    # Protocol 4.1/4.3: uint16 azimuth + uint8 fine azimuth (1/25600 deg), body CRC,
+    # Unix-seconds date; block start = t0 - 9.249 us - 41.666 us per round from the last.
+    "AT128": _general(
+        "AT128",
+        (4, 1),
+        2,
+        128,
+        {"len": 32, "motor": 18, "us": 20, "return_mode": 24, "factory": 25, "date": 26},
+        block_prefix_bytes=3,
+        fine_azimuth=True,
+        body_trailer_bytes=4,
+        trailer_bytes=8,
+        year_base=0,
+        azimuth_units_per_deg=25_600,
+        anchor_ns=-(9_249 + 41_666),
+        period_num_ns=41_666,
+    ),
+}
+
+_MODELS: Final = tuple(HESAI_LAYOUTS)
+
+_RETURNS_OF_MODE: Final = {
+    0x33: 1,  # first
+    0x34: 1,  # second
+    0x37: 1,  # strongest
+    0x38: 1,  # last
+    0x39: 2,  # last + strongest
+    0x3A: 2,  # first + second
+    0x3B: 2,  # first + last
+    0x3C: 2,  # first + strongest
+    0x3E: 2,  # strongest + second strongest
+    0x3D: 3,  # first + last + strongest (XT32M)
+}
+_RETURNS_TABLE: Final = np.zeros(256, dtype=np.int64)
+for _code, _r in _RETURNS_OF_MODE.items():
+    _RETURNS_TABLE[_code] = _r
+
+
+def _check_packets(
+    data: NDArray[np.uint8], size: NDArray[np.integer]
+) -> tuple[NDArray[np.uint8], NDArray[np.int64]]:
+    arr = np.asarray(data)
+    if arr.dtype != np.uint8 or arr.ndim != 2:
+        raise DecodeError(f"packet data must be a 2-D uint8 array, got {arr.dtype} {arr.shape}")
+    sz = np.asarray(size).astype(np.int64)
+    if sz.shape != (arr.shape[0],):
+        raise DecodeError(f"size has shape {sz.shape}, expected ({arr.shape[0]},)")
+    if arr.shape[0] == 0:
+        raise DecodeError("no packets to decode")
+    if int(sz.max()) > arr.shape[1] or int(sz.min()) < 4:
+        raise DecodeError(
+            f"packet sizes {int(sz.min())}..{int(sz.max())} do not fit rows of {arr.shape[1]} bytes"
+        )
+    return arr, sz
+
+
+def _model_codes(data: NDArray[np.uint8], size: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Per packet, the index of its model in `_MODELS`, or -1."""
+    b0, b1, b2, b3 = (data[:, i].astype(np.int64) for i in range(4))
+    width = data.shape[1]
+    lasers = data[:, 6].astype(np.int64) if width > 7 else np.zeros_like(b0)
+    blocks = data[:, 7].astype(np.int64) if width > 7 else np.zeros_like(b0)
+    general = (b0 == 0xEE) & (b1 == 0xFF)
+    rules = {
+        "Pandar40P": (b0 == 0xFF) & (b1 == 0xEE) & np.isin(size, (1262, 1266)),
+        "Pandar64": general & (b2 == 64) & (b3 == 6) & np.isin(size, (1194, 1198)),
+        "PandarQT64": general & (b2 == 3) & (b3 == 1),
+        "PandarQT128": general & (b2 == 3) & (b3 == 2),
+        "AT128": general & (b2 == 4) & ((b3 == 1) | (b3 == 3)),
+        "PandarXT16": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 16),
+        "PandarXT32": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 32),
+        "PandarXT32M": general & (b2 == 6) & (b3 == 1) & (blocks == 6) & (lasers == 32),
+    }
+    code = np.full(data.shape[0], -1, dtype=np.int64)
+    for i, name in enumerate(_MODELS):
+        code[rules[name] & (code < 0)] = i
+    return code
+
+
+def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> str:
+    """The one Hesai model all packets belong to; DecodeError if unknown or mixed.
+
+    Pandar40P: no pre-header, starts with block flag 0xFFEE, 1262/1266 bytes.
+    Pandar64: 0xEEFF, 64 lasers, 6 blocks, 1194/1198 bytes (8-byte header, no version).
+    Others: 0xEEFF + protocol major.minor: 3.1 PandarQT64, 3.2 PandarQT128, 4.1/4.3 AT128,
+    6.1 PandarXT (8 blocks: 16 or 32 lasers -> XT16/XT32; 6 blocks -> XT32M).
+    """
+    arr, sz = _check_packets(data, size)
+    code = _model_codes(arr, sz)
+    bad = np.flatnonzero(code < 0)
+    if bad.size:
+        i = int(bad[0])
+        head = bytes(arr[i, :8]).hex(" ")
+        raise DecodeError(
+            f"{bad.size} packet(s) are no known Hesai model, first #{i}: "
+            f"bytes {head}, size {int(sz[i])}"
+        )
+    found = np.unique(code)
+    if found.size > 1:
+        names = ", ".join(_MODELS[int(c)] for c in found)
+        raise DecodeError(f"packets of more than one Hesai model: {names}")
+    return _MODELS[int(found[0])]
+
+
+def _gather(data: NDArray[np.uint8], start: NDArray[np.int64], count: int) -> NDArray[np.int64]:
+    """(n, count) bytes starting at a per-packet column, as int64."""
+    cols = start[:, None] + np.arange(count, dtype=np.int64)[None, :]
+    return np.take_along_axis(data, cols, axis=1).astype(np.int64)
+
+
+def _le(b: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Little-endian unsigned integer from the bytes along the last axis."""
+    weights = np.left_shift(np.int64(1), 8 * np.arange(b.shape[-1], dtype=np.int64))
+    out: NDArray[np.int64] = (b * weights).sum(axis=-1, dtype=np.int64)
+    return out
+
+
+def _days_from_civil(
+    year: NDArray[np.int64], month: NDArray[np.int64], day: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Days since 1970-01-01 of a proleptic Gregorian date (vectorised)."""
+    y: NDArray[np.int64] = year - (month <= 2).astype(np.int64)
+    era = y // 400
+    yoe = y - era * 400
+    doy = (153 * ((month + 9) % 12) + 2) // 5 + day - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    days: NDArray[np.int64] = era * 146_097 + doe - 719_468
+    return days
+
+
+def _civil_from_days(
+    days: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Inverse of `_days_from_civil`: (year, month, day)."""
+    z = days + 719_468
+    era = z // 146_097
+    doe = z - era * 146_097
+    yoe = (doe - doe // 1460 + doe // 36_524 - doe // 146_096) // 365
+    doy = doe - (365 * yoe + yoe // 4 - yoe // 100)
+    mp = (5 * doy + 2) // 153
+    day = doy - (153 * mp + 2) // 5 + 1
+    month = np.where(mp < 10, mp + 3, mp - 9)
+    return yoe + era * 400 + (month <= 2), month, day
+
+
+def _epoch_seconds(date: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Seconds since the epoch of the 6 date bytes; -1 where unset.
+
+    A first byte of 0 means the bytes 1..5 hold big-endian Unix seconds (AT128). Otherwise
+    it is year, month, day, hour, minute, second with the year as year-2000 (values < 100,
+    Pandar40P/64) or year-1900 (the rest), as HesaiLidar_SDK_2.0 reads it.
+    """
+    unix = date[:, 0] == 0
+    weights = np.left_shift(np.int64(1), 8 * np.arange(4, -1, -1, dtype=np.int64))
+    unix_s = (date[:, 1:] * weights).sum(axis=1)
+    year = np.where(date[:, 0] >= 100, 1900, 2000) + date[:, 0]
+    month, day, hour, minute, second = (date[:, i] for i in range(1, 6))
+    ok = (
+        (month >= 1)
+        & (month <= 12)
+        & (day >= 1)
+        & (day <= 31)
+        & (hour < 24)
+        & (minute < 60)
+        & (second <= 60)
+    )
+    bad = np.flatnonzero(~unix & ~ok)
+    if bad.size:
+        i = int(bad[0])
+        raise DecodeError(f"packet #{i} has an invalid date-time {date[i].tolist()}")
+    cal = _days_from_civil(year, month, day) * 86_400 + hour * 3600 + minute * 60 + second
+    return np.where(unix, np.where(unix_s == 0, -1, unix_s), cal)
+
+
+def _tail_start(layout: HesaiLayout, data: NDArray[np.uint8]) -> NDArray[np.int64]:
+    """Per packet, offset of the tail (QT128: depends on the functional-safety flag)."""
+    start = np.full(data.shape[0], layout.body_end + layout.body_trailer_bytes, dtype=np.int64)
+    if layout.fs_bytes_if_flagged:
+        has_fs = (data[:, 11] & 0x04) != 0
+        start += np.where(has_fs, layout.fs_bytes_if_flagged, 0)
+    return start
+
+
+def _n_returns(
+    layout: HesaiLayout, data: NDArray[np.uint8], mode: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Returns per firing: header 'return number' in the general protocol, else from the mode."""
+    r = data[:, 10].astype(np.int64) if layout.header_bytes == 12 else _RETURNS_TABLE[mode]
+    bad = np.flatnonzero((r < 1) | (r > 3) | (layout.n_blocks % np.maximum(r, 1) != 0))
+    if bad.size:
+        i = int(bad[0])
+        raise DecodeError(
+            f"{layout.model} packet #{i}: unsupported return mode {int(mode[i]):#04x} "
+            f"({int(r[i])} returns for {layout.n_blocks} blocks)"
+        )
+    return r
+
+
+def decode_hesai(
+    data: NDArray[np.uint8], size: NDArray[np.integer], host_stamp_ns: NDArray[np.int64]
+) -> PacketTiming:
+    """Timing of Hesai point-cloud packets (one model), vectorised over packets.
+
+    `data` (n, L) uint8 rows hold the packets (e.g. the (n, 1500) view of a PandarScan),
+    `size` (n,) their lengths, `host_stamp_ns` (n,) the driver stamps. The host stamp is used
+    only where a packet's date field is unset (all zero): the whole second is then taken
+    from it, the microseconds from the packet.
+
+    `sensor_time_ns` is the packet time t0 = date-time + microsecond timestamp (tail).
+    `block_time_ns` is each block's first firing: Pandar40P/64 from the manual's block end
+    times minus the earliest channel offset; the others from the manuals' block start times
+    (QT64 t0 + 25.71 us + 166.67 us * k; XT t0 + 5.632 us - 50 us * later rounds; QT128
+    t0 + 9 us - 111.11 us * later rounds, the ordering monotone in azimuth, whereas nebula
+    adds 111.11 us to block 1 - unverified without a QT128 recording; AT128 t0 - 50.915 us
+    - 41.666 us * later rounds). In multi-return modes the blocks of one firing share a time.
+    `block_azimuth_deg` is the packet's azimuth field: 0.01 deg; AT128 adds a fine byte
+    (1/25600 deg) and reports the raw mirror-encoder angle, not the corrected field angle.
+    """
+    arr, sz = _check_packets(data, size)
+    host = np.asarray(host_stamp_ns, dtype=np.int64)
+    if host.shape != sz.shape:
+        raise DecodeError(f"host_stamp_ns has shape {host.shape}, expected {sz.shape}")
+    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    n = arr.shape[0]
+    if layout.header_bytes == 12:
+        lasers, blocks = arr[:, 6], arr[:, 7]
+        if (lasers != layout.n_channels).any() or (blocks != layout.n_blocks).any():
+            raise DecodeError(
+                f"{layout.model} header declares {int(lasers[0])} lasers x {int(blocks[0])} "
+                f"blocks, layout has {layout.n_channels} x {layout.n_blocks}"
+            )
+    tail = _tail_start(layout, arr)
+    need = tail + layout.tail_bytes
+    short = np.flatnonzero(sz < need)
+    if short.size:
+        i = int(short[0])
+        raise DecodeError(
+            f"{layout.model} packet #{i} has {int(sz[i])} bytes, needs {int(need[i])}"
+        )
+    if layout.valid_sizes and not np.isin(sz, layout.valid_sizes).all():
+        raise DecodeError(f"{layout.model} packets must be {layout.valid_sizes} bytes long")
+
+    # Blocks: a zero-copy (n, B, block) view, then the azimuth columns.
+    body = arr[:, layout.header_bytes : layout.body_end].reshape(
+        n, layout.n_blocks, layout.block_bytes
+    )
+    if (
+        layout.model == "Pandar40P"
+        and not ((body[:, :, 0] == 0xFF) & (body[:, :, 1] == 0xEE)).all()
+    ):
+        raise DecodeError("Pandar40P block without its 0xFFEE start flag")
+    a = layout.azimuth_offset
+    azimuth = body[:, :, a].astype(np.int64) | (body[:, :, a + 1].astype(np.int64) << 8)
+    if layout.fine_azimuth:
+        azimuth = (azimuth << 8) | body[:, :, a + 2]
+    full_turn = 360 * layout.azimuth_units_per_deg
+    if int(azimuth.max()) >= full_turn:
+        i = int(np.argmax(azimuth.max(axis=1)))
+        raise DecodeError(
+            f"{layout.model} packet #{i}: azimuth {int(azimuth[i].max())} is past 360 deg"
+        )
+
+    mode = arr[np.arange(n), tail + layout.tail_return_mode].astype(np.int64)
+    n_ret = _n_returns(layout, arr, mode)
+    us = _le(_gather(arr, tail + layout.tail_timestamp_us, 4))
+    if int(us.max()) > 1_000_000:
+        i = int(np.argmax(us))
+        raise DecodeError(f"{layout.model} packet #{i}: microsecond timestamp {int(us[i])} >= 1 s")
+    seconds = _epoch_seconds(_gather(arr, tail + layout.tail_date_time, 6))
+    unset = seconds < 0
+    if unset.any():
+        seconds = np.where(unset, np.rint((host - us * 1000) / _NS_PER_S).astype(np.int64), seconds)
+    t0_ns = seconds * _NS_PER_S + us * 1000
+    return PacketTiming(
+        vendor="hesai",
+        model=layout.model,
+        sensor_time_ns=t0_ns,
+        block_azimuth_deg=azimuth / layout.azimuth_units_per_deg,
+        block_time_ns=t0_ns[:, None] + layout.block_offset_ns(n_ret),
+        return_mode=mode.astype(np.uint8),
+        dual_return=n_ret >= 2,
+    )
+
+
+def hesai_returns(
+    data: NDArray[np.uint8], size: NDArray[np.integer]
+) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    """Per block and channel: distance in metres (0 = no return) and reflectivity.
+
+    Shapes (n, B, C); the distance unit is the header's (4 mm; Pandar40P: fixed 4 mm).
+    """
+    arr, sz = _check_packets(data, size)
+    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    n = arr.shape[0]
+    body = arr[:, layout.header_bytes : layout.body_end].reshape(
+        n, layout.n_blocks, layout.block_bytes
+    )
+    units = body[:, :, layout.block_prefix_bytes :].reshape(
+        n, layout.n_blocks, layout.n_channels, layout.unit_bytes
+    )
+    raw = units[..., 0].astype(np.uint16) | (units[..., 1].astype(np.uint16) << 8)
+    if layout.model == "Pandar40P":
+        unit_m = np.full(n, 0.004)
+    else:
+        unit_m = arr[:, 5 if layout.header_bytes == 8 else 9] / 1000.0
+    return raw * unit_m[:, None, None], units[..., 2].copy()
+
+
+# ============================================================================ encoder
+
+
+def _layout(model: str) -> HesaiLayout:
+    try:
+        return HESAI_LAYOUTS[model]
+    except KeyError:
+        raise DecodeError(f"unknown Hesai model {model!r}; known: {', '.join(_MODELS)}") from None
+
+
+def encode_hesai(
+    model: str,
+    block_azimuth_deg: NDArray[np.float64],
+    packet_time_ns: NDArray[np.int64],
+    return_mode: int = 0x37,
+    *,
+    distance_m: NDArray[np.float64] | None = None,
+    reflectivity: NDArray[np.uint8] | None = None,
+    rng: np.random.Generator | None = None,
+    motor_rpm: int = 600,
+    udp_sequence_start: int = 1,
+) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
+    """Real-format Hesai packets: (data (n, L) uint8, size (n,)).
+
+    Writes header, blocks (azimuth rounded to the packet's resolution, distances in 4 mm,
+    reflectivity), tail (return mode, motor speed, date-time, microsecond timestamp, factory
+    byte 0x42) and the UDP sequence. Times are floored to the microsecond the packet holds.
+    Without `distance_m`, plausible returns are drawn from `rng` (default seed 0);
+    in multi-return modes the blocks of one firing repeat the azimuth. CRC fields are zero.
+    """
+    layout = _layout(model)
+    az = np.asarray(block_azimuth_deg, dtype=np.float64)
+    t_ns = np.asarray(packet_time_ns, dtype=np.int64)
+    n = t_ns.shape[0]
+    b, c = layout.n_blocks, layout.n_channels
+    if az.shape != (n, b):
+        raise ValueError(f"block_azimuth_deg must be ({n}, {b}) for {model}, got {az.shape}")
+    n_ret = _RETURNS_OF_MODE.get(return_mode, 0)
+    if n_ret == 0 or b % n_ret or (layout.header_bytes != 12 and n_ret > 2):
+        raise ValueError(f"return mode {return_mode:#04x} is not supported by {model}")
+    if distance_m is None:
+        gen = rng if rng is not None else np.random.default_rng(0)
+        first = gen.uniform(0.5, 80.0, (n, b // n_ret, 1, c))
+        extra = gen.uniform(0.0, 10.0, (n, b // n_ret, n_ret, c)) * (
+            gen.random((n, b // n_ret, n_ret, c)) < 0.2
+        )
+        extra[:, :, 0] = 0.0
+        dist = (first + np.cumsum(extra, axis=2)).reshape(n, b, c)
+        dist[gen.random((n, b, c)) < 0.05] = 0.0  # no return
+        refl = gen.integers(0, 256, (n, b, c), dtype=np.uint8)
+    else:
+        dist = np.asarray(distance_m, dtype=np.float64)
+        refl = (
+            np.asarray(reflectivity, dtype=np.uint8)
+            if reflectivity is not None
+            else np.zeros((n, b, c), dtype=np.uint8)
+        )
+    if dist.shape != (n, b, c) or refl.shape != (n, b, c):
+        raise ValueError(f"distance_m and reflectivity must be ({n}, {b}, {c})")
+
+    tail = layout.body_end + layout.body_trailer_bytes
+    if layout.fs_bytes_if_flagged and layout.header_flags & 0x04:
+        tail += layout.fs_bytes_if_flagged
+    size = tail + layout.tail_bytes + layout.trailer_bytes
+    out = np.zeros((n, size), dtype=np.uint8)
+    if layout.header_bytes == 12:
+        major, minor = layout.protocol or (0, 0)
+        out[:, :12] = [
+            0xEE,
+            0xFF,
+            major,
+            minor,
+            0,
+            0,
+            c,
+            b,
+            1 if n_ret > 1 else 0,
+            4,
+            n_ret,
+            layout.header_flags,
+        ]
+    elif layout.header_bytes == 8:
+        out[:, :8] = [0xEE, 0xFF, c, b, 0, 4, 0, 0]
+
+    body = out[:, layout.header_bytes : layout.body_end].reshape(n, b, layout.block_bytes)
+    full_turn = 360 * layout.azimuth_units_per_deg
+    raw_az = np.rint(az * layout.azimuth_units_per_deg).astype(np.int64) % full_turn
+    a = layout.azimuth_offset
+    if layout.model == "Pandar40P":
+        body[:, :, 0], body[:, :, 1] = 0xFF, 0xEE
+    coarse = raw_az >> 8 if layout.fine_azimuth else raw_az
+    body[:, :, a] = coarse & 0xFF
+    body[:, :, a + 1] = coarse >> 8
+    if layout.fine_azimuth:
+        body[:, :, a + 2] = raw_az & 0xFF
+    units = body[:, :, layout.block_prefix_bytes :].reshape(n, b, c, layout.unit_bytes)
+    raw_d = np.clip(np.rint(dist / 0.004), 0, 0xFFFF).astype(np.int64)
+    units[..., 0], units[..., 1], units[..., 2] = raw_d & 0xFF, raw_d >> 8, refl
+
+    seconds, us = t_ns // _NS_PER_S, (t_ns % _NS_PER_S) // 1000
+    rows = out[:, tail : tail + layout.tail_bytes]
+    rows[:, layout.tail_return_mode] = return_mode
+    rows[:, layout.tail_motor_rpm : layout.tail_motor_rpm + 2] = [motor_rpm & 0xFF, motor_rpm >> 8]
+    rows[:, layout.tail_timestamp_us : layout.tail_timestamp_us + 4] = _le_bytes(us, 4)
+    rows[:, layout.tail_factory] = 0x42
+    rows[:, layout.tail_date_time : layout.tail_date_time + 6] = _date_bytes(
+        seconds, layout.year_base
+    )
+    if layout.trailer_bytes:
+        seq = udp_sequence_start + np.arange(n, dtype=np.int64)
+        out[:, tail + layout.tail_bytes : tail + layout.tail_bytes + 4] = _le_bytes(seq, 4)
+    return out, np.full(n, size, dtype=np.uint32)
+
+
+def _le_bytes(values: NDArray[np.int64], count: int) -> NDArray[np.uint8]:
+    """(n, count) little-endian bytes of non-negative integers."""
+    shifts = 8 * np.arange(count, dtype=np.int64)
+    return ((values[:, None] >> shifts) & 0xFF).astype(np.uint8)
+
+
+def _date_bytes(seconds: NDArray[np.int64], year_base: int) -> NDArray[np.uint8]:
+    """(n, 6) date field: calendar with a year offset, or 0 + 5-byte big-endian Unix seconds."""
+    if year_base == 0:
+        out = np.zeros((seconds.shape[0], 6), dtype=np.uint8)
+        out[:, 1:] = _le_bytes(seconds, 5)[:, ::-1]
+        return out
+    days, rest = seconds // 86_400, seconds % 86_400
+    year, month, day = _civil_from_days(days)
+    year_byte = year - year_base
+    if ((year_byte < 0) | (year_byte > 255) | ((year_base == 1900) & (year_byte < 100))).any():
+        raise ValueError(
+            f"packet times outside the years the date field can hold (base {year_base})"
+        )
+    cols = (year_byte, month, day, rest // 3600, rest % 3600 // 60, rest % 60)
+    return np.stack(cols, axis=1).astype(np.uint8)
+
+
+@dataclass(frozen=True, slots=True)
+class HesaiRevolution:
+    """One revolution of packets laid out on the sensor's firing clock."""
+
+    model: str
+    return_mode: int
+    block_azimuth_deg: NDArray[np.float64]
+    """(n, B) azimuth of each block, on the packet's azimuth grid."""
+    packet_time_ns: NDArray[np.int64]
+    """(n,) packet time t0, whole microseconds."""
+    block_time_ns: NDArray[np.int64]
+    """(n, B) first-firing time of each block, as `decode_hesai` computes it."""
+
+
+def hesai_revolution_schedule(
+    model: str,
+    rpm: float,
+    start_time_ns: int,
+    *,
+    return_mode: int = 0x37,
+    start_azimuth_deg: float = 0.0,
+) -> HesaiRevolution:
+    """Packets of one revolution starting at `start_time_ns` and `start_azimuth_deg`.
+
+    Firing rounds follow the model's fixed round period (e.g. 55.56 us Pandar40P, 50 us XT),
+    so the azimuth step per round is rpm * 6 deg/s * period; the packet count is the rounds of
+    one turn divided by rounds per packet (rounded up). Packet times are floored to whole
+    microseconds and block times derived from them by the decoder's rule; azimuths follow
+    the block times exactly (constant angular velocity), rounded to the packet's resolution.
+    """
+    layout = _layout(model)
+    n_ret = _RETURNS_OF_MODE.get(return_mode, 0)
+    if n_ret == 0 or layout.n_blocks % n_ret:
+        raise ValueError(f"return mode {return_mode:#04x} is not supported by {model}")
+    if not rpm > 0:
+        raise ValueError("rpm must be positive")
+    deg_per_ns = rpm * 360.0 / 60e9
+    rounds_per_turn = round(360.0 / (deg_per_ns * layout.round_period_ns))
+    per_packet = layout.n_blocks // n_ret
+    n = -(-rounds_per_turn // per_packet)
+    first_round = np.arange(n, dtype=np.int64) * per_packet
+    first_start = start_time_ns + (layout.period_num_ns * first_round) // layout.period_den
+    returns = np.full(n, n_ret, dtype=np.int64)
+    offsets = layout.block_offset_ns(returns)
+    packet_ns = (first_start - offsets[:, 0]) // 1000 * 1000
+    block_ns = packet_ns[:, None] + offsets
+    azimuth = (start_azimuth_deg + deg_per_ns * (block_ns - start_time_ns)) % 360.0
+    units = layout.azimuth_units_per_deg
+    azimuth = (np.rint(azimuth * units) % (360 * units)) / units
+    return HesaiRevolution(model, return_mode, azimuth, packet_ns, block_ns)
