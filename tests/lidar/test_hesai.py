@@ -113,6 +113,12 @@ def test_real_scans_decode(case: tuple[Expected, list[bytes]]) -> None:
         assert (timing.block_time_ns[:, ::2] == timing.block_time_ns[:, 1::2]).all()
         flat_t = timing.block_time_ns.ravel()
         assert (np.diff(flat_t) >= 0).all()  # block times never go back, across packets too
+        # The manual's block timing puts the next packet's first firing one round period
+        # after this packet's last (55.56 us Pandar40P, 50 us XT): measured here, not assumed.
+        firing_ns = timing.block_time_ns[:, ::2]
+        period_ns = HESAI_LAYOUTS[exp.model].round_period_ns
+        assert (np.diff(firing_ns, axis=1) == period_ns).all()
+        assert abs(np.mean(firing_ns[1:, 0] - firing_ns[:-1, -1]) - period_ns) < 50.0
         counts.append(timing.n_packets)
         times.append(flat_t)
         azimuths.append(timing.block_azimuth_deg.ravel())
