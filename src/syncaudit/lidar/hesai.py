@@ -823,11 +823,14 @@ def decode_hesai(
     us = _le(_gather(arr, tail + layout.tail_timestamp_us, 4))
     if int(us.max()) > 1_000_000:
         i = int(np.argmax(us))
-        raise DecodeError(f"{layout.model} packet #{i}: microsecond timestamp {int(us[i])} >= 1 s")
+        raise DecodeError(
+            f"{layout.model} packet #{i}: microsecond timestamp {int(us[i])} is past 1 s"
+        )
     seconds = _epoch_seconds(_gather(arr, tail + layout.tail_date_time, 6))
     unset = seconds < 0
     if unset.any():
-        seconds = np.where(unset, np.rint((host - us * 1000) / _NS_PER_S).astype(np.int64), seconds)
+        host_s = (host - us * 1000 + _NS_PER_S // 2) // _NS_PER_S  # nearest whole second
+        seconds = np.where(unset, host_s, seconds)
     t0_ns = seconds * _NS_PER_S + us * 1000
     return PacketTiming(
         vendor="hesai",
@@ -931,22 +934,11 @@ def encode_hesai(
     out = np.zeros((n, size), dtype=np.uint8)
     if layout.header_bytes == 12:
         major, minor = layout.protocol or (0, 0)
-        out[:, :12] = [
-            0xEE,
-            0xFF,
-            major,
-            minor,
-            0,
-            0,
-            c,
-            b,
-            1 if n_ret > 1 else 0,
-            4,
-            n_ret,
-            layout.header_flags,
-        ]
+        first, flags = (1 if n_ret > 1 else 0), layout.header_flags  # dual: last return first
+        # 0xEEFF, version, reserved 2, lasers, blocks, first-block return, 4 mm, returns, flags
+        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, first, 4, n_ret, flags)
     elif layout.header_bytes == 8:
-        out[:, :8] = [0xEE, 0xFF, c, b, 0, 4, 0, 0]
+        out[:, :8] = (0xEE, 0xFF, c, b, 0, 4, 0, 0)  # 0xEEFF, lasers, blocks, -, 4 mm, -, -
 
     body = out[:, layout.header_bytes : layout.body_end].reshape(n, b, layout.block_bytes)
     full_turn = 360 * layout.azimuth_units_per_deg
