@@ -934,9 +934,9 @@ def encode_hesai(
     out = np.zeros((n, size), dtype=np.uint8)
     if layout.header_bytes == 12:
         major, minor = layout.protocol or (0, 0)
-        first, flags = (1 if n_ret > 1 else 0), layout.header_flags  # dual: last return first
+        lead, flags = (1 if n_ret > 1 else 0), layout.header_flags  # dual: last return leads
         # 0xEEFF, version, reserved 2, lasers, blocks, first-block return, 4 mm, returns, flags
-        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, first, 4, n_ret, flags)
+        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, lead, 4, n_ret, flags)
     elif layout.header_bytes == 8:
         out[:, :8] = (0xEE, 0xFF, c, b, 0, 4, 0, 0)  # 0xEEFF, lasers, blocks, -, 4 mm, -, -
 
