@@ -29,9 +29,13 @@ T = TypeVar("T")
 
 RigOption = Annotated[
     Path | None,
-    typer.Option("--rig", help="Rig file (YAML/TOML/JSON); topics and cameras are guessed without it."),
+    typer.Option(
+        "--rig", help="Rig file (YAML/TOML/JSON); topics and cameras are guessed without it."
+    ),
 ]
-JsonFlag = Annotated[bool, typer.Option("--json", help="Print the result as JSON instead of tables.")]
+JsonFlag = Annotated[
+    bool, typer.Option("--json", help="Print the result as JSON instead of tables.")
+]
 
 
 def _run(job: Callable[[], T]) -> T:
@@ -60,7 +64,9 @@ def _print_json(data: Any) -> None:
 
 @app.command()
 def info(
-    log: Annotated[Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")],
+    log: Annotated[
+        Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")
+    ],
     rig: RigOption = None,
     as_json: JsonFlag = False,
 ) -> None:
@@ -75,6 +81,48 @@ def info(
             _print_json(report.to_dict())
         else:
             render_info(report, out)
+
+    _run(job)
+
+
+@app.command()
+def audit(
+    log: Annotated[
+        Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")
+    ],
+    rig: RigOption = None,
+    as_json: JsonFlag = False,
+    json_out: Annotated[
+        Path | None, typer.Option("--json-out", help="Also write the full JSON result here.")
+    ] = None,
+    csv_out: Annotated[
+        Path | None, typer.Option("--csv", help="Write the per-frame table as CSV here.")
+    ] = None,
+    gate: Annotated[
+        bool, typer.Option("--gate", help="Exit 10 when a camera crosses a threshold (CI gate).")
+    ] = False,
+) -> None:
+    """Audit LiDAR-camera sync: Eq. 1-6 per camera, recommended delay, threshold verdict."""
+    from syncaudit.audit import audit_log
+    from syncaudit.errors import GateFailedError
+    from syncaudit.report.console import render_audit
+    from syncaudit.rig import load_rig
+    from syncaudit.writers.atomic import write_atomic, write_text_atomic
+
+    def job() -> None:
+        result = audit_log(log, load_rig(rig) if rig else None)
+        data = result.to_dict()
+        if json_out:
+            write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")
+        if csv_out:
+            frames = result.frames()
+            write_atomic(csv_out, lambda handle: frames.to_csv(handle, index=False))
+        if as_json:
+            _print_json(data)
+        else:
+            render_audit(result, out)
+        if gate and not result.passed:
+            raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
 
     _run(job)
 

@@ -46,6 +46,8 @@ class LidarRow:
     packets_per_revolution: float
     dropped_packets: int
     dual_return: bool
+    cropped_sector: str | None
+    outlier_blocks: int
     clock_offset_s: float | None
     clock_synchronised: bool | None
     t1_p50_us: float | None
@@ -111,6 +113,12 @@ def lidar_row(scan: LidarScan) -> LidarRow:
         packets_per_revolution=scan.packets_per_revolution,
         dropped_packets=scan.dropped_packets,
         dual_return=scan.dual_return,
+        cropped_sector=None
+        if scan.cropped_sector is None
+        else f"{scan.cropped_sector[1]:.0f} packets/turn are never recorded before the "
+        f"sector resumes {scan.cropped_sector[0]:.0f} deg past the zero crossing, in "
+        f"{scan.cropped_sector[2]} revolutions (FOV-cropped recording, not counted as drops)",
+        outlier_blocks=scan.outlier_blocks,
         clock_offset_s=None if clock is None else clock.raw_median_ns / 1e9,
         clock_synchronised=None if clock is None else clock.synchronised,
         t1_p50_us=None if clock is None else clock.t1_p50_ns / 1e3,
@@ -159,7 +167,17 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
         except SyncauditError as exc:
             report.warnings.append(f"{topic}: {exc}")
             continue
-        report.lidars.append(lidar_row(scan))
+        if scan.packets == 0:
+            report.warnings.append(f"{topic}: no LiDAR data packets (e.g. an IMU packet topic)")
+            continue
+        row = lidar_row(scan)
+        report.lidars.append(row)
+        if row.cropped_sector:
+            report.warnings.append(f"{topic}: {row.cropped_sector}")
+        if row.outlier_blocks:
+            report.warnings.append(
+                f"{topic}: {row.outlier_blocks} blocks ignored, their azimuth contradicts their packet"
+            )
     cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)
     if not (rig and rig.cameras) and cameras:
         report.guessed.append(
@@ -185,7 +203,9 @@ def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> Ca
         image_topic=cam.image_topic,
         frames=frames,
         rate_hz=frames / duration if frames and duration else None,
-        exposure_metadata=exposure.msgtype if exposure and exposure.msgtype in EXPOSURE_TYPES else None,
+        exposure_metadata=exposure.msgtype
+        if exposure and exposure.msgtype in EXPOSURE_TYPES
+        else None,
         stamp_semantics=cam.stamp,
         trigger_topic=cam.trigger_topic,
         checkpoints=CHECKPOINTS_BY_TYPE.get(trigger.msgtype, ())

@@ -172,17 +172,26 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> pd.DataFrame:
             trig, left_on="frame_sequence", right_on="trig_frame_sequence", how="left"
         )
         return merged.drop(columns="trig_frame_sequence")
-    key = "trig_exposure_start_ns" if trig["trig_exposure_start_ns"].notna().any() else "trig_camera_sensor_ns"
+    key = (
+        "trig_exposure_start_ns"
+        if trig["trig_exposure_start_ns"].notna().any()
+        else "trig_camera_sensor_ns"
+    )
     left = frames.assign(_t=frames["exposure_start_ns"].astype("float64")).sort_values("_t")
     right = trig.assign(_t=trig[key].astype("float64")).dropna(subset=["_t"]).sort_values("_t")
     merged = pd.merge_asof(
-        left, right.drop(columns="trig_frame_sequence"), on="_t", direction="backward",
+        left,
+        right.drop(columns="trig_frame_sequence"),
+        on="_t",
+        direction="backward",
         tolerance=float(PAIR_TOLERANCE_NS),
     )
     return merged.drop(columns="_t").sort_index()
 
 
-def _latency(values: NDArray[np.float64], assumed_us: float | None) -> tuple[NDArray[np.float64], LatencyStats]:
+def _latency(
+    values: NDArray[np.float64], assumed_us: float | None
+) -> tuple[NDArray[np.float64], LatencyStats]:
     finite = values[np.isfinite(values)]
     if finite.size:
         return values, LatencyStats(
@@ -224,7 +233,9 @@ def analyze_camera(
     t_rotate = theta / omega_mean * 1e9 if omega_mean else math.nan
     offset, how = host_offset_ns(scan, tables.triggers)
     if how != "synchronised":
-        warnings.append(f"LiDAR clock not synchronised with the host; offset {offset / 1e9:+.6f} s {how}")
+        warnings.append(
+            f"LiDAR clock not synchronised with the host; offset {offset / 1e9:+.6f} s {how}"
+        )
 
     frames = pair_triggers(tables.frames, tables.triggers)
     n = len(frames)
@@ -275,12 +286,19 @@ def analyze_camera(
     raw = {
         "t1": _col(frames, "trig_lidar_driver_ns") - _col(frames, "trig_lidar_packet_ns"),
         "t2": _col(frames, "trig_camera_driver_ns") - _col(frames, "trig_lidar_driver_ns"),
-        "t3": _col(frames, "trig_camera_sensor_ns") - _col(frames, "trig_camera_driver_ns") - applied,
+        "t3": _col(frames, "trig_camera_sensor_ns")
+        - _col(frames, "trig_camera_driver_ns")
+        - applied,
         "t4": _col(frames, "trig_exposure_start_ns") - _col(frames, "trig_camera_sensor_ns"),
     }
     if not np.isfinite(raw["t1"]).any() and scan.clock is not None:
         raw["t1"] = np.full(n, scan.clock.t1_mean_ns)
-    assumed = {"t1": None, "t2": analysis.assumed_t2_us, "t3": analysis.assumed_t3_us, "t4": analysis.assumed_t4_us}
+    assumed = {
+        "t1": None,
+        "t2": analysis.assumed_t2_us,
+        "t3": analysis.assumed_t3_us,
+        "t4": analysis.assumed_t4_us,
+    }
     lat: dict[str, NDArray[np.float64]] = {}
     stats: dict[str, LatencyStats] = {}
     for name in LATENCIES:
@@ -325,6 +343,7 @@ def analyze_camera(
             "t4_ns": lat["t4"],
             "t5_avg_ns": t5_avg,
             "t_rotate_ns": t_rotate_frame,
+            "packet_phase_ns": packet_phase,
             "t_sleep_ns": t_sleep,
             "applied_delay_ns": applied,
             "rolling_error_mean_ns": roll_mean,
@@ -357,7 +376,9 @@ def analyze_camera(
         error_var_ns2=var_e,
         error_p99_ns=float(np.percentile(e, 99)) if e.size else math.nan,
         error_max_ns=float(e.max()) if e.size else math.nan,
-        rolling_mean_max_ns=float(np.nanmax(roll_mean)) if np.isfinite(roll_mean).any() else math.nan,
+        rolling_mean_max_ns=float(np.nanmax(roll_mean))
+        if np.isfinite(roll_mean).any()
+        else math.nan,
         rolling_var_max_ns2=float(np.nanmax(roll_var)) if np.isfinite(roll_var).any() else math.nan,
         mean_exceeded=bool(mean_e > thr_mean),
         var_exceeded=bool(var_e > thr_var),

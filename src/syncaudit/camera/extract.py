@@ -170,6 +170,17 @@ def _read_triggers(log: LogReader, cam: CameraConfig) -> tuple[list[tuple[Any, .
         else:
             sent = _time_ns(m) if msgtype == "builtin_interfaces/msg/Time" else _time_ns(m.time_ref)
             rows.append(
-                (cam.name, _ros1_seq(msg), msg.log_time_ns, None, None, None, sent, None, None, msgtype)
+                (
+                    cam.name,
+                    _ros1_seq(msg),
+                    msg.log_time_ns,
+                    None,
+                    None,
+                    None,
+                    sent,
+                    None,
+                    None,
+                    msgtype,
+                )
             )
     return rows, msgtype

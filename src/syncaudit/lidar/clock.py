@@ -83,7 +83,7 @@ class ClockEstimator:
         mean_rel = self._sum / self._count
         var = max(self._sumsq / self._count - mean_rel**2, 0.0)
         median = int(np.median(sample))
-        synchronised = SYNC_FLOOR_NS <= self._min and median <= self.tolerance_ns
+        synchronised = self._min >= SYNC_FLOOR_NS and median <= self.tolerance_ns
         offset = 0 if synchronised else self._min
         t1 = (sample - offset).astype(np.float64)
         return ClockReport(

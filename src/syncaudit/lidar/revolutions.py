@@ -21,6 +21,10 @@ from syncaudit.lidar.packets import PacketTiming
 FULL_TURN_DEG = 360.0
 MAX_BLOCK_STEP_DEG = 90.0
 """Steps larger than this between consecutive blocks are gaps, not rotation samples."""
+MAX_PACKET_SPAN_DEG = 30.0
+"""A block further than this from its packet's first block contradicts its own packet."""
+CROP_BIN_DEG = 5.0
+"""Gaps that start within this angle of each other in most revolutions are a cropped sector."""
 
 
 @dataclass(slots=True)
@@ -49,6 +53,9 @@ class RevolutionTracker:
     _targets: dict[tuple[int, int], int] = field(default_factory=dict)
     _packets: dict[int, int] = field(default_factory=dict)
     _dropped: dict[int, int] = field(default_factory=dict)
+    _gaps: list[tuple[int, float, int]] = field(default_factory=list)
+    outlier_blocks: int = 0
+    """Blocks ignored because their azimuth contradicts the rest of their packet."""
 
     def __post_init__(self) -> None:
         if self.direction not in (1, -1):
@@ -66,7 +73,11 @@ class RevolutionTracker:
         times = timing.block_time_ns.reshape(-1)
         azimuth = timing.block_azimuth_deg.reshape(-1)
         packet_of = np.repeat(np.arange(n, dtype=np.int64), b)
-        keep = np.isfinite(azimuth)
+        oriented_blocks = self.direction * timing.block_azimuth_deg
+        span = (oriented_blocks - oriented_blocks[:, :1]) % FULL_TURN_DEG
+        sane = (span < MAX_PACKET_SPAN_DEG) | (span > FULL_TURN_DEG - MAX_PACKET_SPAN_DEG)
+        self.outlier_blocks += int(np.sum(~sane & np.isfinite(span)))
+        keep = np.isfinite(azimuth) & sane.reshape(-1)
         keep[1:] &= np.diff(times) > 0  # dual returns repeat a block's time: keep the first
         times, azimuth, packet_of = times[keep], azimuth[keep], packet_of[keep]
         if times.size == 0:
@@ -122,6 +133,9 @@ class RevolutionTracker:
         if math.isfinite(self._period_ns) and gaps.size:
             miss = np.maximum(np.rint(gaps / self._period_ns).astype(np.int64) - 1, 0)
             missing[stamps.size - miss.size :] = miss
+        for i in np.flatnonzero(missing).tolist():
+            angle = float((unwrapped[first[i]] - self._zero_oriented) % FULL_TURN_DEG)
+            self._gaps.append((int(rev[i]), angle, int(missing[i])))
         revs, inverse = np.unique(rev, return_inverse=True)
         counts = np.bincount(inverse)
         drops = np.bincount(inverse, weights=missing).astype(np.int64)
@@ -169,8 +183,37 @@ class RevolutionTracker:
                 else:
                     self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
 
+    @property
+    def omega_blocks_deg_s(self) -> float:
+        """Angular velocity from consecutive blocks (works with less than a revolution)."""
+        return self._omega_deg_ns * 1e9
+
+    def cropped_sector(self) -> tuple[float, float, int] | None:
+        """(end angle of the recorded sector, missing packets per turn, revolutions) where the
+        same gap recurs in most revolutions: a FOV-cropped recording, not packet loss."""
+        if not self._gaps:
+            return None
+        bins: dict[int, list[tuple[int, float, int]]] = {}
+        for gap in self._gaps:
+            bins.setdefault(round(gap[1] / CROP_BIN_DEG), []).append(gap)
+        best = max(bins.values(), key=len)
+        revolutions = len({g[0] for g in best})
+        if revolutions < 2 or revolutions < 0.8 * max(len(self._zero), 1):
+            return None
+        return (
+            float(np.median([g[1] for g in best])),
+            float(np.median([g[2] for g in best])),
+            revolutions,
+        )
+
     def finish(self) -> RevolutionColumns:
         """Per-revolution columns for every revolution whose start was seen."""
+        crop = self.cropped_sector()
+        if crop is not None:
+            centre = round(crop[0] / CROP_BIN_DEG)
+            for k, angle, missing in self._gaps:
+                if round(angle / CROP_BIN_DEG) == centre:
+                    self._dropped[k] -= missing
         ks = sorted(self._zero)
         zero = np.array([self._zero[k][0] for k in ks], dtype=np.int64)
         omega = np.full(len(ks), np.nan)

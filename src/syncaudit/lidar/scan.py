@@ -26,13 +26,18 @@ class LidarScan:
     dual_return: bool
     revolutions: RevolutionColumns
     clock: ClockReport | None
+    omega_blocks_deg_s: float
+    """Angular velocity from block to block, for logs shorter than two revolutions."""
+    cropped_sector: tuple[float, float, int] | None
+    """(angle where recording stops, packets missing per turn, revolutions) of a FOV crop."""
+    outlier_blocks: int
 
     @property
     def rpm(self) -> float:
         """Median measured rotation rate (revolutions per minute)."""
         omega = self.revolutions.omega_deg_s
         omega = omega[np.isfinite(omega)]
-        return float(np.median(omega) / 6.0) if omega.size else float("nan")
+        return float(np.median(omega) / 6.0) if omega.size else self.omega_blocks_deg_s / 6.0
 
     @property
     def packets_per_revolution(self) -> float:
@@ -88,4 +93,7 @@ def scan_lidar(
         dual_return=dual,
         revolutions=tracker.finish(),
         clock=clock.finish(),
+        omega_blocks_deg_s=tracker.omega_blocks_deg_s,
+        cropped_sector=tracker.cropped_sector(),
+        outlier_blocks=tracker.outlier_blocks,
     )

@@ -106,7 +106,8 @@ def _scan_chunk(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
         if family == "hesai":
             stamps, data, sizes = hesai.pandar_scan_packets(msg.data, msg.encoding)
         else:
-            stamps, data, sizes = hesai.nebula_packets(msg.data, msg.encoding)
+            stamps, packets = hesai.nebula_packets(msg.data, msg.encoding)
+            data, sizes = hesai.stack_packets(packets)
         if stamps.size == 0:
             return None
         if family == "nebula" and _looks_velodyne(data, sizes):

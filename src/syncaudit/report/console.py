@@ -5,6 +5,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.table import Table
 
+from syncaudit.audit import AuditResult
 from syncaudit.inspect_log import InfoReport
 
 
@@ -22,7 +23,9 @@ def render_info(report: InfoReport, console: Console) -> None:
     for col in ("topic", "type", "count", "rate Hz"):
         topics.add_column(col, justify="right" if col in ("count", "rate Hz") else "left")
     for t in report.topics:
-        topics.add_row(t.name, t.msgtype, str(t.count if t.count is not None else "?"), _num(t.rate_hz))
+        topics.add_row(
+            t.name, t.msgtype, str(t.count if t.count is not None else "?"), _num(t.rate_hz)
+        )
     console.print(topics)
     if report.lidars:
         lidars = Table(title="LiDARs (measured from packets)", title_justify="left")
@@ -57,7 +60,14 @@ def render_info(report: InfoReport, console: Console) -> None:
         console.print(lidars)
     if report.cameras:
         cams = Table(title="Cameras", title_justify="left")
-        for col in ("camera", "frames", "rate Hz", "exposure metadata", "stamp", "trigger checkpoints"):
+        for col in (
+            "camera",
+            "frames",
+            "rate Hz",
+            "exposure metadata",
+            "stamp",
+            "trigger checkpoints",
+        ):
             cams.add_column(col)
         for cam in report.cameras:
             cams.add_row(
@@ -73,3 +83,84 @@ def render_info(report: InfoReport, console: Console) -> None:
         console.print(f"[cyan]guessed[/] {guess} (pass --rig to set them)")
     for warning in report.warnings:
         console.print(f"[yellow]warning[/] {warning}")
+
+
+def _us(value: float | None, fmt: str = "{:.1f}") -> str:
+    return _num(value, fmt)
+
+
+def render_audit(result: AuditResult, console: Console) -> None:
+    """The `audit` view: LiDAR side, then one table of the method's quantities per camera."""
+    lidar = result.lidar
+    console.print(
+        f"[bold]{result.path}[/]  {result.container}  {_num(result.duration_s, '{:.3f} s')}\n"
+        f"LiDAR {lidar.topic}: {lidar.vendor} {lidar.model}, {_num(lidar.rpm, '{:.2f}')} RPM, "
+        f"{lidar.revolutions} revolutions, {_num(lidar.packets_per_revolution, '{:.0f}')} packets/rev, "
+        f"{lidar.dropped_packets} dropped, clock "
+        + (
+            "synchronised"
+            if lidar.clock_synchronised
+            else f"[red]NOT synchronised[/] ({_num(lidar.clock_offset_s, '{:+.3f} s')})"
+        )
+        + f", t1 p50/p99 {_num(lidar.t1_p50_us)}/{_num(lidar.t1_p99_us)} us"
+    )
+    for cam in result.cameras:
+        d = cam.to_dict()
+        verdict = (
+            "[red]needs correction[/]"
+            if cam.sync.needs_correction
+            else "[green]within thresholds[/]"
+        )
+        table = Table(
+            title=f"camera {cam.sync.camera}: {verdict}", title_justify="left", show_header=False
+        )
+        table.add_column("quantity")
+        table.add_column("value")
+        table.add_row(
+            "theta / omega / t_rotate (Eq. 1)",
+            f"{_num(d['theta_deg'], '{:.2f}')} deg / {_num(d['omega_deg_s'], '{:.1f}')} deg/s / "
+            f"{_us(d['t_rotate_us'])} us  (azimuth from {cam.azimuth_source})",
+        )
+        for name, lat in d["latencies"].items():
+            table.add_row(
+                f"{name} mean / p50 / p99",
+                f"{_us(lat['mean_us'])} / {_us(lat['p50_us'])} / "
+                f"{_us(lat['p99_us'])} us  ({lat['status']})",
+            )
+        table.add_row("t5 mean exposure (Eq. 3)", f"{_us(d['t5_mean_us'])} us")
+        table.add_row(
+            "t_sleep applied -> recommended (Eq. 2)",
+            f"{_us(d['delay_applied_us'])} -> [bold]{_us(d['delay_recommended_us'])}[/] us "
+            f"(from error: {_us(d['delay_from_error_us'])} us)",
+        )
+        table.add_row(
+            "error mean (Eq. 5) / var (Eq. 6)",
+            f"{_us(d['error_mean_us'])} us / {_num(d['error_var_us2'], '{:.1f}')} us^2",
+        )
+        table.add_row(
+            "error signed mean / p99 / max",
+            f"{_us(d['error_signed_mean_us'])} / {_us(d['error_p99_us'])} / {_us(d['error_max_us'])} us",
+        )
+        table.add_row(
+            "frames paired / total",
+            f"{d['frames_paired']} / {d['frames_total']}"
+            + "".join(f"; {v} {k}" for k, v in d["unpaired"].items()),
+        )
+        if d["corrected"]:
+            c = d["corrected"]
+            table.add_row(
+                "with self-adaptive correction",
+                f"error mean {_us(c['error_mean_us'])} us, var {_num(c['error_var_us2'], '{:.1f}')} us^2, "
+                f"{c['adjustments']} adjustments, final delay {_us(c['final_delay_us'])} us",
+            )
+        console.print(table)
+        for w in cam.sync.warnings:
+            console.print(f"  [yellow]warning[/] {w}")
+    for item in result.missing:
+        console.print(f"[yellow]missing[/] {item}")
+    for guess in result.guessed:
+        console.print(f"[cyan]guessed[/] {guess} (pass --rig to set them)")
+    for warning in result.warnings:
+        console.print(f"[yellow]warning[/] {warning}")
+    verdict = "PASS" if result.passed else ("NO CAMERAS" if not result.cameras else "FAIL")
+    console.print(f"[bold]verdict: {verdict}[/]")

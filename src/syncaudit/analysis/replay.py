@@ -1,0 +1,84 @@
+"""Replay the self-adaptive controller over a recorded camera: what correction would do.
+
+The error of a frame moves one-for-one with the trigger delay (the exposure lands later
+by exactly the extra wait), so replaying the controller only needs each frame's
+latencies, exposure, error and applied delay: error_if_corrected = error + (d_new - d_applied).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.analysis.stats import error_mean, error_variance
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayResult:
+    """Errors of the recorded frames had the controller been running."""
+
+    adjustments: int
+    final_delay_ns: int
+    error_mean_ns: float
+    error_var_ns2: float
+    error_signed_mean_ns: float
+    errors_ns: NDArray[np.float64]
+    """Per paired frame, corrected signed error."""
+    delays_ns: NDArray[np.int64]
+    """Per paired frame, the delay the controller would have used."""
+
+
+def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayResult | None:
+    """Run the controller over the paired frames of one camera (None without applied delays)."""
+    rows = frames[frames["paired"]]
+    cols = [
+        "t1_ns",
+        "t2_ns",
+        "t3_ns",
+        "t4_ns",
+        "exposure_duration_ns",
+        "error_signed_ns",
+        "applied_delay_ns",
+        "t_estimated_ns",
+    ]
+    values = rows[cols].astype("float64").to_numpy()
+    rotate = (
+        rows["t_rotate_ns"].astype("float64") + rows["packet_phase_ns"].astype("float64")
+    ).to_numpy()
+    ok = np.isfinite(values).all(axis=1) & np.isfinite(rotate)
+    values, rotate = values[ok], rotate[ok]
+    if not values.shape[0]:
+        return None
+    controller = DelayController(config, initial_delay_ns=int(values[0, 6]))
+    errors = np.empty(values.shape[0])
+    delays = np.empty(values.shape[0], dtype=np.int64)
+    delay = int(values[0, 6])
+    for i, (t1, t2, t3, t4, t5, err, applied, _) in enumerate(values):
+        corrected = err + (delay - applied)
+        errors[i], delays[i] = corrected, delay
+        delay = controller.update(
+            FrameObservation(
+                t1_ns=round(t1),
+                t2_ns=round(t2),
+                t3_ns=round(t3),
+                t4_ns=round(t4),
+                exposure_ns=round(t5),
+                error_ns=round(corrected),
+                t_rotate_ns=round(rotate[i]),
+            )
+        )
+    abs_err = np.abs(errors)
+    return ReplayResult(
+        adjustments=len(controller.adjustments),
+        final_delay_ns=delay,
+        error_mean_ns=error_mean(abs_err),
+        error_var_ns2=error_variance(abs_err),
+        error_signed_mean_ns=float(errors.mean()) if errors.size else math.nan,
+        errors_ns=errors,
+        delays_ns=delays,
+    )

@@ -1,0 +1,221 @@
+"""`audit_log`: the whole synchronisation audit of one log (part A of the method)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from syncaudit.analysis.controller import ControllerConfig
+from syncaudit.analysis.replay import ReplayResult, replay_controller
+from syncaudit.analysis.sync import CameraSync, analyze_camera
+from syncaudit.camera.azimuth import camera_azimuth, tf_static_yaws
+from syncaudit.camera.extract import read_camera
+from syncaudit.camera.topics import detect_cameras
+from syncaudit.errors import NoDataError
+from syncaudit.inspect_log import LidarRow, lidar_row
+from syncaudit.lidar.scan import scan_lidar
+from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.logs import LogReader, open_log
+from syncaudit.rig import CameraConfig, LidarConfig, Rig
+
+SCHEMA_VERSION = 1
+
+
+@dataclass(slots=True)
+class CameraAudit:
+    """One camera's audit plus what the replayed controller would have achieved."""
+
+    sync: CameraSync
+    azimuth_deg: float
+    azimuth_source: str
+    replay: ReplayResult | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        out = self.sync.to_dict()
+        out["azimuth_deg"] = self.azimuth_deg
+        out["azimuth_source"] = self.azimuth_source
+        out["corrected"] = (
+            None
+            if self.replay is None
+            else {
+                "adjustments": self.replay.adjustments,
+                "final_delay_us": self.replay.final_delay_ns / 1e3,
+                "error_mean_us": _us(self.replay.error_mean_ns),
+                "error_var_us2": _f(self.replay.error_var_ns2 / 1e6),
+                "error_signed_mean_us": _us(self.replay.error_signed_mean_ns),
+            }
+        )
+        return out
+
+
+def _f(v: float) -> float | None:
+    return v if math.isfinite(v) else None
+
+
+def _us(v: float) -> float | None:
+    return v / 1e3 if math.isfinite(v) else None
+
+
+@dataclass(slots=True)
+class AuditResult:
+    """The audit of one log."""
+
+    path: str
+    container: str
+    duration_s: float | None
+    rig: Rig
+    lidar: LidarRow
+    clock_offset_ns: int
+    cameras: list[CameraAudit] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    guessed: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        """No camera crossed a threshold and the audit had cameras to judge."""
+        return bool(self.cameras) and not any(c.sync.needs_correction for c in self.cameras)
+
+    def frames(self) -> pd.DataFrame:
+        """Per-frame table of every camera (what --csv writes)."""
+        tables = [c.sync.frames for c in self.cameras]
+        return pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (schemas/audit.schema.json)."""
+        from syncaudit.inspect_log import _clean
+
+        return _clean(
+            {
+                "schema_version": SCHEMA_VERSION,
+                "path": self.path,
+                "container": self.container,
+                "duration_s": self.duration_s,
+                "verdict": "pass"
+                if self.passed
+                else ("no cameras" if not self.cameras else "fail"),
+                "lidar": _row(self.lidar),
+                "clock_offset_s": self.clock_offset_ns / 1e9,
+                "thresholds": self.rig.thresholds.model_dump(),
+                "analysis": self.rig.analysis.model_dump(),
+                "cameras": [c.to_dict() for c in self.cameras],
+                "missing": self.missing,
+                "guessed": self.guessed,
+                "warnings": self.warnings,
+            }
+        )
+
+
+def _row(row: Any) -> dict[str, Any]:
+    return {name: getattr(row, name) for name in row.__slots__}
+
+
+def _default_rig(log: LogReader) -> tuple[Rig, list[str]]:
+    """A rig guessed from the log: the first packet topic and the cameras by type and name."""
+    packet_topics = sorted(t.name for t in log.topics.values() if is_packet_topic(t.msgtype))
+    if not packet_topics:
+        raise NoDataError(
+            f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
+        )
+    cameras = detect_cameras(log.topics)
+    guessed = [f"LiDAR topic {packet_topics[0]} (by type)"]
+    if cameras:
+        guessed.append(
+            "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
+        )
+    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+
+
+def audit_log(path: str | Path, rig: Rig | None = None) -> AuditResult:
+    """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics."""
+    with open_log(path) as log:
+        if not log.summary.message_count:
+            raise NoDataError(f"{log.summary.path}: the log holds no messages")
+        guessed: list[str] = []
+        if rig is None:
+            rig, guessed = _default_rig(log)
+        elif rig.lidar.topic not in log.topics:
+            raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
+        return _audit(log, rig, guessed)
+
+
+def _audit(log: LogReader, rig: Rig, guessed: list[str]) -> AuditResult:
+    warnings: list[str] = []
+    missing: list[str] = []
+    tf_yaws = tf_static_yaws(log) if any(c.frame_id for c in rig.cameras) else {}
+    located: list[tuple[CameraConfig, float, str]] = []
+    for cam in rig.cameras:
+        azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws)
+        if azimuth is None:
+            warnings.append(f"camera {cam.name} skipped: {source}")
+            continue
+        located.append((cam, azimuth, source))
+    lidar_cfg = rig.lidar
+    scan = scan_lidar(
+        log,
+        lidar_cfg.topic,
+        zero_azimuth_deg=lidar_cfg.zero_azimuth_deg,
+        azimuth_increases=lidar_cfg.azimuth_increases,
+        target_azimuth_deg=tuple(a for _, a, _ in located),
+        clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
+        ouster_metadata_topic=lidar_cfg.metadata_topic,
+    )
+    if scan.packets == 0:
+        raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
+    if scan.clock is not None and not scan.clock.synchronised:
+        warnings.append(
+            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
+            f"(not synchronised); t1 reported as spread above the minimum"
+        )
+    if not rig.cameras:
+        missing.append("no camera topics: images, exposure metadata and triggers are all missing")
+    controller = ControllerConfig(
+        window_frames=rig.analysis.window_frames,
+        mean_error_threshold_ns=round(rig.thresholds.error_mean_us * 1e3),
+        variance_threshold_ns2=rig.thresholds.error_var_us2 * 1e6,
+        mode=rig.analysis.correction,
+        min_frames=rig.analysis.window_frames,
+    )
+    offset = 0 if scan.clock is None or scan.clock.synchronised else scan.clock.offset_ns
+    result_cams: list[CameraAudit] = []
+    for index, (cam, azimuth, source) in enumerate(located):
+        tables = read_camera(log, cam)
+        for what, present in (
+            ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
+            ("exposure metadata", tables.exposure_source is not None),
+            ("trigger records", tables.trigger_source is not None),
+        ):
+            if not present:
+                missing.append(f"camera {cam.name}: no {what}")
+        sync = analyze_camera(
+            scan,
+            index,
+            cam,
+            azimuth,
+            tables,
+            lidar_cfg.zero_azimuth_deg,
+            lidar_cfg.azimuth_increases,
+            rig.analysis,
+            rig.thresholds,
+        )
+        result_cams.append(
+            CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))
+        )
+    warnings.extend(w.message for w in log.warnings)
+    return AuditResult(
+        path=log.summary.path,
+        container=log.summary.container,
+        duration_s=log.summary.duration_s,
+        rig=rig,
+        lidar=lidar_row(scan),
+        clock_offset_ns=offset,
+        cameras=result_cams,
+        missing=missing,
+        guessed=guessed,
+        warnings=warnings,
+    )
