@@ -15,28 +15,55 @@ class LogReader(ABC):
 
     summary: LogSummary
     warnings: list[LogWarning]
+    closed: bool = False
 
     @property
     def topics(self) -> dict[str, TopicInfo]:
         """Topics of the log by name."""
         return self.summary.topics
 
-    @abstractmethod
     def messages(
         self,
         topics: Iterable[str] | None = None,
         start_ns: int | None = None,
         stop_ns: int | None = None,
     ) -> Iterator[RawMessage]:
-        """Yield raw messages of `topics` (all if None) with start_ns <= log time < stop_ns."""
+        """Yield raw messages of `topics` (all if None) with start_ns <= log time < stop_ns.
+
+        A single topic may be passed as a plain string. The generator reads the log as it
+        is consumed; damaged data raises LogReadError when it is reached.
+        """
+        if self.closed:
+            raise ValueError(f"{self.summary.path}: log is closed")
+        wanted = (
+            None if topics is None else frozenset([topics] if isinstance(topics, str) else topics)
+        )
+        if wanted is not None and not wanted:
+            return iter(())
+        if start_ns is not None and stop_ns is not None and start_ns >= stop_ns:
+            return iter(())
+        return self._messages(wanted, start_ns, stop_ns)
+
+    @abstractmethod
+    def _messages(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[RawMessage]:
+        """Backend part of `messages`, with the selection already normalised."""
 
     @abstractmethod
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types for messages of the given encoding ('cdr' or 'ros1') in this log."""
 
     def deserialize(self, msg: RawMessage) -> object:
-        """Deserialize one raw message with the log's own definitions (or schemas/)."""
-        return self.type_registry(msg.encoding).deserialize(msg.data, msg.msgtype, msg.encoding)
+        """Deserialize one raw message with the log's own definitions (or schemas/).
+
+        Raises UnknownTypeError where no definition is known, LogReadError where the bytes
+        do not fit it.
+        """
+        registry = self.type_registry(msg.encoding)
+        for problem in registry.problems:
+            self.warn("bad-project-schema", problem)
+        return registry.deserialize(msg.data, msg.msgtype, msg.encoding)
 
     def warn(self, code: str, message: str) -> None:
         """Record a warning once."""
@@ -44,9 +71,15 @@ class LogReader(ABC):
         if warning not in self.warnings:
             self.warnings.append(warning)
 
-    @abstractmethod
     def close(self) -> None:
-        """Release the file handles."""
+        """Release the file handles; safe to call twice."""
+        if not self.closed:
+            self.closed = True
+            self._close()
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Backend part of `close`."""
 
     def __enter__(self) -> LogReader:
         return self
@@ -58,8 +91,3 @@ class LogReader(ABC):
         tb: TracebackType | None,
     ) -> None:
         self.close()
-
-
-def selected(topics: Iterable[str] | None) -> frozenset[str] | None:
-    """Normalise a topic selection to a frozenset (None = all)."""
-    return None if topics is None else frozenset(topics)

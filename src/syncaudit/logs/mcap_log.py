@@ -1,26 +1,72 @@
-"""MCAP files (ROS 1 and ROS 2 encodings) through the `mcap` package."""
+"""MCAP files (ROS 1 and ROS 2 encodings) through the `mcap` package.
+
+Two ways of reading, chosen at open:
+
+- indexed: the file ends with a footer whose summary holds chunk indexes; `mcap`'s
+  `SeekingReader` reads only the chunks a query needs, in log-time order.
+- linear: no usable summary (a recording that was cut off, a writer that skipped the
+  summary, an unchunked file). One pass at open builds the topic table and a list of
+  chunks with their time ranges; queries then read chunk by chunk, merged by log time,
+  so memory stays at the chunks that overlap in time. A cut-off file yields every
+  message that is complete before the cut, including those of a partly written chunk.
+"""
 
 from __future__ import annotations
 
+import heapq
+import inspect
 import io
+import os
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
-from mcap.exceptions import McapError
+import lz4.frame
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk
+from mcap.summary import Summary
 
-from syncaudit.errors import LogOpenError, LogReadError
-from syncaudit.logs.base import LogReader, selected
+from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
+from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import LogSummary, RawMessage, TopicInfo
-from syncaudit.logs.typesys import TypeRegistry, normalise_type_name, parse_definition
+from syncaudit.logs.typesys import TypeRegistry, normalise_type_name, one_line, parse_definition
 
-_ENCODINGS = {"cdr": "cdr", "ros1": "ros1"}
-# Errors the mcap package and its decompressors raise on damaged bytes.
-_READ_ERRORS = (McapError, struct.error, ValueError, EOFError, OSError, RuntimeError)
+if TYPE_CHECKING:
+    from rosbags.interfaces.typing import Typesdict
+
+MAGIC = b"\x89MCAP0\r\n"
+_RECORD_HEAD = struct.Struct("<BQ")
+# Newer mcap releases name the half-open time bounds starting_at/ending_before and deprecate
+# start_time/end_time; older releases only know the latter.
+_NEW_BOUNDS = "starting_at" in inspect.signature(SeekingReader.iter_messages).parameters
+
+
+@dataclass(frozen=True, slots=True)
+class _ChunkSpan:
+    """A chunk found by the linear scan: where it is and what it holds."""
+
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+    channels: frozenset[int]
+
+
+@dataclass(slots=True)
+class _Scan:
+    """What one linear pass over an MCAP without index found."""
+
+    chunks: list[_ChunkSpan] = field(default_factory=list)
+    loose: bool = False
+    """Some messages lie outside chunks (so chunk-wise reading cannot find them)."""
+    ordered: bool = True
+    """Messages appear in the file in non-decreasing log time."""
 
 
 class McapLog(LogReader):
@@ -29,171 +75,397 @@ class McapLog(LogReader):
     def __init__(self, path: Path) -> None:
         self.path = path
         self.warnings = []
-        self._file: BinaryIO = path.open("rb")
-        try:
-            self._reader = SeekingReader(self._file)
-        except _READ_ERRORS as exc:
-            self._file.close()
-            raise LogOpenError(f"{path}: not a readable MCAP file ({exc})") from exc
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._registries: dict[str, TypeRegistry] = {}
-        self._indexed = self._load_summary()
+        self._cut: str | None = None
+        self._scan = _Scan()
+        try:
+            self._file: BinaryIO = path.open("rb")
+        except OSError as exc:
+            raise LogOpenError(f"{path}: cannot open: {one_line(exc)}") from exc
+        try:
+            self._size = os.fstat(self._file.fileno()).st_size
+            self._reader = SeekingReader(self._file, validate_crcs=True)
+            self._check_header()
+            index = self._load_index()
+            self._indexed = index is not None
+            if index is None:
+                self._scan_linear()
+        except SyncauditError:
+            self._file.close()
+            raise
+        except Exception as exc:  # mcap raises many types on damaged bytes
+            self._file.close()
+            raise LogOpenError(f"{path}: not a readable MCAP file: {one_line(exc)}") from exc
 
-    def _load_summary(self) -> bool:
-        """Fill `summary` from the MCAP summary section, or by a linear scan without one."""
+    # -- opening -----------------------------------------------------------------------
+
+    def _check_header(self) -> None:
+        """Refuse a file whose first record is not a complete MCAP Header: nothing to read."""
+        self._file.seek(len(MAGIC))
+        head = self._file.read(_RECORD_HEAD.size)
+        if len(head) < _RECORD_HEAD.size:
+            raise LogOpenError(f"{self.path}: MCAP file cut off before its header record")
+        opcode, length = _RECORD_HEAD.unpack(head)
+        if opcode != Opcode.HEADER:
+            raise LogOpenError(
+                f"{self.path}: not a valid MCAP file: first record is "
+                f"{_opcode_name(opcode)}, not a header"
+            )
+        if len(MAGIC) + _RECORD_HEAD.size + length > self._size:
+            raise LogOpenError(f"{self.path}: MCAP file cut off inside its header record")
+
+    def _load_index(self) -> Summary | None:
+        """The summary section if it can drive indexed reading, else None (read linearly)."""
+        self._file.seek(max(self._size - len(MAGIC), 0))
+        if self._size < 2 * len(MAGIC) or self._file.read(len(MAGIC)) != MAGIC:
+            return None  # no closing magic: cut off; the scan reports where
         try:
             summary = self._reader.get_summary()
-        except _READ_ERRORS:
-            summary = None
-        if summary is not None and summary.chunk_indexes:
-            self._schemas = dict(summary.schemas)
-            self._channels = dict(summary.channels)
-            stats = summary.statistics
-            counts = stats.channel_message_counts if stats else {}
-            self.summary = LogSummary(
-                path=str(self.path),
-                container="mcap",
-                start_ns=stats.message_start_time if stats and stats.message_count else None,
-                end_ns=stats.message_end_time if stats and stats.message_count else None,
-                message_count=stats.message_count if stats else None,
+        except Exception as exc:
+            self.warn(
+                "mcap-bad-summary",
+                f"{self.path}: MCAP summary section unreadable ({one_line(exc)}); "
+                "scanning the file linearly",
             )
-            for cid, channel in self._channels.items():
-                self._add_topic(channel, counts.get(cid))
-            return True
-        self.warn(
-            "mcap-no-summary",
-            f"{self.path.name}: MCAP has no summary/index (recording cut off?); reading linearly",
+            return None
+        if summary is None:
+            self.warn(
+                "mcap-no-summary",
+                f"{self.path}: MCAP has no summary section (index); scanning the file linearly",
+            )
+            return None
+        complete = all(
+            c.schema_id == 0 or c.schema_id in summary.schemas for c in summary.channels.values()
         )
-        self._scan_linear()
-        return False
+        if not summary.chunk_indexes or not summary.channels or not complete:
+            # Unchunked or empty file, or a summary without the channels the reader needs:
+            # the linear scan is then the index.
+            return None
+        self._schemas = dict(summary.schemas)
+        self._channels = dict(summary.channels)
+        stats = summary.statistics
+        if stats is not None:
+            counts: dict[int, int] | None = dict(stats.channel_message_counts)
+            total: int | None = stats.message_count
+            start = stats.message_start_time if stats.message_count else None
+            end = stats.message_end_time if stats.message_count else None
+        else:
+            counts, total = None, None
+            start = min(c.message_start_time for c in summary.chunk_indexes)
+            end = max(c.message_end_time for c in summary.chunk_indexes)
+        self.summary = LogSummary(str(self.path), "mcap", start, end, total)
+        for cid, channel in self._channels.items():
+            self._add_topic(channel, None if counts is None else counts.get(cid, 0))
+        return summary
 
     def _add_topic(self, channel: Channel, count: int | None) -> None:
         schema = self._schemas.get(channel.schema_id)
-        msgtype = normalise_type_name(schema.name) if schema else "<no schema>"
         prior = self.summary.topics.get(channel.topic)
-        if prior is not None and count is not None and prior.count is not None:
-            count += prior.count
+        if prior is not None:
+            count = None if count is None or prior.count is None else count + prior.count
         self.summary.topics[channel.topic] = TopicInfo(
             name=channel.topic,
-            msgtype=msgtype,
-            encoding=_ENCODINGS.get(channel.message_encoding, channel.message_encoding),
+            msgtype=normalise_type_name(schema.name) if schema else "<no schema>",
+            encoding=channel.message_encoding,
             count=count,
             has_definition=bool(schema and schema.data),
         )
 
     def _scan_linear(self) -> None:
-        """Count messages per channel and their time range by reading every record."""
+        """Read every record once: counts, time range, chunk list, order, where it is cut."""
         counts: dict[int, int] = {}
         start: int | None = None
         end: int | None = None
-        for message in self._linear_messages(None, None, None):
-            counts[message.channel_id] = counts.get(message.channel_id, 0) + 1
-            start = message.log_time if start is None else min(start, message.log_time)
-            end = message.log_time if end is None else max(end, message.log_time)
-        self.summary = LogSummary(
-            path=str(self.path),
-            container="mcap",
-            start_ns=start,
-            end_ns=end,
-            message_count=sum(counts.values()),
-        )
+        previous = -1
+        times: dict[int, list[int]] = {}  # chunk offset -> [length, first, last]
+        channels: dict[int, set[int]] = {}  # chunk offset -> channel ids
+        with self.path.open("rb") as handle:
+            for offset, length, _index, message in self._walk(handle):
+                cid, t = message.channel_id, message.log_time
+                counts[cid] = counts.get(cid, 0) + 1
+                start = t if start is None else min(start, t)
+                end = t if end is None else max(end, t)
+                self._scan.ordered &= t >= previous
+                previous = t
+                if offset is None:
+                    self._scan.loose = True
+                    continue
+                span = times.setdefault(offset, [length, t, t])
+                span[1], span[2] = min(span[1], t), max(span[2], t)
+                channels.setdefault(offset, set()).add(cid)
+        self._scan.chunks = [
+            _ChunkSpan(off, length, lo, hi, frozenset(channels[off]))
+            for off, (length, lo, hi) in times.items()
+        ]
+        total = sum(counts.values())
+        self.summary = LogSummary(str(self.path), "mcap", start, end, total)
         for cid, channel in self._channels.items():
             self._add_topic(channel, counts.get(cid, 0))
-
-    def _linear_messages(
-        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
-    ) -> Iterator[Message]:
-        """Every message record in file order; stops with a warning where the file is cut."""
-        self._file.seek(0, io.SEEK_SET)
-        stream = StreamReader(self._file, skip_magic=False)
-        try:
-            for record in stream.records:
-                records = breakup_chunk(record) if isinstance(record, Chunk) else [record]
-                for rec in records:
-                    if isinstance(rec, Schema):
-                        self._schemas[rec.id] = rec
-                    elif isinstance(rec, Channel):
-                        self._channels[rec.id] = rec
-                    elif isinstance(rec, Message):
-                        if _wanted(rec, self._channels, topics, start_ns, stop_ns):
-                            yield rec
-        except _READ_ERRORS as exc:
+        if self._cut is not None:
             self.warn(
                 "mcap-truncated",
-                f"{self.path.name}: MCAP ends early or is damaged after offset "
-                f"{self._file.tell()} ({type(exc).__name__}); using what was read before it",
+                f"{self.path}: MCAP cut off {self._cut} (no footer: recording interrupted?); "
+                f"reading the {total} complete messages before the cut",
+            )
+        if not self._scan.ordered and self._scan.loose:
+            self.warn(
+                "mcap-unordered",
+                f"{self.path}: unindexed MCAP with messages outside chunks and out of "
+                "log-time order; they are read in file order",
             )
 
-    def messages(
-        self,
-        topics: Iterable[str] | None = None,
-        start_ns: int | None = None,
-        stop_ns: int | None = None,
-    ) -> Iterator[RawMessage]:
-        """Raw messages in log-time order (file order when the MCAP has no index)."""
-        wanted = selected(topics)
-        if not self._indexed:
-            for rec in self._linear_messages(wanted, start_ns, stop_ns):
-                yield self._raw(self._channels[rec.channel_id], rec)
-            return
+    # -- record walking (linear mode) ------------------------------------------------------
+
+    def _walk(self, handle: BinaryIO) -> Iterator[tuple[int | None, int, int, Message]]:
+        """(chunk offset or None, chunk length, index, message) for every message, in file order.
+
+        Stops at the footer; where the file ends before it, records the place in `_cut`
+        after yielding the complete messages of a partly written chunk.
+        """
+        handle.seek(len(MAGIC))
+        while True:
+            offset = handle.tell()
+            head = handle.read(_RECORD_HEAD.size)
+            if len(head) < _RECORD_HEAD.size:
+                self._cut = (
+                    f"at byte {offset}" if not head else f"in a record header at byte {offset}"
+                )
+                return
+            opcode, length = _RECORD_HEAD.unpack(head)
+            if opcode == Opcode.FOOTER:
+                if offset + _RECORD_HEAD.size + length + len(MAGIC) > self._size:
+                    self._cut = f"inside its footer at byte {offset} (after all data)"
+                return
+            whole = offset + _RECORD_HEAD.size + length <= self._size
+            if opcode == Opcode.CHUNK:
+                for index, rec in enumerate(self._chunk_records(handle, offset, length)):
+                    if isinstance(rec, Message):
+                        yield offset, length, index, rec
+            elif whole and opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+                rec = self._parse_record(offset, opcode, handle.read(length))
+                if isinstance(rec, Message) and self._known(rec):
+                    yield None, 0, 0, rec
+            if not whole:
+                name = _opcode_name(opcode)
+                self._cut = f"inside a {name} record starting at byte {offset}"
+                return
+            handle.seek(offset + _RECORD_HEAD.size + length)
+
+    def _chunk_records(self, handle: BinaryIO, offset: int, length: int) -> list[Any]:
+        """Records of the chunk at `offset` (handle just past its record header).
+
+        A chunk that runs past the end of the file gives the complete records decodable
+        from its bytes; a damaged whole chunk raises LogReadError.
+        """
+        available = self._size - offset - _RECORD_HEAD.size
+        whole = length <= available
+        body = handle.read(min(length, available))
+        if whole:
+            try:
+                records = breakup_chunk(
+                    Chunk.read(ReadDataStream(io.BytesIO(body))), validate_crc=True
+                )
+            except Exception as exc:
+                raise LogReadError(
+                    f"{self.path}: corrupt MCAP chunk at byte {offset}: {one_line(exc)}"
+                ) from exc
+        else:
+            records = _salvage_chunk(body)
+        kept: list[Any] = []
+        for rec in records:
+            if isinstance(rec, Schema):
+                self._schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                self._channels[rec.id] = rec
+            elif isinstance(rec, Message) and not self._known(rec):
+                continue
+            kept.append(rec)
+        return kept
+
+    def _parse_record(self, offset: int, opcode: int, body: bytes) -> Any:
+        """Parse one Schema, Channel or Message record outside chunks, registering the first two."""
+        stream = ReadDataStream(io.BytesIO(body))
         try:
-            for _schema, channel, rec in self._reader.iter_messages(
-                topics=None if wanted is None else sorted(wanted),
-                start_time=start_ns,
-                end_time=stop_ns,
-                log_time_order=True,
-            ):
-                yield self._raw(channel, rec)
-        except _READ_ERRORS as exc:
+            if opcode == Opcode.SCHEMA:
+                schema = Schema.read(stream)
+                self._schemas[schema.id] = schema
+                return schema
+            if opcode == Opcode.CHANNEL:
+                channel = Channel.read(stream)
+                self._channels[channel.id] = channel
+                return channel
+            return Message.read(stream, len(body))
+        except Exception as exc:
             raise LogReadError(
-                f"{self.path.name}: corrupt MCAP data near offset {self._file.tell()} "
-                f"({type(exc).__name__}: {exc})"
+                f"{self.path}: corrupt MCAP {_opcode_name(opcode)} record at byte {offset}: "
+                f"{one_line(exc)}"
             ) from exc
 
+    def _known(self, rec: Message) -> bool:
+        """False (with a warning) for a message whose channel was never declared."""
+        if rec.channel_id in self._channels:
+            return True
+        self.warn(
+            "mcap-unknown-channel",
+            f"{self.path}: messages on undeclared channel id {rec.channel_id} skipped",
+        )
+        return False
+
+    # -- reading -----------------------------------------------------------------------
+
+    def _messages(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[RawMessage]:
+        """Raw messages in log-time order (file order only for the `mcap-unordered` case)."""
+        if self._indexed:
+            source = self._indexed_messages(topics, start_ns, stop_ns)
+        elif self._scan.loose:
+            source = self._walked_messages(start_ns, stop_ns)
+        else:
+            source = self._merged_chunks(topics, start_ns, stop_ns)
+        for message in source:
+            channel = self._channels[message.channel_id]
+            if topics is None or channel.topic in topics:
+                yield self._raw(channel, message)
+
+    def _indexed_messages(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[Message]:
+        names = None if topics is None else sorted(topics)
+        if _NEW_BOUNDS:
+            stream = self._reader.iter_messages(
+                names, log_time_order=True, starting_at=start_ns, ending_before=stop_ns
+            )
+        else:
+            stream = self._reader.iter_messages(names, start_ns, stop_ns, log_time_order=True)
+        try:
+            for _schema, _channel, rec in stream:
+                yield rec
+        except Exception as exc:  # zstd/lz4/crc/struct errors from damaged chunks
+            raise LogReadError(
+                f"{self.path}: corrupt MCAP data near byte {self._file.tell()}: {one_line(exc)}"
+            ) from exc
+
+    def _walked_messages(self, start_ns: int | None, stop_ns: int | None) -> Iterator[Message]:
+        """Every message in file order (files with messages outside chunks)."""
+        with self.path.open("rb") as handle:
+            for _offset, _length, _index, rec in self._walk(handle):
+                if _in_range(rec.log_time, start_ns, stop_ns):
+                    yield rec
+
+    def _merged_chunks(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[Message]:
+        """Messages of the scanned chunks merged by log time (ties in file order).
+
+        A chunk is decoded only once the merge reaches its first message time, so memory
+        holds just the chunks that overlap in time.
+        """
+        channels = (
+            None
+            if topics is None
+            else {cid for cid, ch in self._channels.items() if ch.topic in topics}
+        )
+        heap: list[tuple[int, int, int, Message | _ChunkSpan]] = [
+            (span.start_ns, span.offset, -1, span)
+            for span in self._scan.chunks
+            if (channels is None or span.channels & channels)
+            and (start_ns is None or span.end_ns >= start_ns)
+            and (stop_ns is None or span.start_ns < stop_ns)
+        ]
+        heapq.heapify(heap)
+        with self.path.open("rb") as handle:
+            while heap:
+                _time, offset, _index, item = heapq.heappop(heap)
+                if isinstance(item, Message):
+                    yield item
+                    continue
+                handle.seek(offset + _RECORD_HEAD.size)
+                for index, rec in enumerate(self._chunk_records(handle, offset, item.length)):
+                    if isinstance(rec, Message) and _in_range(rec.log_time, start_ns, stop_ns):
+                        heapq.heappush(heap, (rec.log_time, offset, index, rec))
+
     def _raw(self, channel: Channel, rec: Message) -> RawMessage:
-        info = self.summary.topics.get(channel.topic)
-        if info is None:
-            self._add_topic(channel, None)
-            info = self.summary.topics[channel.topic]
-        return RawMessage(channel.topic, info.msgtype, rec.log_time, rec.data, info.encoding)
+        schema = self._schemas.get(channel.schema_id)
+        msgtype = normalise_type_name(schema.name) if schema else "<no schema>"
+        return RawMessage(channel.topic, msgtype, rec.log_time, rec.data, channel.message_encoding)
 
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types from this file's schemas of the given encoding, then schemas/ and ROS."""
         if encoding not in self._registries:
-            ros1 = encoding == "ros1"
-            log_types: dict[str, object] = {}
+            log_types: Typesdict = {}
             for channel in self._channels.values():
                 schema = self._schemas.get(channel.schema_id)
-                if schema is None or not schema.data or (channel.message_encoding == "ros1") != ros1:
+                if schema is None or not schema.data or channel.message_encoding != encoding:
                     continue
-                name = normalise_type_name(schema.name)
                 try:
-                    parsed = parse_definition(schema.encoding, schema.data.decode(), name)
-                except Exception as exc:  # noqa: BLE001 - a bad schema must not stop the audit
-                    self.warn("bad-schema", f"schema {schema.name!r} unreadable: {exc}")
+                    text = schema.data.decode("utf-8")
+                    parsed = parse_definition(schema.encoding, text, schema.name)
+                except Exception as exc:  # a bad schema must not stop the audit
+                    self.warn(
+                        "bad-schema",
+                        f"{self.path}: schema {schema.name!r} unreadable: {one_line(exc)}",
+                    )
                     continue
                 log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registries[encoding] = TypeRegistry(ros1=ros1, log_types=log_types)
+            self._registries[encoding] = TypeRegistry(ros1=encoding == "ros1", log_types=log_types)
         return self._registries[encoding]
 
-    def close(self) -> None:
-        """Close the file."""
+    def _close(self) -> None:
         self._file.close()
 
 
-def _wanted(
-    rec: Message,
-    channels: dict[int, Channel],
-    topics: frozenset[str] | None,
-    start_ns: int | None,
-    stop_ns: int | None,
-) -> bool:
-    channel = channels.get(rec.channel_id)
-    if channel is None:
-        return False
-    if topics is not None and channel.topic not in topics:
-        return False
-    if start_ns is not None and rec.log_time < start_ns:
-        return False
-    return stop_ns is None or rec.log_time < stop_ns
+def _in_range(t: int, start_ns: int | None, stop_ns: int | None) -> bool:
+    return (start_ns is None or t >= start_ns) and (stop_ns is None or t < stop_ns)
+
+
+def _opcode_name(opcode: int) -> str:
+    try:
+        return Opcode(opcode).name.lower()
+    except ValueError:
+        return f"unknown (opcode {opcode:#x})"
+
+
+def _salvage_chunk(body: bytes) -> list[Any]:
+    """Complete records at the start of a chunk whose bytes were cut off.
+
+    zstd and lz4 decode block by block, so a streaming decompressor returns everything
+    before the last damaged block; the records are then parsed up to the first one that
+    does not fit. A cut inside the chunk header leaves nothing.
+    """
+    try:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+    except Exception:
+        return []
+    try:
+        if chunk.compression == "zstd":
+            data = zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
+        elif chunk.compression == "lz4":
+            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
+        elif chunk.compression == "":
+            data = chunk.data
+        else:
+            return []
+    except Exception:
+        return []
+    records: list[Any] = []
+    pos = 0
+    while pos + _RECORD_HEAD.size <= len(data):
+        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+        body_start = pos + _RECORD_HEAD.size
+        if body_start + length > len(data):
+            break
+        stream = ReadDataStream(io.BytesIO(data[body_start : body_start + length]))
+        try:
+            if opcode == Opcode.SCHEMA:
+                records.append(Schema.read(stream))
+            elif opcode == Opcode.CHANNEL:
+                records.append(Channel.read(stream))
+            elif opcode == Opcode.MESSAGE:
+                records.append(Message.read(stream, length))
+        except Exception:
+            break
+        pos = body_start + length
+    return records

@@ -2,21 +2,23 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+import heapq
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import zstandard
 from rosbags.rosbag1 import Reader as Rosbag1Reader
-from rosbags.rosbag1 import ReaderError as Rosbag1ReaderError
 from rosbags.rosbag2 import Reader as Rosbag2Reader
-from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+from rosbags.rosbag2.storage_mcap import McapReader as Rosbag2McapStorage
 
 from syncaudit.errors import LogOpenError, LogReadError
-from syncaudit.logs.base import LogReader, selected
+from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import LogSummary, RawMessage, TopicInfo
-from syncaudit.logs.typesys import TypeRegistry, parse_definition
+from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
 
-_ROSBAGS_ERRORS = (Rosbag1ReaderError, Rosbag2ReaderError, OSError, ValueError, KeyError)
+if TYPE_CHECKING:
+    from rosbags.interfaces.typing import Typesdict
 
 
 class RosbagsLog(LogReader):
@@ -27,23 +29,30 @@ class RosbagsLog(LogReader):
         self.ros1 = ros1
         self.warnings = []
         reader_cls: Any = Rosbag1Reader if ros1 else Rosbag2Reader
+        kind = "ROS 1 bag" if ros1 else "ROS 2 bag"
         try:
             self._reader = reader_cls(path)
             self._reader.open()
-        except _ROSBAGS_ERRORS as exc:
-            kind = "ROS 1 bag" if ros1 else "ROS 2 bag"
-            raise LogOpenError(f"{path}: cannot open as a {kind}: {_one_line(exc)}") from exc
+        except Exception as exc:  # rosbags: ReaderError, OSError, apsw and YAML errors
+            raise LogOpenError(f"{path}: cannot open as a {kind}: {one_line(exc)}") from exc
         self._registry: TypeRegistry | None = None
-        self.summary = self._make_summary()
+        try:
+            self.summary = self._make_summary()
+        except Exception as exc:  # metadata with wrong value types
+            self._reader.close()
+            raise LogOpenError(f"{path}: cannot read the {kind} index: {one_line(exc)}") from exc
+
+    def _storages(self) -> list[Any]:
+        """The per-file storage readers of a bag directory (one entry for a bare file)."""
+        storage = self._reader.storage if not self.ros1 else None
+        return list(getattr(storage, "storages", None) or [storage])
 
     def _container(self) -> str:
         if self.ros1:
             return "rosbag1"
-        if self.path.is_file():
-            is_mcap = self.path.suffix == ".mcap"
-        else:
-            is_mcap = any(self.path.glob("*.mcap"))
-        return "rosbag2-mcap" if is_mcap else "rosbag2-sqlite3"
+        if any(isinstance(s, Rosbag2McapStorage) for s in self._storages()):
+            return "rosbag2-mcap"
+        return "rosbag2-sqlite3"
 
     def _make_summary(self) -> LogSummary:
         count = int(self._reader.message_count)
@@ -56,61 +65,100 @@ class RosbagsLog(LogReader):
         )
         for conn in self._reader.connections:
             prior = summary.topics.get(conn.topic)
+            prior_count = prior.count or 0 if prior is not None else 0
             summary.topics[conn.topic] = TopicInfo(
                 name=conn.topic,
                 msgtype=conn.msgtype,
-                encoding="ros1" if self.ros1 else _ros2_encoding(conn),
-                count=int(conn.msgcount) + (prior.count or 0 if prior else 0),
-                has_definition=bool(conn.msgdef.data),
+                encoding=_encoding(conn, self.ros1),
+                count=int(conn.msgcount) + prior_count,
+                has_definition=bool(conn.msgdef.data)
+                or bool(prior is not None and prior.has_definition),
             )
         return summary
 
-    def messages(
-        self,
-        topics: Iterable[str] | None = None,
-        start_ns: int | None = None,
-        stop_ns: int | None = None,
+    def _messages(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
     ) -> Iterator[RawMessage]:
-        """Raw messages in log-time order."""
-        wanted = selected(topics)
-        conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
-        if not conns:
-            return
-        encoding = {c.id: ("ros1" if self.ros1 else _ros2_encoding(c)) for c in conns}
+        """Raw messages in log-time order; the files of a split bag are merged by time."""
+        storages = self._storages()
+        if len(storages) > 1:
+            stream = self._merged(storages, topics, start_ns, stop_ns)
+        else:
+            stream = self._single(topics, start_ns, stop_ns)
         try:
-            for conn, log_time, data in self._reader.messages(
-                connections=conns, start=start_ns, stop=stop_ns
-            ):
-                yield RawMessage(conn.topic, conn.msgtype, int(log_time), data, encoding[conn.id])
-        except _ROSBAGS_ERRORS as exc:
-            raise LogReadError(f"{self.path.name}: damaged bag data: {_one_line(exc)}") from exc
+            yield from stream
+        except Exception as exc:  # rosbags, apsw, zstd and decompressor errors
+            raise LogReadError(f"{self.path}: damaged bag data: {one_line(exc)}") from exc
+
+    def _single(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[RawMessage]:
+        conns = [c for c in self._reader.connections if topics is None or c.topic in topics]
+        if not conns:  # rosbags reads every connection when given none
+            return
+        for conn, log_time, data in self._reader.messages(
+            connections=conns, start=start_ns, stop=stop_ns
+        ):
+            yield RawMessage(
+                conn.topic, conn.msgtype, int(log_time), data, _encoding(conn, self.ros1)
+            )
+
+    def _merged(
+        self,
+        storages: list[Any],
+        topics: frozenset[str] | None,
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> Iterator[RawMessage]:
+        """Merge the files of a split bag by log time.
+
+        rosbags reads the files one after the other, which is out of order where a
+        recorder wrote a message into the next file after a later-stamped one (split
+        boundaries of multi-threaded recorders). Each file is time-ordered on its own.
+        """
+        compressed = self._reader.compression_mode == "message"
+
+        def one(storage: Any) -> Iterator[RawMessage]:
+            conns = [c for c in storage.connections if topics is None or c.topic in topics]
+            if not conns:
+                return
+            for conn, log_time, data in storage.messages(conns, start_ns, stop_ns):
+                raw = (
+                    zstandard.ZstdDecompressor().decompressobj().decompress(data)
+                    if compressed
+                    else data
+                )
+                yield RawMessage(
+                    conn.topic, conn.msgtype, int(log_time), raw, _encoding(conn, False)
+                )
+
+        yield from heapq.merge(*(one(s) for s in storages), key=lambda m: m.log_time_ns)
 
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types from the bag's connection definitions, then schemas/ and ROS defaults."""
         if self._registry is None:
-            log_types: dict[str, object] = {}
+            log_types: Typesdict = {}
             for conn in self._reader.connections:
                 if not conn.msgdef.data or conn.msgtype in log_types:
                     continue
                 fmt = "ros2idl" if conn.msgdef.format.name == "IDL" else "msg"
                 try:
                     parsed = parse_definition(fmt, conn.msgdef.data, conn.msgtype)
-                except Exception as exc:  # noqa: BLE001 - a bad definition must not stop the audit
-                    self.warn("bad-schema", f"definition of {conn.msgtype!r} unreadable: {exc}")
+                except Exception as exc:  # a bad definition must not stop the audit
+                    self.warn(
+                        "bad-schema", f"definition of {conn.msgtype!r} unreadable: {one_line(exc)}"
+                    )
                     continue
                 log_types.update({k: v for k, v in parsed.items() if k not in log_types})
             self._registry = TypeRegistry(ros1=self.ros1, log_types=log_types)
         return self._registry
 
-    def close(self) -> None:
-        """Close the bag."""
+    def _close(self) -> None:
         self._reader.close()
 
 
-def _ros2_encoding(conn: Any) -> str:
-    fmt = getattr(conn.ext, "serialization_format", "cdr")
-    return "cdr" if fmt == "cdr" else str(fmt)
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
+def _encoding(conn: Any, ros1: bool) -> str:
+    """'ros1' for ROS 1 connections, else the rosbag2 serialization format ('cdr')."""
+    if ros1:
+        return "ros1"
+    return str(getattr(conn.ext, "serialization_format", "cdr"))

@@ -9,12 +9,17 @@ from typing import TYPE_CHECKING
 
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
-from syncaudit.errors import UnknownTypeError
+from syncaudit.errors import LogReadError, UnknownTypeError
 
 if TYPE_CHECKING:
+    from rosbags.interfaces.typing import Typesdict
     from rosbags.typesys.store import Typestore
 
-    Typesdict = dict[str, object]
+# Schema encodings that carry ROS message definitions; anything else (jsonschema,
+# protobuf, ...) describes non-ROS data that rosbags cannot deserialize.
+MSG_SCHEMA_ENCODINGS = frozenset({"ros1msg", "ros2msg", "msg"})
+IDL_SCHEMA_ENCODINGS = frozenset({"ros2idl", "idl"})
+MESSAGE_ENCODINGS = frozenset({"cdr", "ros1"})
 
 
 def schemas_dir() -> Path:
@@ -23,20 +28,44 @@ def schemas_dir() -> Path:
 
 
 @cache
-def project_types() -> dict[str, object]:
-    """All message types under `schemas/<pkg>/msg/<Name>.msg`, parsed once."""
-    types: dict[str, object] = {}
+def _project_schemas() -> tuple[Typesdict, tuple[str, ...]]:
+    """Parse `schemas/<pkg>/msg/<Name>.msg` once: (types, one-line problems of bad files).
+
+    A bad file is reported, not raised: one broken definition must not make every log
+    unreadable, only the types that need it.
+    """
+    types: Typesdict = {}
+    problems: list[str] = []
     for path in sorted(schemas_dir().glob("*/msg/*.msg")):
         name = f"{path.parent.parent.name}/msg/{path.stem}"
-        types.update(get_types_from_msg(path.read_text(encoding="utf-8"), name))
-    return types
+        try:
+            types.update(get_types_from_msg(path.read_text(encoding="utf-8"), name))
+        except Exception as exc:  # rosbags raises several parser error types
+            problems.append(f"schemas/{path.parent.parent.name}/msg/{path.name}: {one_line(exc)}")
+    return types, tuple(problems)
 
 
-def parse_definition(encoding: str, text: str, name: str) -> dict[str, object]:
-    """Parse one MCAP schema or rosbag connection definition into rosbags' type dict."""
-    if encoding == "ros2idl":
+def project_types() -> Typesdict:
+    """All message types under `schemas/<pkg>/msg/<Name>.msg` (unparseable files left out)."""
+    return dict(_project_schemas()[0])
+
+
+def project_schema_problems() -> tuple[str, ...]:
+    """One line per file under `schemas/` that could not be parsed."""
+    return _project_schemas()[1]
+
+
+def parse_definition(encoding: str, text: str, name: str) -> Typesdict:
+    """Parse one MCAP schema or rosbag connection definition into rosbags' type dict.
+
+    `encoding` is the MCAP schema encoding ('ros1msg', 'ros2msg', 'ros2idl') or 'msg'/'idl';
+    other encodings hold no ROS definitions and give an empty dict.
+    """
+    if encoding in IDL_SCHEMA_ENCODINGS:
         return dict(get_types_from_idl(text))
-    return dict(get_types_from_msg(text, name))
+    if encoding in MSG_SCHEMA_ENCODINGS:
+        return dict(get_types_from_msg(text, normalise_type_name(name)))
+    return {}
 
 
 def normalise_type_name(name: str) -> str:
@@ -47,10 +76,15 @@ def normalise_type_name(name: str) -> str:
     return name
 
 
+def one_line(exc: BaseException) -> str:
+    """An exception's text folded onto one line (type name if it has no text)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 class TypeRegistry:
     """Types known for one log, built as: log definitions, then project schemas, then ROS."""
 
-    def __init__(self, ros1: bool, log_types: dict[str, object] | None = None) -> None:
+    def __init__(self, ros1: bool, log_types: Typesdict | None = None) -> None:
         base = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
         store = get_typestore(Stores.EMPTY)
         if log_types:
@@ -62,17 +96,38 @@ class TypeRegistry:
         store.register(rest)
         self.store: Typestore = store
         self.ros1 = ros1
+        self.problems: tuple[str, ...] = project_schema_problems()
+        """Unparseable files under schemas/, for the log to report as warnings."""
 
     def knows(self, msgtype: str) -> bool:
         """True where a definition for `msgtype` is available."""
         return msgtype in self.store.fielddefs
 
     def deserialize(self, data: bytes | memoryview, msgtype: str, encoding: str) -> object:
-        """Deserialize one message with rosbags; raises UnknownTypeError for unknown types."""
+        """Deserialize one message with rosbags.
+
+        Raises UnknownTypeError when `msgtype` (or a type it nests) has no definition or the
+        encoding is not a ROS one, LogReadError when the bytes do not fit the definition.
+        """
+        if encoding not in MESSAGE_ENCODINGS:
+            raise UnknownTypeError(
+                f"message encoding {encoding!r} of {msgtype!r} is not ROS (cdr/ros1); "
+                "cannot deserialize it"
+            )
         if not self.knows(msgtype):
             raise UnknownTypeError(
                 f"no definition for message type {msgtype!r} in the log or in schemas/"
             )
-        if encoding == "ros1":
-            return self.store.deserialize_ros1(data, msgtype)
-        return self.store.deserialize_cdr(data, msgtype)
+        try:
+            if encoding == "ros1":
+                return self.store.deserialize_ros1(data, msgtype)
+            return self.store.deserialize_cdr(data, msgtype)
+        except KeyError as exc:
+            # rosbags looks nested types up lazily: a missing one surfaces as KeyError.
+            raise UnknownTypeError(
+                f"no definition for {exc.args[0]!r} (used by {msgtype!r}) in the log or in schemas/"
+            ) from exc
+        except Exception as exc:  # rosbags' SerdeError, struct.error, IndexError, ...
+            raise LogReadError(
+                f"a {msgtype!r} message does not match its definition: {one_line(exc)}"
+            ) from exc
