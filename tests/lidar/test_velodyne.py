@@ -160,6 +160,7 @@ def test_vlp16_pcd_azimuth_and_time_stamp(lidar_data: Path, vlp16: list[Scan]) -
     data = np.concatenate([s.data for s in scans])
     fir = v.velodyne_firing_times(data, stamps)
     n = data.shape[0]
+    assert np.array_equal(fir.sequence[0, :, 0], np.arange(12) // 2 * 2)  # dual: 12 sequences
     elev_deg, _ = v.velodyne_laser_angles("VLP-16")
     ring = np.argsort(np.argsort(elev_deg))  # nebula's `channel`: lasers by elevation
     dist_raw = np.rint(fir.distance_m / 0.002).astype(np.int64)
@@ -377,6 +378,7 @@ def test_encode_explicit_records_and_first_firing() -> None:
     assert np.allclose(fir.distance_m, np.rint(dist / 0.002) * 0.002)
     assert np.array_equal(fir.intensity, inten)
     assert np.array_equal(fir.laser_id[0, 3], np.arange(32))
+    assert np.array_equal(fir.sequence[0, :, 0], np.arange(12))
     # HDL-32E: the stamp is the last firing of the packet (manual's transit timing table).
     assert fir.time_ns[0].max() == fir.timing.sensor_time_ns[0]
     assert fir.timing.sensor_time_ns[0] - fir.time_ns[0].min() == 542_592

@@ -631,6 +631,8 @@ class VelodyneFirings:
     timing: PacketTiming
     laser_id: NDArray[np.int16]
     """Laser id in packet data order (VLS-128: 0..127, HDL-64E: upper 0..31, lower 32..63)."""
+    sequence: NDArray[np.int16]
+    """Firing sequence index within the packet (dual-return pairs share one)."""
     azimuth_deg: NDArray[np.float64]
     """Interpolated rotor azimuth at the firing, [0, 360), vendor convention."""
     time_ns: NDArray[np.int64]
@@ -713,6 +715,7 @@ def velodyne_firing_times(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> 
     return VelodyneFirings(
         timing=timing,
         laser_id=laser,
+        sequence=np.stack([lay.sequence for lay in layouts])[di],
         azimuth_deg=az.astype(np.float64),
         time_ns=time_ns.astype(np.int64),
         distance_m=(dist_raw * DISTANCE_RESOLUTION_M[timing.model]).astype(np.float64),
