@@ -36,9 +36,9 @@ class Plant:
         """Latency the driver does not measure (so only 'shift' can remove it)."""
 
     def frame(self, delay_ns: int, exposure_ns: int) -> FrameObservation:
-        lat = [int(v + self.rng.normal(0.0, self.jitter_ns)) for v in LATENCIES_NS]
-        t_l = delay_ns + sum(lat) + self.bias_ns + exposure_ns // 2
-        return FrameObservation(*lat, exposure_ns, t_l - T_ROTATE_NS, T_ROTATE_NS)
+        t1, t2, t3, t4 = (int(v + self.rng.normal(0.0, self.jitter_ns)) for v in LATENCIES_NS)
+        t_l = delay_ns + t1 + t2 + t3 + t4 + self.bias_ns + exposure_ns // 2
+        return FrameObservation(t1, t2, t3, t4, exposure_ns, t_l - T_ROTATE_NS, T_ROTATE_NS)
 
 
 def test_ring_buffer_matches_numpy() -> None:

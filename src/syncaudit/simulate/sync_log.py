@@ -1,0 +1,1008 @@
+"""Simulated drive logs with known LiDAR-camera synchronisation truth.
+
+One host clock is true time. A spinning LiDAR (Velodyne VLP-16/VLP-32C, Hesai Pandar40P/
+PandarXT32) turns at a nominal RPM with a slow sinusoidal rate drift; its azimuth is the
+exact integral of the angular velocity. Packets follow the model's real firing clock
+(the vendor modules' packet period and block timing rules), each block carrying the
+azimuth at its firing time, and are encoded as real vendor packets. Each packet reaches the
+LiDAR driver t1 after capture; a fraction is lost on the network (never written, never
+seen by the driver). Packets are published one scan message per revolution, cut at the
+zero-crossing packet (the first delivered packet with a block at or past the zero azimuth).
+
+Cameras are triggered from that packet through the chain of the method (part A of
+docs/method.md): 240 packet capture -> t1 -> 242 LiDAR driver -> t2 -> 244 camera driver
+-> applied delay + t3 -> 246 camera sensor -> t4 -> 248 exposure start, exposure t5_i.
+The truth of every frame is exact integer arithmetic on those times:
+
+    t_l = exposure_start + t5_i / 2                      (t5_i is an even number of ns)
+    t_estimated = time at which the true azimuth equals zero + theta in that revolution
+    error = t_l - t_estimated                            (signed; Eq. 4 is |error|)
+    ideal_delay = t_estimated - (lidar_packet + t1 + t2 + t3 + t4 + t5_i / 2)
+    error = applied_delay - ideal_delay
+
+The sensor clock is true time + `clock_offset_ns`; packet stamps are whole microseconds of
+the sensor clock (as the packets hold them), so what the log implies is exactly the truth
+apart from the 0.01 deg azimuth quantisation of the packets.
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import math
+import os
+import secrets
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, build_pandar_scan, encode_hesai
+from syncaudit.lidar.velodyne import (
+    HOUR_US,
+    RETURN_STRONGEST,
+    build_velodyne_scan,
+    encode_velodyne,
+    velodyne_firing_offsets_ns,
+    velodyne_revolution_schedule,
+)
+from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
+
+LidarModel = Literal["VLP-16", "VLP-32C", "Pandar40P", "PandarXT32"]
+StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
+ExposureMessage = Literal["camera_exposure", "flir_meta"]
+
+NS_PER_S = 1_000_000_000
+NS_PER_US = 1_000
+HESAI_RETURN_STRONGEST = 0x37
+FLIR_MAX_EXPOSURE_US = 20_000
+"""`ImageMetaData.max_exposure_time` the simulated cameras report."""
+
+_VENDOR_OF: dict[str, str] = {
+    "VLP-16": "velodyne",
+    "VLP-32C": "velodyne",
+    "Pandar40P": "hesai",
+    "PandarXT32": "hesai",
+}
+_X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0}
+"""Packet azimuth of the LiDAR frame's +X axis in the vendors' ROS drivers: Velodyne
+x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise."""
+
+
+# ==================================================================================== config
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LatencyDist(_Strict):
+    """A positive latency: `min_us` plus a lognormal part with the given mean and std.
+
+    Lognormal because network and scheduling latencies are positive and right-skewed; the
+    total mean and std are `mean_us` and `std_us` (std 0 = constant).
+    """
+
+    mean_us: float = Field(gt=0.0)
+    std_us: float = Field(default=0.0, ge=0.0)
+    min_us: float = Field(default=0.0, ge=0.0)
+
+    @model_validator(mode="after")
+    def _min_below_mean(self) -> LatencyDist:
+        if self.min_us >= self.mean_us:
+            raise ValueError("min_us must be below mean_us")
+        return self
+
+    def draw_ns(self, rng: np.random.Generator, n: int) -> NDArray[np.int64]:
+        """n latencies in integer nanoseconds."""
+        excess = (self.mean_us - self.min_us) * NS_PER_US
+        if self.std_us == 0.0:
+            values = np.full(n, excess)
+        else:
+            sigma2 = math.log1p((self.std_us * NS_PER_US / excess) ** 2)
+            mu = math.log(excess) - sigma2 / 2.0
+            values = rng.lognormal(mu, math.sqrt(sigma2), n)
+        return np.rint(values + self.min_us * NS_PER_US).astype(np.int64)
+
+
+class LightModel(_Strict):
+    """Exposure driven by the light: bright -> tunnel -> bright, with smooth transitions.
+
+    Auto exposure moves each frame a fraction `ae_gain` of the way to the target
+    (cameras lag the light by a few frames), then multiplicative noise is applied.
+    """
+
+    bright_exposure_us: float = Field(default=2_000.0, gt=0.0)
+    dark_exposure_us: float = Field(default=12_000.0, gt=0.0)
+    tunnel_start_s: float | None = None
+    """Start of the transition into the tunnel, from the log start; None: 35 % of it."""
+    tunnel_length_s: float | None = None
+    """From entering to leaving the tunnel; None: 30 % of the log."""
+    transition_s: float = Field(default=2.0, gt=0.0)
+    ae_gain: float = Field(default=0.5, gt=0.0, le=1.0)
+    noise_frac: float = Field(default=0.02, ge=0.0, lt=0.5)
+
+
+class CameraSim(_Strict):
+    """One simulated camera."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_]+$")
+    yaw_deg: float
+    """Viewing direction in the LiDAR frame, counter-clockwise from +X (REP 103)."""
+    hfov_deg: float = Field(default=90.0, gt=0.0, le=360.0)
+    stamp_semantics: StampSemantics = "exposure_start"
+    """What the image header stamp marks ('trigger': 246, the trigger reaching the camera)."""
+    delay_error_us: float = 0.0
+    """Offset of the (initial) applied delay from the log's true ideal delay."""
+
+
+def _default_cameras() -> list[CameraSim]:
+    return [
+        CameraSim(name="front", yaw_deg=0.0),
+        CameraSim(name="rear_left", yaw_deg=120.0),
+        CameraSim(name="rear_right", yaw_deg=240.0),
+    ]
+
+
+class SyncSimConfig(_Strict):
+    """Everything `simulate_sync_log` needs; defaults give a 10 s VLP-16 log, 3 cameras."""
+
+    seed: int = 0
+    duration_s: float = Field(default=10.0, gt=0.0, le=3_600.0)
+    start_time_ns: int = Field(default=1_700_000_000 * NS_PER_S, gt=0)
+    """True (host) time of the log start."""
+    log_format: LogFormat = "mcap"
+    overwrite: bool = False
+
+    lidar_model: LidarModel = "VLP-16"
+    rpm: float = Field(default=600.0, ge=300.0, le=1200.0)
+    rpm_drift_frac: float = Field(default=0.005, ge=0.0, lt=0.2)
+    """Amplitude of the sinusoidal rate drift, as a fraction of the nominal rate."""
+    rpm_drift_period_s: float = Field(default=30.0, gt=0.0)
+    rpm_drift_phase_deg: float = 0.0
+    start_azimuth_deg: float = Field(default=123.45, ge=0.0, lt=360.0)
+    """Azimuth of the head at the log start."""
+    zero_azimuth_deg: float | None = Field(default=None, ge=0.0, lt=360.0)
+    """Packet azimuth of the zero crossing; None: 60 deg before the first camera's centre,
+    so every camera's t_rotate exceeds the trigger chain."""
+    azimuth_of_x_axis_deg: float | None = Field(default=None, ge=0.0, lt=360.0)
+    """Packet azimuth of the LiDAR frame's +X axis; None: the vendor driver's convention."""
+    clock_offset_ns: int = 0
+    """Sensor clock minus host clock (0 = synchronised; 1_531 s mimics the VLP-16 sample)."""
+    packet_drop_fraction: float = Field(default=0.001, ge=0.0, lt=0.5)
+    lidar_returns: Literal["smooth", "random"] = "smooth"
+    """'smooth': ranges of a simple room (compress well); 'random': noise ranges."""
+    lidar_frame: str = "lidar_top"
+
+    t1: LatencyDist = LatencyDist(mean_us=300.0, std_us=40.0, min_us=150.0)
+    """240 -> 242 per packet: network to the LiDAR driver."""
+    t2: LatencyDist = LatencyDist(mean_us=60.0, std_us=15.0, min_us=20.0)
+    """242 -> 244 per trigger: shared memory write + read."""
+    t3: LatencyDist = LatencyDist(mean_us=120.0, std_us=20.0, min_us=50.0)
+    """244 -> 246 per trigger (after the delay): trigger line / GPIO to the camera."""
+    t4: LatencyDist = LatencyDist(mean_us=40.0, std_us=5.0, min_us=20.0)
+    """246 -> 248 per trigger: sensor start-of-exposure latency."""
+    image_latency: LatencyDist = LatencyDist(mean_us=8_000.0, std_us=500.0, min_us=5_000.0)
+    """Exposure end -> image published (readout, transfer, debayer)."""
+
+    light: LightModel = LightModel()
+    cameras: list[CameraSim] = Field(default_factory=_default_cameras, min_length=1)
+    image_kind: Literal["raw", "compressed"] = "raw"
+    exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
+    trigger_messages: bool = True
+    controller: ControllerConfig | None = None
+    """None: constant delays; else the self-adaptive controller runs live per camera."""
+
+    @model_validator(mode="after")
+    def _check(self) -> SyncSimConfig:
+        names = [c.name for c in self.cameras]
+        if len(set(names)) != len(names):
+            raise ValueError(f"camera names must be unique: {names}")
+        if len(set(self.exposure_messages)) != len(self.exposure_messages):
+            raise ValueError("exposure_messages has duplicates")
+        return self
+
+    @property
+    def vendor(self) -> str:
+        """'velodyne' or 'hesai'."""
+        return _VENDOR_OF[self.lidar_model]
+
+
+# ================================================================================== rotation
+
+
+@dataclass(frozen=True, slots=True)
+class Rotation:
+    """Unwrapped azimuth A(t) = A0 + integral of omega, omega = w0 (1 + f sin(2 pi t/P + phi)).
+
+    t is true time in ns relative to the log start (float64: sub-ns resolution over hours).
+    """
+
+    start_deg: float
+    w0_deg_ns: float
+    drift_frac: float
+    period_ns: float
+    phase_rad: float
+
+    def angle_deg(self, t_ns: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Unwrapped azimuth (deg) at t."""
+        k = 2.0 * math.pi / self.period_ns
+        wobble = (np.cos(k * t_ns + self.phase_rad) - math.cos(self.phase_rad)) / k
+        return self.start_deg + self.w0_deg_ns * (t_ns - self.drift_frac * wobble)
+
+    def rate_deg_ns(self, t_ns: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Angular velocity (deg/ns) at t."""
+        k = 2.0 * math.pi / self.period_ns
+        return self.w0_deg_ns * (1.0 + self.drift_frac * np.sin(k * t_ns + self.phase_rad))
+
+    def time_at_ns(self, angle_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Solve A(t) = angle exactly (Newton; A is strictly increasing)."""
+        target = np.asarray(angle_deg, dtype=np.float64)
+        t = (target - self.start_deg) / self.w0_deg_ns
+        for _ in range(50):
+            step = (self.angle_deg(t) - target) / self.rate_deg_ns(t)
+            t = t - step
+            if float(np.max(np.abs(step), initial=0.0)) < 1e-4:
+                break
+        return t
+
+
+# ============================================================================ LiDAR packets
+
+
+@dataclass(frozen=True, slots=True)
+class _PacketClock:
+    """Packet k's stamp = floor_us(T0 + (num * k) // den); blocks at stamp + offsets."""
+
+    period_num_ns: int
+    period_den: int
+    block_offset_ns: NDArray[np.int64]
+    azimuth_units_per_deg: int
+
+
+def _packet_clock(model: str, rpm: float) -> _PacketClock:
+    """The model's packet period and block sample offsets from the vendor modules."""
+    if _VENDOR_OF[model] == "velodyne":
+        sched = velodyne_revolution_schedule(model, rpm, 0, n_packets=2)
+        period = int(sched.packet_stamp_ns[1] - sched.packet_stamp_ns[0])
+        offsets = velodyne_firing_offsets_ns(model, False)[:, 0].astype(np.int64)
+        return _PacketClock(period, 1, offsets, 100)
+    layout = HESAI_LAYOUTS[model]
+    offsets = layout.block_offset_ns(np.ones(1, dtype=np.int64))[0].astype(np.int64)
+    return _PacketClock(
+        layout.period_num_ns * layout.n_blocks,
+        layout.period_den,
+        offsets,
+        layout.azimuth_units_per_deg,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _Packets:
+    """Every packet the sensor sent in the simulated span (delivered or not)."""
+
+    stamp_sensor_ns: NDArray[np.int64]
+    """(n,) packet time in the sensor clock, whole microseconds."""
+    capture_ns: NDArray[np.int64]
+    """(n,) the same instant in true (host) time: checkpoint 240."""
+    block_true_ns: NDArray[np.int64]
+    """(n, B) true time of each block's azimuth sample."""
+    azimuth_q: NDArray[np.int64]
+    """(n, B) unwrapped block azimuth in the packet's units (0.01 deg)."""
+    delivered: NDArray[np.bool_]
+    t1_ns: NDArray[np.int64]
+    driver_ns: NDArray[np.int64]
+    """(n,) checkpoint 242: the driver's stamp of the packet."""
+
+
+# ==================================================================================== truth
+
+
+def _eq5_eq6(abs_error_ns: NDArray[np.int64]) -> tuple[float, float]:
+    """Eq. 5 and Eq. 6 over all frames, exact integer sums (Eq. 6 literally rearranged)."""
+    n = int(abs_error_ns.size)
+    if n == 0:
+        return math.nan, math.nan
+    values = [int(v) for v in abs_error_ns]
+    s1 = sum(values)
+    s2 = sum(v * v for v in values)
+    mean = s1 / n
+    var = (n * s2 - s1 * s1) / (n * (n - 1)) if n > 1 else math.nan
+    return mean, var
+
+
+def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
+
+
+def _target_exposure_us(
+    light: LightModel, t_s: NDArray[np.float64], duration_s: float
+) -> NDArray[np.float64]:
+    """Exposure the light asks for at t (s from the log start): log-space bright/dark blend."""
+    start = light.tunnel_start_s if light.tunnel_start_s is not None else 0.35 * duration_s
+    length = light.tunnel_length_s if light.tunnel_length_s is not None else 0.30 * duration_s
+    dark = _smoothstep((t_s - start) / light.transition_s) * (
+        1.0 - _smoothstep((t_s - start - length) / light.transition_s)
+    )
+    lo, hi = math.log(light.bright_exposure_us), math.log(light.dark_exposure_us)
+    return np.exp(lo + dark * (hi - lo))
+
+
+def _exposures_ns(
+    light: LightModel, t_s: NDArray[np.float64], duration_s: float, rng: np.random.Generator
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Per frame: exposure t5_i (even ns) and the scene brightness relative to the bright
+    light times the exposure (what the image shows, 1.0 = well exposed)."""
+    target = _target_exposure_us(light, t_s, duration_s)
+    out = np.empty_like(target)
+    current = float(target[0]) if target.size else 0.0
+    for i, goal in enumerate(target.tolist()):
+        current += light.ae_gain * (goal - current)
+        out[i] = current
+    out *= 1.0 + light.noise_frac * rng.standard_normal(out.size)
+    t5_ns = 2 * np.rint(out * NS_PER_US / 2.0).astype(np.int64)
+    exposure_ratio = t5_ns / (target * NS_PER_US)
+    return np.maximum(t5_ns, 2), exposure_ratio
+
+
+# ================================================================================ messages
+
+
+def _png_gray(pixels: NDArray[np.uint8]) -> bytes:
+    """A minimal valid 8-bit grayscale PNG of a 2-D array."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+    height, width = pixels.shape
+    raw = b"".join(b"\x00" + pixels[row].tobytes() for row in range(height))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(raw, 6))
+        + chunk(b"IEND", b"")
+    )
+
+
+def _camera_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
+    """Rotation (x, y, z, w) of an optical frame (z forward, x right, y down) at `yaw_deg`."""
+    yaw = math.radians(yaw_deg)
+    z_axis = (math.cos(yaw), math.sin(yaw), 0.0)
+    x_axis = (math.sin(yaw), -math.cos(yaw), 0.0)
+    y_axis = (0.0, 0.0, -1.0)
+    m = [[x_axis[r], y_axis[r], z_axis[r]] for r in range(3)]
+    trace = m[0][0] + m[1][1] + m[2][2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        return ((m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s, s / 4)
+    if m[0][0] > m[1][1] and m[0][0] > m[2][2]:
+        s = 2.0 * math.sqrt(1.0 + m[0][0] - m[1][1] - m[2][2])
+        return (s / 4, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s, (m[2][1] - m[1][2]) / s)
+    if m[1][1] > m[2][2]:
+        s = 2.0 * math.sqrt(1.0 + m[1][1] - m[0][0] - m[2][2])
+        return ((m[0][1] + m[1][0]) / s, s / 4, (m[1][2] + m[2][1]) / s, (m[0][2] - m[2][0]) / s)
+    s = 2.0 * math.sqrt(1.0 + m[2][2] - m[0][0] - m[1][1])
+    return ((m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, s / 4, (m[1][0] - m[0][1]) / s)
+
+
+@dataclass(slots=True)
+class _Outgoing:
+    """Serialized messages waiting to be written in log-time order."""
+
+    items: list[tuple[int, int, str, bytes]]
+
+    def add(self, log_time_ns: int, topic: str, data: bytes) -> None:
+        self.items.append((int(log_time_ns), len(self.items), topic, data))
+
+
+# =============================================================================== simulator
+
+
+def truth_path(out: Path) -> Path:
+    """Where the truth of a simulated log is written: `<out>.truth.json`."""
+    return Path(str(out) + ".truth.json")
+
+
+class _Simulation:
+    """One run of the simulator: arrays first (vectorised), then messages."""
+
+    def __init__(self, config: SyncSimConfig) -> None:
+        self.cfg = config
+        seeds = np.random.SeedSequence(config.seed).spawn(8)
+        self.rng_drop, self.rng_t1, self.rng_points = (np.random.default_rng(s) for s in seeds[:3])
+        self.camera_seeds = seeds[3]
+        self.vendor = config.vendor
+        self.x_axis_deg = (
+            config.azimuth_of_x_axis_deg
+            if config.azimuth_of_x_axis_deg is not None
+            else _X_AXIS_AZIMUTH_DEG[self.vendor]
+        )
+        self.camera_azimuth_deg = [(self.x_axis_deg - c.yaw_deg) % 360.0 for c in config.cameras]
+        self.zero_deg = (
+            config.zero_azimuth_deg
+            if config.zero_azimuth_deg is not None
+            else round((self.camera_azimuth_deg[0] - 60.0) % 360.0, 2) % 360.0
+        )
+        self.rotation = Rotation(
+            start_deg=config.start_azimuth_deg,
+            w0_deg_ns=config.rpm * 6.0 / NS_PER_S,
+            drift_frac=config.rpm_drift_frac,
+            period_ns=config.rpm_drift_period_s * NS_PER_S,
+            phase_rad=math.radians(config.rpm_drift_phase_deg),
+        )
+        self.clock = _packet_clock(config.lidar_model, config.rpm)
+        self.topic = "/velodyne_packets" if self.vendor == "velodyne" else "/pandar_packets"
+        self.msgtype = (
+            "velodyne_msgs/msg/VelodyneScan"
+            if self.vendor == "velodyne"
+            else "pandar_msgs/msg/PandarScan"
+        )
+
+    # -- LiDAR ----------------------------------------------------------------------------
+
+    def packets(self) -> _Packets:
+        """All packets of the span: firing clock, azimuths, drops, t1."""
+        cfg, clk = self.cfg, self.clock
+        span_ns = int(cfg.duration_s * NS_PER_S)
+        n = span_ns * clk.period_den // clk.period_num_ns
+        k = np.arange(n, dtype=np.int64)
+        t0_sensor = cfg.start_time_ns + cfg.clock_offset_ns
+        stamp = (t0_sensor + (clk.period_num_ns * k) // clk.period_den) // NS_PER_US * NS_PER_US
+        capture = stamp - cfg.clock_offset_ns
+        block_true = capture[:, None] + clk.block_offset_ns[None, :]
+        angle = self.rotation.angle_deg((block_true - cfg.start_time_ns).astype(np.float64))
+        azimuth_q = np.rint(angle * clk.azimuth_units_per_deg).astype(np.int64)
+        delivered = self.rng_drop.random(n) >= cfg.packet_drop_fraction
+        t1 = cfg.t1.draw_ns(self.rng_t1, n)
+        return _Packets(stamp, capture, block_true, azimuth_q, delivered, t1, capture + t1)
+
+    def crossings(self, pk: _Packets) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Zero crossings seen in the delivered packets: (turn numbers m, zero packet index).
+
+        The zero-crossing angle of turn m is zero + 360 m (unwrapped); its packet is the
+        first delivered packet holding a block at or past it, with a delivered block before.
+        """
+        units = self.clock.azimuth_units_per_deg
+        full = 360 * units
+        idx_delivered = np.flatnonzero(pk.delivered)
+        q = pk.azimuth_q[idx_delivered].reshape(-1)
+        zero_q = self.zero_deg * units
+        m_lo = math.floor((int(q[0]) - zero_q) / full) + 1
+        m_hi = math.floor((int(q[-1]) - zero_q) / full)
+        turns = np.arange(m_lo, m_hi + 1, dtype=np.int64)
+        at = np.searchsorted(q, zero_q + full * turns.astype(np.float64), side="left")
+        n_blocks = pk.azimuth_q.shape[1]
+        return turns, idx_delivered[at // n_blocks]
+
+    # -- cameras --------------------------------------------------------------------------
+
+    def run(self, out: Path) -> dict[str, Any]:
+        """Simulate, write the log to `out` and return the truth."""
+        cfg = self.cfg
+        pk = self.packets()
+        turns, zero_packet = self.crossings(pk)
+        if turns.size < 3:
+            raise ValueError("duration too short: fewer than three zero crossings")
+        last_packet = int(zero_packet[-1])
+        rot = self.rotation
+        zero_angles = self.zero_deg + 360.0 * turns.astype(np.float64)
+        zero_true_ns = cfg.start_time_ns + np.rint(rot.time_at_ns(zero_angles)).astype(np.int64)
+        # The log holds whole revolutions: it ends with the last zero-crossing packet, and
+        # frames belong to revolutions that start and end inside it.
+        revs_ns = np.diff(zero_true_ns).astype(np.float64)
+        omega_mean_deg_ns = 360.0 * (turns.size - 1) / float(zero_true_ns[-1] - zero_true_ns[0])
+
+        cams = [
+            self._camera(i, pk, zero_packet, zero_angles, zero_true_ns, revs_ns, omega_mean_deg_ns)
+            for i in range(len(cfg.cameras))
+        ]
+        written = int(pk.delivered[: last_packet + 1].sum())
+        dropped = int((~pk.delivered[: last_packet + 1]).sum())
+        written_idx = np.flatnonzero(pk.delivered[: last_packet + 1])
+        lidar_truth = {
+            "topic": self.topic,
+            "msgtype": self.msgtype,
+            "vendor": self.vendor,
+            "model": cfg.lidar_model,
+            "frame_id": cfg.lidar_frame,
+            "rpm_nominal": cfg.rpm,
+            "rpm_mean": omega_mean_deg_ns * NS_PER_S / 6.0,
+            "omega_mean_deg_s": omega_mean_deg_ns * NS_PER_S,
+            "rpm_drift_frac": cfg.rpm_drift_frac,
+            "rpm_drift_period_s": cfg.rpm_drift_period_s,
+            "zero_azimuth_deg": self.zero_deg,
+            "azimuth_increases": True,
+            "rotation": "clockwise seen from above (packet azimuth grows with time)",
+            "azimuth_of_x_axis_deg": self.x_axis_deg,
+            "azimuth_resolution_deg": 1.0 / self.clock.azimuth_units_per_deg,
+            "clock_offset_ns": cfg.clock_offset_ns,
+            "packet_period_ns": self.clock.period_num_ns / self.clock.period_den,
+            "packets_written": written,
+            "packets_dropped": dropped,
+            "revolutions": int(turns.size),
+            "scans": int(turns.size),
+            "zero_crossing_ns": [int(v) for v in zero_true_ns],
+            "zero_packet_ns": [int(v) for v in pk.capture_ns[zero_packet]],
+            "t1_mean_ns": float(pk.t1_ns[written_idx].mean()),
+            "t1_min_ns": int(pk.t1_ns[written_idx].min()),
+            "first_packet_ns": int(pk.capture_ns[written_idx[0]]),
+            "last_packet_ns": int(pk.capture_ns[written_idx[-1]]),
+        }
+        truth: dict[str, Any] = {
+            "seed": cfg.seed,
+            "config": cfg.model_dump(mode="json"),
+            "log": {"path": str(out), "format": cfg.log_format},
+            "conventions": {
+                "times": "integer ns, true (host) clock; sensor clock = host + clock_offset_ns",
+                "t_l": "exposure_start_ns + exposure_duration_ns / 2 (durations are even)",
+                "error_ns": "t_l_ns - t_estimated_ns (signed); Eq. 4 t_error = |error_ns|",
+                "ideal_delay_ns": "t_estimated - (lidar_packet + t1 + t2 + t3 + t4 + t5/2)",
+                "error_var_ns2": "Eq. 6 over all frames of the camera: "
+                "(sum(|e|^2)/N - mean(|e|)^2) * N/(N-1)",
+                "flir_exposure_time": "ImageMetaData.exposure_time is t5 rounded to the "
+                "nearest microsecond (the message holds whole us)",
+                "camera_exposure_duration": "CameraExposure.exposure_duration = t5 / 1e9 s "
+                "(exact to the ns after rounding)",
+                "trigger_stamp": "stamp semantics 'trigger': header.stamp = camera_sensor_time "
+                "(246, the trigger reaching the camera)",
+                "azimuth": "packets hold azimuths rounded to 0.01 deg; t_estimated is from "
+                "the exact azimuth model, so interpolating packets differs by ~1 us",
+                "packet_phase_ns": "zero_crossing_ns - lidar_packet_ns: when the beam "
+                "crossed the zero azimuth, relative to the trigger packet's capture",
+            },
+            "lidar": lidar_truth,
+            "cameras": {c["name"]: c for c in cams},
+        }
+        self._write(out, pk, zero_packet, cams)
+        return truth
+
+    def _camera(
+        self,
+        index: int,
+        pk: _Packets,
+        zero_packet: NDArray[np.int64],
+        zero_angles: NDArray[np.float64],
+        zero_true_ns: NDArray[np.int64],
+        revs_ns: NDArray[np.float64],
+        omega_mean_deg_ns: float,
+    ) -> dict[str, Any]:
+        """Per-frame truth of one camera (one frame per whole revolution)."""
+        cfg = self.cfg
+        cam = cfg.cameras[index]
+        rng = np.random.default_rng(self.camera_seeds.spawn(len(cfg.cameras))[index])
+        n = int(zero_packet.size) - 1
+        theta = (self.camera_azimuth_deg[index] - self.zero_deg) % 360.0
+        t_est_rel = self.rotation.time_at_ns(zero_angles[:n] + theta)
+        t_est = cfg.start_time_ns + np.rint(t_est_rel).astype(np.int64)
+        zp = zero_packet[:n]
+        packet_ns = pk.capture_ns[zp]
+        t1 = pk.t1_ns[zp]
+        t2 = cfg.t2.draw_ns(rng, n)
+        t3 = cfg.t3.draw_ns(rng, n)
+        t4 = cfg.t4.draw_ns(rng, n)
+        t5, exposure_ratio = _exposures_ns(cfg.light, t_est_rel / NS_PER_S, cfg.duration_s, rng)
+        ideal = t_est - (packet_ns + t1 + t2 + t3 + t4 + t5 // 2)
+        ideal_mean = float(ideal.mean())
+        delay_error_ns = round(cam.delay_error_us * NS_PER_US)
+        initial = max(0, round(ideal_mean) + delay_error_ns)
+        t_rotate_ns = round(theta / omega_mean_deg_ns)
+
+        adjustments: list[dict[str, Any]] = []
+        if cfg.controller is None:
+            applied = np.full(n, initial, dtype=np.int64)
+        else:
+            applied = self._run_controller(
+                cfg.controller, initial, theta, revs_ns, t1, t2, t3, t4, t5, ideal, adjustments
+            )
+        exposure_start = packet_ns + t1 + t2 + applied + t3 + t4
+        t_l = exposure_start + t5 // 2
+        error = t_l - t_est
+        err_mean, err_var = _eq5_eq6(np.abs(error))
+        zero_ns = zero_true_ns[:n]
+        latency = cfg.image_latency.draw_ns(rng, n)
+        image_log = exposure_start + t5 + latency
+        stamp = {
+            "exposure_start": exposure_start,
+            "exposure_middle": exposure_start + t5 // 2,
+            "exposure_end": exposure_start + t5,
+            "trigger": packet_ns + t1 + t2 + applied + t3,
+        }[cam.stamp_semantics]
+        pattern_seed = int(rng.integers(0, 2**31))
+        prefix = f"/cameras/{cam.name}"
+        image_topic = (
+            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
+        )
+        topics: dict[str, str] = {"image": image_topic}
+        if "camera_exposure" in cfg.exposure_messages:
+            topics["exposure"] = f"{prefix}/exposure"
+        if "flir_meta" in cfg.exposure_messages:
+            topics["meta"] = f"{prefix}/meta"
+        if cfg.trigger_messages:
+            topics["trigger"] = f"{prefix}/trigger"
+        frames = [
+            {
+                "frame_sequence": i,
+                "lidar_packet_ns": int(packet_ns[i]),
+                "t1_ns": int(t1[i]),
+                "t2_ns": int(t2[i]),
+                "t3_ns": int(t3[i]),
+                "t4_ns": int(t4[i]),
+                "applied_delay_ns": int(applied[i]),
+                "exposure_start_ns": int(exposure_start[i]),
+                "exposure_duration_ns": int(t5[i]),
+                "t_l_ns": int(t_l[i]),
+                "t_estimated_ns": int(t_est[i]),
+                "error_ns": int(error[i]),
+                "ideal_delay_ns": int(ideal[i]),
+                "zero_crossing_ns": int(zero_ns[i]),
+                "packet_phase_ns": int(zero_ns[i] - packet_ns[i]),
+                "image_stamp_ns": int(stamp[i]),
+                "image_log_time_ns": int(image_log[i]),
+            }
+            for i in range(n)
+        ]
+        return {
+            "name": cam.name,
+            "frame_id": f"{cam.name}_optical_frame",
+            "yaw_deg": cam.yaw_deg,
+            "azimuth_deg": self.camera_azimuth_deg[index],
+            "theta_deg": theta,
+            "hfov_deg": cam.hfov_deg,
+            "stamp_semantics": cam.stamp_semantics,
+            "topics": topics,
+            "frames_count": n,
+            "t_rotate_ns": t_rotate_ns,
+            "t1_mean_ns": float(t1.mean()),
+            "t2_mean_ns": float(t2.mean()),
+            "t3_mean_ns": float(t3.mean()),
+            "t4_mean_ns": float(t4.mean()),
+            "t5_mean_ns": float(t5.mean()),
+            "t5_window_frames": (
+                cfg.controller.window_frames
+                if cfg.controller is not None
+                else ControllerConfig().window_frames
+            ),
+            "packet_phase_mean_ns": float((zero_ns - packet_ns).mean()),
+            "error_signed_mean_ns": float(error.mean()),
+            "error_mean_ns": err_mean,
+            "error_var_ns2": err_var,
+            "ideal_delay_ns": round(ideal_mean),
+            "ideal_delay_mean_ns": ideal_mean,
+            "applied_delay": {
+                "mode": "constant" if cfg.controller is None else "controller",
+                "delay_error_ns": delay_error_ns,
+                "initial_ns": int(applied[0]),
+                "final_ns": int(applied[-1]),
+                "mean_ns": float(applied.mean()),
+                "min_ns": int(applied.min()),
+                "max_ns": int(applied.max()),
+                "adjustments": adjustments,
+            },
+            "frames": frames,
+            "_arrays": {
+                "exposure_ratio": exposure_ratio,
+                "pattern_seed": pattern_seed,
+                "image_stamp": stamp,
+                "image_log": image_log,
+            },
+        }
+
+    def _run_controller(
+        self,
+        config: ControllerConfig,
+        initial_ns: int,
+        theta_deg: float,
+        revs_ns: NDArray[np.float64],
+        t1: NDArray[np.int64],
+        t2: NDArray[np.int64],
+        t3: NDArray[np.int64],
+        t4: NDArray[np.int64],
+        t5: NDArray[np.int64],
+        ideal: NDArray[np.int64],
+        adjustments: list[dict[str, Any]],
+    ) -> NDArray[np.int64]:
+        """Run the controller live: frame i uses the delay decided after frame i - 1.
+
+        t_rotate of frame i is theta over the previous revolution's measured rate (the
+        nominal rate for the first frame); the error is the frame's true signed error.
+        """
+        controller = DelayController(config, initial_delay_ns=initial_ns)
+        n = ideal.size
+        applied = np.empty(n, dtype=np.int64)
+        delay = initial_ns
+        w0 = self.rotation.w0_deg_ns
+        lists = [a.tolist() for a in (t1, t2, t3, t4, t5, ideal)]
+        for i in range(n):
+            applied[i] = delay
+            omega = w0 if i == 0 else 360.0 / float(revs_ns[i - 1])
+            obs = FrameObservation(
+                t1_ns=lists[0][i],
+                t2_ns=lists[1][i],
+                t3_ns=lists[2][i],
+                t4_ns=lists[3][i],
+                exposure_ns=lists[4][i],
+                error_ns=delay - lists[5][i],
+                t_rotate_ns=round(theta_deg / omega),
+            )
+            before = len(controller.adjustments)
+            delay = controller.update(obs)
+            for adj in controller.adjustments[before:]:
+                adjustments.append(
+                    {
+                        "after_frame_sequence": adj.frame_index,
+                        "old_delay_ns": adj.old_delay_ns,
+                        "new_delay_ns": adj.new_delay_ns,
+                        "reason": adj.reason,
+                        "window_error_mean_ns": adj.stats.error_mean_ns,
+                        "window_error_var_ns2": adj.stats.error_var_ns2,
+                    }
+                )
+        return applied
+
+    # -- writing --------------------------------------------------------------------------
+
+    def _scan_messages(
+        self, writer: LogWriter, pk: _Packets, zero_packet: NDArray[np.int64]
+    ) -> Iterator[tuple[int, int, str, bytes]]:
+        """One scan per zero crossing: delivered packets after the previous zero packet up
+        to and including this one; header stamp and log time = last packet's driver stamp."""
+        units = self.clock.azimuth_units_per_deg
+        full = 360 * units
+        begin = 0
+        for j, zp in enumerate(zero_packet.tolist()):
+            rows = np.arange(begin, zp + 1)
+            begin = zp + 1
+            azimuth_deg = (pk.azimuth_q[rows] % full) / units
+            keep = pk.delivered[rows]
+            data, size = self._encode(azimuth_deg, pk.stamp_sensor_ns[rows], int(rows[0]))
+            stamps = pk.driver_ns[rows][keep]
+            log_time = int(pk.driver_ns[zp])
+            if self.vendor == "velodyne":
+                payload = build_velodyne_scan(
+                    log_time, self.cfg.lidar_frame, stamps, data[keep], writer.encoding, seq=j
+                )
+            else:
+                payload = build_pandar_scan(
+                    RosHeader(log_time, self.cfg.lidar_frame, j),
+                    stamps,
+                    data[keep],
+                    size[keep],
+                    writer.encoding,
+                )
+            yield (log_time, -1, self.topic, payload)
+
+    def _encode(
+        self, azimuth_deg: NDArray[np.float64], stamp_ns: NDArray[np.int64], first_index: int
+    ) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
+        """Real-format packets of consecutive sensor packets (delivered or not)."""
+        cfg = self.cfg
+        n, b = azimuth_deg.shape
+        distances: NDArray[np.float64] | None = None
+        if cfg.lidar_returns == "smooth":
+            channels = (
+                32
+                if cfg.lidar_model in ("VLP-16", "VLP-32C")
+                else (HESAI_LAYOUTS[cfg.lidar_model].n_channels)
+            )
+            rad = np.radians(azimuth_deg)[:, :, None]
+            ring = np.arange(channels, dtype=np.float64)[None, None, :]
+            distances = 12.0 + 6.0 * np.abs(np.sin(rad)) + 3.0 * np.cos(2.0 * rad) + 0.25 * ring
+            distances = np.broadcast_to(distances, (n, b, channels))
+        if self.vendor == "velodyne":
+            toh_us = (stamp_ns // NS_PER_US) % HOUR_US
+            data = encode_velodyne(
+                cfg.lidar_model,
+                azimuth_deg,
+                toh_us,
+                RETURN_STRONGEST,
+                rng=self.rng_points,
+                distances_m=distances,
+                intensities=None if distances is None else np.uint8(40),
+            )
+            return data, np.full(n, data.shape[1], dtype=np.uint32)
+        reflectivity = None if distances is None else np.full(distances.shape, 40, np.uint8)
+        return encode_hesai(
+            cfg.lidar_model,
+            azimuth_deg,
+            stamp_ns,
+            HESAI_RETURN_STRONGEST,
+            distance_m=None if distances is None else np.ascontiguousarray(distances),
+            reflectivity=reflectivity,
+            rng=self.rng_points,
+            motor_rpm=round(cfg.rpm),
+            udp_sequence_start=1 + first_index,
+        )
+
+    def _camera_messages(self, writer: LogWriter, cams: list[dict[str, Any]]) -> _Outgoing:
+        """Image, exposure, metadata and trigger messages of every frame, serialized."""
+        cfg = self.cfg
+        out = _Outgoing([])
+        tf_msgs = []
+        for cam_cfg, cam in zip(cfg.cameras, cams, strict=True):
+            qx, qy, qz, qw = _camera_quaternion(cam_cfg.yaw_deg)
+            yaw = math.radians(cam_cfg.yaw_deg)
+            transform = writer.new_msg(
+                "geometry_msgs/msg/Transform",
+                translation=writer.new_msg(
+                    "geometry_msgs/msg/Vector3",
+                    x=0.12 * math.cos(yaw),
+                    y=0.12 * math.sin(yaw),
+                    z=-0.2,
+                ),
+                rotation=writer.new_msg("geometry_msgs/msg/Quaternion", x=qx, y=qy, z=qz, w=qw),
+            )
+            tf_msgs.append(
+                writer.new_msg(
+                    "geometry_msgs/msg/TransformStamped",
+                    header=writer.header(cfg.start_time_ns, cfg.lidar_frame),
+                    child_frame_id=cam["frame_id"],
+                    transform=transform,
+                )
+            )
+        out.add(
+            cfg.start_time_ns,
+            "/tf_static",
+            writer.serialize(writer.new_msg("tf2_msgs/msg/TFMessage", transforms=tf_msgs)),
+        )
+        for cam_cfg, cam in zip(cfg.cameras, cams, strict=True):
+            self._frames_of(writer, cam_cfg, cam, out)
+        return out
+
+    def _frames_of(
+        self, writer: LogWriter, cam_cfg: CameraSim, cam: dict[str, Any], out: _Outgoing
+    ) -> None:
+        cfg = self.cfg
+        arrays = cam["_arrays"]
+        topics = cam["topics"]
+        frame_id = cam["frame_id"]
+        pattern_rng = np.random.default_rng(arrays["pattern_seed"])
+        height, width = 24, 32
+        gradient = np.linspace(0.6, 1.4, width)[None, :] * np.linspace(1.2, 0.8, height)[:, None]
+        ros1 = writer.encoding == "ros1"
+
+        def hdr(stamp_ns: int, seq: int) -> Any:
+            """Header of this camera; ROS 1 publishers number messages in `seq`."""
+            fields: dict[str, Any] = {"stamp": writer.time(stamp_ns), "frame_id": frame_id}
+            if ros1:
+                fields["seq"] = seq
+            return writer.new_msg("std_msgs/msg/Header", **fields)
+
+        for i, frame in enumerate(cam["frames"]):
+            stamp_ns = int(arrays["image_stamp"][i])
+            log_ns = int(arrays["image_log"][i])
+            seq = frame["frame_sequence"]
+            header = hdr(stamp_ns, seq)
+            level = 110.0 * float(arrays["exposure_ratio"][i])
+            noise = pattern_rng.normal(0.0, 2.0, (height, width))
+            pixels = np.clip(level * gradient + noise, 0, 255).astype(np.uint8)
+            if cfg.image_kind == "raw":
+                image = writer.new_msg(
+                    "sensor_msgs/msg/Image",
+                    header=header,
+                    height=height,
+                    width=width,
+                    encoding="mono8",
+                    step=width,
+                    data=pixels.reshape(-1),
+                )
+            else:
+                image = writer.new_msg(
+                    "sensor_msgs/msg/CompressedImage",
+                    header=header,
+                    format="mono8; png compressed",
+                    data=np.frombuffer(_png_gray(pixels), dtype=np.uint8),
+                )
+            out.add(log_ns, topics["image"], writer.serialize(image))
+            t5 = frame["exposure_duration_ns"]
+            if "exposure" in topics:
+                msg = writer.new_msg(
+                    "syncaudit_msgs/msg/CameraExposure",
+                    header=hdr(frame["exposure_start_ns"], seq),
+                    camera=cam["name"],
+                    frame_sequence=seq,
+                    exposure_start=writer.time(frame["exposure_start_ns"]),
+                    exposure_duration=t5 / NS_PER_S,
+                    gain_db=0.0,
+                )
+                out.add(log_ns + 1_000, topics["exposure"], writer.serialize(msg))
+            if "meta" in topics:
+                msg = writer.new_msg(
+                    "flir_camera_msgs/msg/ImageMetaData",
+                    header=header,
+                    camera_time=frame["exposure_start_ns"] - cfg.start_time_ns + 3_600 * NS_PER_S,
+                    brightness=int(pixels.mean()),
+                    exposure_time=round(t5 / NS_PER_US),
+                    max_exposure_time=FLIR_MAX_EXPOSURE_US,
+                    gain=0.0,
+                )
+                out.add(log_ns + 2_000, topics["meta"], writer.serialize(msg))
+            if "trigger" in topics:
+                packet = frame["lidar_packet_ns"]
+                driver = packet + frame["t1_ns"]
+                cam_driver = driver + frame["t2_ns"]
+                cam_sensor = cam_driver + frame["applied_delay_ns"] + frame["t3_ns"]
+                msg = writer.new_msg(
+                    "syncaudit_msgs/msg/TriggerEvent",
+                    header=hdr(cam_sensor, seq),
+                    camera=cam["name"],
+                    frame_sequence=seq,
+                    lidar_packet_time=writer.time(packet),
+                    lidar_driver_time=writer.time(driver),
+                    camera_driver_time=writer.time(cam_driver),
+                    camera_sensor_time=writer.time(cam_sensor),
+                    exposure_start_time=writer.time(frame["exposure_start_ns"]),
+                    applied_delay=frame["applied_delay_ns"] / NS_PER_S,
+                )
+                out.add(log_ns + 3_000, topics["trigger"], writer.serialize(msg))
+
+    def _write(
+        self, out: Path, pk: _Packets, zero_packet: NDArray[np.int64], cams: list[dict[str, Any]]
+    ) -> None:
+        cfg = self.cfg
+        with open_writer(out, cfg.log_format, overwrite=cfg.overwrite) as writer:
+            writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
+            writer.add_topic(self.topic, self.msgtype)
+            image_type = (
+                "sensor_msgs/msg/Image"
+                if cfg.image_kind == "raw"
+                else "sensor_msgs/msg/CompressedImage"
+            )
+            for cam in cams:
+                topics = cam["topics"]
+                writer.add_topic(topics["image"], image_type)
+                if "exposure" in topics:
+                    writer.add_topic(topics["exposure"], "syncaudit_msgs/msg/CameraExposure")
+                if "meta" in topics:
+                    writer.add_topic(topics["meta"], "flir_camera_msgs/msg/ImageMetaData")
+                if "trigger" in topics:
+                    writer.add_topic(topics["trigger"], "syncaudit_msgs/msg/TriggerEvent")
+            camera_msgs = self._camera_messages(writer, cams)
+            camera_msgs.items.sort()
+            merged = heapq.merge(
+                self._scan_messages(writer, pk, zero_packet),
+                iter(camera_msgs.items),
+                key=lambda item: (item[0], item[1]),
+            )
+            for log_time, _order, topic, data in merged:
+                writer.write(topic, log_time, data)
+
+
+def _write_json_atomic(path: Path, payload: dict[str, Any], overwrite: bool) -> None:
+    """Write JSON to a temporary file beside `path` (normal permissions), then rename."""
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists already; pass overwrite=True to replace it")
+    tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            json.dump(payload, handle, indent=1, allow_nan=True)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def simulate_sync_log(out: Path, config: SyncSimConfig) -> dict[str, Any]:
+    """Write a simulated log to `out` (format `config.log_format`) and its truth to
+    `<out>.truth.json`; return the truth. Both are written atomically; existing outputs are
+    kept unless `config.overwrite`."""
+    out = Path(out)
+    truth_file = truth_path(out)
+    if not config.overwrite and (out.exists() or truth_file.exists()):
+        raise FileExistsError(f"{out} or its truth file exists already; set overwrite=True")
+    sim = _Simulation(config)
+    truth = sim.run(out)
+    for cam in truth["cameras"].values():
+        cam.pop("_arrays")
+    _write_json_atomic(truth_file, truth, config.overwrite)
+    return truth
