@@ -148,6 +148,20 @@ def test_target_appearing_while_writing_is_kept(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
 
 
+def test_overwrite_replaces_other_kinds(tmp_path: Path) -> None:
+    path = tmp_path / "out"
+    path.write_text("a file where the bag directory goes")
+    with open_writer(path, "db3", overwrite=True) as writer:
+        writer.add_topic("/a", "std_msgs/msg/String")
+    assert (path / "metadata.yaml").is_file()
+    with open_writer(path, "mcap", overwrite=True) as writer:
+        writer.add_topic("/a", "std_msgs/msg/String")
+    assert path.is_file()
+    with open_log(path) as log:
+        assert log.summary.container == "mcap"
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
 def test_misuse_is_refused(tmp_path: Path) -> None:
     with open_writer(tmp_path / "m.mcap") as writer:
         writer.add_topic("/a", "std_msgs/String")

@@ -175,7 +175,9 @@ class SyncSimConfig(_Strict):
     azimuth_of_x_axis_deg: float | None = Field(default=None, ge=0.0, lt=360.0)
     """Packet azimuth of the LiDAR frame's +X axis; None: the vendor driver's convention."""
     clock_offset_ns: int = 0
-    """Sensor clock minus host clock (0 = synchronised; 1_531 s mimics the VLP-16 sample)."""
+    """Sensor clock minus host clock (0 = synchronised; 1_531 s mimics the VLP-16 sample).
+    Velodyne packets hold microseconds past the hour, so offsets beyond +-30 min cannot be
+    told from an hour error by a reader."""
     packet_drop_fraction: float = Field(default=0.001, ge=0.0, lt=0.5)
     lidar_returns: Literal["smooth", "random"] = "smooth"
     """'smooth': ranges of a simple room (compress well); 'random': noise ranges."""

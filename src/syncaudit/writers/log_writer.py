@@ -201,15 +201,25 @@ class LogWriter(ABC):
     def _publish(self) -> None:
         """Rename the finished temporary output onto the target."""
         target = self.path
-        if target.exists() or target.is_symlink():
-            if not self.overwrite:
-                raise FileExistsError(f"{target} appeared while writing; not overwriting it")
-            if target.is_dir() and not target.is_symlink():
-                # A directory cannot be replaced in one rename: move it aside first.
-                trash = self._tmp_dir / ".replaced"
-                os.rename(target, trash)
-                os.rename(self._tmp_path, target)
+        exists = target.exists() or target.is_symlink()
+        if exists and not self.overwrite:
+            raise FileExistsError(f"{target} appeared while writing; not overwriting it")
+        if not exists and self._tmp_path.is_file():
+            # link() never replaces: a file created meanwhile by someone else is kept.
+            try:
+                os.link(self._tmp_path, target)
+            except FileExistsError:
+                raise FileExistsError(
+                    f"{target} appeared while writing; not overwriting it"
+                ) from None
+            except OSError:
+                pass  # no hard links on this file system: fall back to rename below
+            else:
                 return
+        if exists and (target.is_dir() or self._tmp_path.is_dir()) and not target.is_symlink():
+            # A directory cannot be replaced in one rename: move the old output aside first
+            # (it is deleted with the temporary directory).
+            os.rename(target, self._tmp_dir / ".replaced")
         os.replace(self._tmp_path, target)
 
     @abstractmethod
