@@ -48,6 +48,8 @@ class CameraAudit:
                 "error_mean_us": _us(self.replay.error_mean_ns),
                 "error_var_us2": _f(self.replay.error_var_ns2 / 1e6),
                 "error_signed_mean_us": _us(self.replay.error_signed_mean_ns),
+                "settled_error_mean_us": _us(self.replay.settled_error_mean_ns),
+                "settled_error_var_us2": _f(self.replay.settled_error_var_ns2 / 1e6),
             }
         )
         return out

@@ -127,6 +127,107 @@ def audit(
     _run(job)
 
 
+LIDAR_MODELS = ("VLP-16", "VLP-32C", "Pandar40P", "PandarXT32")
+
+
+@app.command()
+def simulate(
+    out: Annotated[
+        Path, typer.Argument(help="Output log (.mcap file, .db3 bag directory or .bag).")
+    ],
+    lidar: Annotated[str, typer.Option(help=f"LiDAR model: {', '.join(LIDAR_MODELS)}.")] = "VLP-16",
+    duration_s: Annotated[float, typer.Option("--duration", help="Seconds of log.")] = 10.0,
+    seed: Annotated[int, typer.Option(help="Random seed (the log is a pure function of it).")] = 0,
+    fmt: Annotated[
+        str | None,
+        typer.Option("--format", help="mcap, mcap-ros1, db3 or bag (default: from OUT)."),
+    ] = None,
+    delay_error_us: Annotated[
+        float, typer.Option(help="Applied delay minus the ideal one, every camera.")
+    ] = 0.0,
+    clock_offset_s: Annotated[float, typer.Option(help="LiDAR clock minus host clock.")] = 0.0,
+    drop_fraction: Annotated[float, typer.Option(help="Fraction of packets dropped.")] = 0.001,
+    controller: Annotated[
+        bool, typer.Option(help="Run the self-adaptive controller live while recording.")
+    ] = False,
+    tunnel: Annotated[
+        bool, typer.Option(help="Drive through a tunnel (exposure 2 -> 12 -> 2 ms).")
+    ] = True,
+    compressed: Annotated[bool, typer.Option(help="CompressedImage instead of Image.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+) -> None:
+    """Write a log with known ground truth (OUT.truth.json) and its rig file (OUT.rig.yaml)."""
+    import yaml
+
+    from syncaudit.analysis.controller import ControllerConfig
+    from syncaudit.errors import ConfigError
+    from syncaudit.simulate.rig_file import rig_from_truth
+    from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+    from syncaudit.writers.atomic import write_text_atomic
+
+    def job() -> None:
+        from pydantic import ValidationError
+
+        if lidar not in LIDAR_MODELS:
+            raise ConfigError(f"--lidar must be one of {', '.join(LIDAR_MODELS)}, got {lidar!r}")
+        try:
+            base = SyncSimConfig()
+            light = (
+                base.light
+                if tunnel
+                else base.light.model_copy(
+                    update={"dark_exposure_us": base.light.bright_exposure_us}
+                )
+            )
+            config = SyncSimConfig(
+                seed=seed,
+                duration_s=duration_s,
+                log_format=fmt or _format_of(out),
+                overwrite=overwrite,
+                lidar_model=lidar,
+                clock_offset_ns=round(clock_offset_s * 1e9),
+                packet_drop_fraction=drop_fraction,
+                light=light,
+                cameras=[
+                    c.model_copy(update={"delay_error_us": delay_error_us}) for c in base.cameras
+                ],
+                image_kind="compressed" if compressed else "raw",
+                controller=ControllerConfig() if controller else None,
+            )
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            raise ConfigError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
+        if out.exists() and not overwrite:
+            raise ConfigError(f"{out} exists (pass --overwrite to replace it)")
+        truth = simulate_sync_log(out, config)
+        rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
+        rig_path = out.with_name(out.name + ".rig.yaml")
+        write_text_atomic(rig_path, yaml.safe_dump(rig, sort_keys=False))
+        lidar_truth = truth["lidar"]
+        out_lines = [
+            f"wrote {out} ({lidar_truth['model']}, {lidar_truth['revolutions']} revolutions, "
+            f"{len(truth['cameras'])} cameras)",
+            f"truth {out.name}.truth.json, rig {rig_path.name}",
+        ]
+        for line in out_lines:
+            out_console_print(line)
+
+    _run(job)
+
+
+def out_console_print(line: str) -> None:
+    """One plain line on stdout."""
+    out.print(line, highlight=False)
+
+
+def _format_of(path: Path) -> str:
+    if path.suffix == ".bag":
+        return "bag"
+    if path.suffix == ".mcap":
+        return "mcap"
+    return "db3"
+
+
 def main() -> None:
     """Console-script entry point."""
     app()

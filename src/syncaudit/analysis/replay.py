@@ -27,6 +27,10 @@ class ReplayResult:
     error_mean_ns: float
     error_var_ns2: float
     error_signed_mean_ns: float
+    settled_error_mean_ns: float
+    """Eq. 5 over the frames after the first adjustment took effect (the corrected state)."""
+    settled_error_var_ns2: float
+    """Eq. 6 over the same frames."""
     errors_ns: NDArray[np.float64]
     """Per paired frame, corrected signed error."""
     delays_ns: NDArray[np.int64]
@@ -73,12 +77,16 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
             )
         )
     abs_err = np.abs(errors)
+    first = controller.adjustments[0].frame_index + 1 if controller.adjustments else 0
+    settled = abs_err[first:]
     return ReplayResult(
         adjustments=len(controller.adjustments),
         final_delay_ns=delay,
         error_mean_ns=error_mean(abs_err),
         error_var_ns2=error_variance(abs_err),
         error_signed_mean_ns=float(errors.mean()) if errors.size else math.nan,
+        settled_error_mean_ns=error_mean(settled),
+        settled_error_var_ns2=error_variance(settled),
         errors_ns=errors,
         delays_ns=delays,
     )

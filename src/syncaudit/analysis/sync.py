@@ -177,16 +177,21 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> pd.DataFrame:
         if trig["trig_exposure_start_ns"].notna().any()
         else "trig_camera_sensor_ns"
     )
-    left = frames.assign(_t=frames["exposure_start_ns"].astype("float64")).sort_values("_t")
+    # Frames without exposure metadata pair by their header stamp instead.
+    when = frames["exposure_start_ns"].fillna(frames["header_stamp_ns"]).astype("float64")
+    left = frames.assign(_t=when, _row=np.arange(len(frames)))
+    timed = left.dropna(subset=["_t"]).sort_values("_t")
     right = trig.assign(_t=trig[key].astype("float64")).dropna(subset=["_t"]).sort_values("_t")
     merged = pd.merge_asof(
-        left,
+        timed,
         right.drop(columns="trig_frame_sequence"),
         on="_t",
         direction="backward",
         tolerance=float(PAIR_TOLERANCE_NS),
     )
-    return merged.drop(columns="_t").sort_index()
+    untimed = left[left["_t"].isna()]
+    merged = pd.concat([merged, untimed], ignore_index=True).sort_values("_row")
+    return merged.drop(columns=["_t", "_row"]).reset_index(drop=True)
 
 
 def _latency(

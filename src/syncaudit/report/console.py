@@ -149,9 +149,10 @@ def render_audit(result: AuditResult, console: Console) -> None:
         if d["corrected"]:
             c = d["corrected"]
             table.add_row(
-                "with self-adaptive correction",
-                f"error mean {_us(c['error_mean_us'])} us, var {_num(c['error_var_us2'], '{:.1f}')} us^2, "
-                f"{c['adjustments']} adjustments, final delay {_us(c['final_delay_us'])} us",
+                "with self-adaptive correction (replayed)",
+                f"{c['adjustments']} adjustments, final delay {_us(c['final_delay_us'])} us; "
+                f"after the first: error mean {_us(c['settled_error_mean_us'])} us, "
+                f"var {_num(c['settled_error_var_us2'], '{:.1f}')} us^2",
             )
         console.print(table)
         for w in cam.sync.warnings:

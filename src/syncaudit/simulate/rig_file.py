@@ -1,0 +1,38 @@
+"""The rig file that goes with a simulated log, derived from its truth."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from syncaudit.rig import Rig
+
+
+def rig_from_truth(truth: dict[str, Any]) -> Rig:
+    """A rig naming the simulated topics and camera azimuths exactly as simulated."""
+    lidar = truth["lidar"]
+    cameras = []
+    for name, cam in truth["cameras"].items():
+        topics = cam["topics"]
+        cameras.append(
+            {
+                "name": name,
+                "image_topic": topics.get("image"),
+                "exposure_topic": topics.get("exposure") or topics.get("meta"),
+                "trigger_topic": topics.get("trigger"),
+                "azimuth_deg": cam["azimuth_deg"] % 360.0,
+                "frame_id": cam.get("frame_id"),
+                "hfov_deg": cam["hfov_deg"],
+                "stamp": cam["stamp_semantics"],
+            }
+        )
+    return Rig.model_validate(
+        {
+            "lidar": {
+                "topic": lidar["topic"],
+                "zero_azimuth_deg": lidar["zero_azimuth_deg"],
+                "azimuth_increases": lidar["azimuth_increases"],
+                "azimuth_of_x_axis_deg": lidar.get("azimuth_of_x_axis_deg"),
+            },
+            "cameras": cameras,
+        }
+    )
