@@ -92,7 +92,7 @@ class AuditResult:
         """JSON form (schemas/audit.schema.json)."""
         from syncaudit.inspect_log import _clean
 
-        return _clean(
+        cleaned: dict[str, Any] = _clean(
             {
                 "schema_version": SCHEMA_VERSION,
                 "path": self.path,
@@ -111,6 +111,7 @@ class AuditResult:
                 "warnings": self.warnings,
             }
         )
+        return cleaned
 
 
 def _row(row: Any) -> dict[str, Any]:

@@ -179,20 +179,23 @@ def simulate(
                     update={"dark_exposure_us": base.light.bright_exposure_us}
                 )
             )
-            config = SyncSimConfig(
-                seed=seed,
-                duration_s=duration_s,
-                log_format=fmt or _format_of(out),
-                overwrite=overwrite,
-                lidar_model=lidar,
-                clock_offset_ns=round(clock_offset_s * 1e9),
-                packet_drop_fraction=drop_fraction,
-                light=light,
-                cameras=[
-                    c.model_copy(update={"delay_error_us": delay_error_us}) for c in base.cameras
-                ],
-                image_kind="compressed" if compressed else "raw",
-                controller=ControllerConfig() if controller else None,
+            config = SyncSimConfig.model_validate(
+                {
+                    "seed": seed,
+                    "duration_s": duration_s,
+                    "log_format": fmt or _format_of(out),
+                    "overwrite": overwrite,
+                    "lidar_model": lidar,
+                    "clock_offset_ns": round(clock_offset_s * 1e9),
+                    "packet_drop_fraction": drop_fraction,
+                    "light": light,
+                    "cameras": [
+                        c.model_copy(update={"delay_error_us": delay_error_us})
+                        for c in base.cameras
+                    ],
+                    "image_kind": "compressed" if compressed else "raw",
+                    "controller": ControllerConfig() if controller else None,
+                }
             )
         except ValidationError as exc:
             first = exc.errors()[0]

@@ -86,7 +86,8 @@ class InfoReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; NaN becomes None."""
-        return _clean(asdict(self))
+        cleaned: dict[str, Any] = _clean(asdict(self))
+        return cleaned
 
 
 def _clean(value: Any) -> Any:

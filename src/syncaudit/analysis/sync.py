@@ -187,7 +187,7 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> pd.DataFrame:
         right.drop(columns="trig_frame_sequence"),
         on="_t",
         direction="backward",
-        tolerance=float(PAIR_TOLERANCE_NS),
+        tolerance=PAIR_TOLERANCE_NS,
     )
     untimed = left[left["_t"].isna()]
     merged = pd.concat([merged, untimed], ignore_index=True).sort_values("_row")
@@ -213,9 +213,13 @@ def _latency(
 
 
 def _col(df: pd.DataFrame, name: str) -> NDArray[np.float64]:
+    """A column as float64 with NaN for missing values (all NaN where the column is absent)."""
     if name not in df:
-        return np.full(len(df), np.nan)
-    return df[name].astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
+        return np.full(len(df), np.nan, dtype=np.float64)
+    values: NDArray[np.float64] = np.asarray(
+        df[name].astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan), dtype=np.float64
+    )
+    return values
 
 
 def analyze_camera(

@@ -75,5 +75,5 @@ def detect_cameras(topics: dict[str, TopicInfo]) -> list[CameraConfig]:
             exposure_type = topics[slots["exposure_topic"]].msgtype
             if exposure_type == "wfov_camera_msgs/msg/WFOVImage":
                 slots["image_topic"] = slots["exposure_topic"]
-        cameras.append(CameraConfig(name=name, **slots))
+        cameras.append(CameraConfig.model_validate({"name": name, **slots}))
     return cameras

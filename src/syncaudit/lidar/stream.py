@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any, Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,7 +58,8 @@ def find_ouster_metadata_topic(log: LogReader, packet_topic: str) -> str | None:
         if t.msgtype == "std_msgs/msg/String" and "metadata" in t.name.rsplit("/", 1)[-1]
     ]
     same_ns = [c for c in candidates if c.rsplit("/", 1)[0] == namespace]
-    return (same_ns or candidates or [None])[0]
+    preferred = same_ns or candidates
+    return preferred[0] if preferred else None
 
 
 def read_ouster_metadata(log: LogReader, topic: str) -> ouster.OusterMetadata:
@@ -118,7 +120,7 @@ def _scan_chunk(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
     return PacketChunk(index, log_time, stamps.astype(np.int64), timing)
 
 
-def _looks_velodyne(data: NDArray[np.uint8], sizes: NDArray[np.int64]) -> bool:
+def _looks_velodyne(data: NDArray[np.uint8], sizes: NDArray[np.integer[Any]]) -> bool:
     """Nebula packets can be Velodyne: 1206 bytes starting with the 0xFFEE block flag."""
     return bool(
         np.all(sizes == VELODYNE_PACKET_BYTES) and data[0, 0] == 0xFF and data[0, 1] == 0xEE
@@ -134,7 +136,7 @@ def _ouster_chunks(
     times: list[int] = []
     index = 0
     for msg in messages:
-        buf = ouster.ouster_packet_bytes(msg.data, msg.encoding)
+        buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
         if buf.size != size:
             continue
         buffers.append(buf)

@@ -24,4 +24,8 @@ def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
 
 def write_text_atomic(path: Path, text: str) -> None:
     """Atomically write a text file."""
-    write_atomic(path, lambda handle: handle.write(text))
+
+    def fill(handle: IO[str]) -> None:
+        handle.write(text)
+
+    write_atomic(path, fill)
