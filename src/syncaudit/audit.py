@@ -13,16 +13,25 @@ from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.analysis.replay import ReplayResult, replay_controller
 from syncaudit.analysis.sync import CameraSync, analyze_camera
 from syncaudit.camera.azimuth import camera_azimuth, tf_static_yaws
-from syncaudit.camera.extract import read_camera
+from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.topics import detect_cameras
+from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
-from syncaudit.lidar.scan import scan_lidar
-from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.lidar.scan import LidarScanner
+from syncaudit.lidar.stream import (
+    PacketChunk,
+    concat_chunks,
+    find_ouster_metadata_topic,
+    is_packet_topic,
+    read_ouster_metadata,
+)
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
 
 SCHEMA_VERSION = 1
+LIDAR_BATCH = 256
+"""Single-packet messages (Ouster) are fed to the tracker this many at a time."""
 
 
 @dataclass(slots=True)
@@ -134,8 +143,12 @@ def _default_rig(log: LogReader) -> tuple[Rig, list[str]]:
     return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
 
 
-def audit_log(path: str | Path, rig: Rig | None = None) -> AuditResult:
-    """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics."""
+def audit_log(path: str | Path, rig: Rig | None = None, jobs: int | None = None) -> AuditResult:
+    """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics.
+
+    `jobs` worker processes extract an indexed MCAP's chunks in parallel (default: one
+    per core); other containers, and `jobs=1`, read serially. The result is the same.
+    """
     with open_log(path) as log:
         if not log.summary.message_count:
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
@@ -144,10 +157,45 @@ def audit_log(path: str | Path, rig: Rig | None = None) -> AuditResult:
             rig, guessed = _default_rig(log)
         elif rig.lidar.topic not in log.topics:
             raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
-        return _audit(log, rig, guessed)
+        return _audit(log, rig, guessed, default_jobs() if jobs is None else max(1, jobs))
 
 
-def _audit(log: LogReader, rig: Rig, guessed: list[str]) -> AuditResult:
+def _plan(
+    log: LogReader, rig: Rig, cameras: list[CameraConfig]
+) -> tuple[ExtractPlan, dict[str, CameraTableBuilder]]:
+    """What to read, and a table builder per camera topic."""
+    lidar = rig.lidar
+    family = lidar_family(log.topics[lidar.topic].msgtype)
+    if family is None:
+        raise NoDataError(
+            f"{lidar.topic}: {log.topics[lidar.topic].msgtype} is not a LiDAR packet type"
+        )
+    meta = None
+    if family == "ouster":
+        meta_topic = lidar.metadata_topic or find_ouster_metadata_topic(log, lidar.topic)
+        if meta_topic is None:
+            raise NoDataError(f"{lidar.topic}: Ouster packets need the sensor metadata topic")
+        meta = read_ouster_metadata(log, meta_topic)
+    builders: dict[str, CameraTableBuilder] = {}
+    images: dict[str, str] = {}
+    exposures: dict[str, tuple[str, str]] = {}
+    triggers: dict[str, str] = {}
+    for cam in cameras:
+        builder = CameraTableBuilder(cam)
+        if cam.image_topic in log.topics:
+            images[cam.image_topic] = cam.name
+            builders[cam.image_topic] = builder
+        if cam.exposure_topic in log.topics:
+            exposures[cam.exposure_topic] = (cam.name, cam.stamp)
+            builders[cam.exposure_topic] = builder
+        if cam.trigger_topic in log.topics:
+            triggers[cam.trigger_topic] = cam.name
+            builders[cam.trigger_topic] = builder
+    plan = ExtractPlan(lidar.topic, family, meta, images, exposures, triggers)
+    return plan, builders
+
+
+def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int) -> AuditResult:
     warnings: list[str] = []
     missing: list[str] = []
     tf_yaws = tf_static_yaws(log) if any(c.frame_id for c in rig.cameras) else {}
@@ -159,15 +207,30 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str]) -> AuditResult:
             continue
         located.append((cam, azimuth, source))
     lidar_cfg = rig.lidar
-    scan = scan_lidar(
-        log,
+    scanner = LidarScanner.create(
         lidar_cfg.topic,
         zero_azimuth_deg=lidar_cfg.zero_azimuth_deg,
         azimuth_increases=lidar_cfg.azimuth_increases,
         target_azimuth_deg=tuple(a for _, a, _ in located),
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
-        ouster_metadata_topic=lidar_cfg.metadata_topic,
     )
+    plan, builders = _plan(log, rig, [c for c, _, _ in located])
+    batch: list[PacketChunk] = []
+    for kind, topic, payload in iter_items(log, plan, jobs):
+        if kind == "lidar":
+            batch.append(payload)
+            if len(batch) >= LIDAR_BATCH or plan.lidar_family != "ouster":
+                scanner.feed(concat_chunks(batch))
+                batch = []
+        elif kind == "image":
+            builders[topic].images.append(payload)
+        elif kind == "exposure":
+            builders[topic].exposures.append(payload)
+        else:
+            builders[topic].triggers.append(payload)
+    if batch:
+        scanner.feed(concat_chunks(batch))
+    scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
     if scan.clock is not None and not scan.clock.synchronised:
@@ -186,8 +249,10 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str]) -> AuditResult:
     )
     offset = 0 if scan.clock is None or scan.clock.synchronised else scan.clock.offset_ns
     result_cams: list[CameraAudit] = []
+    empty = {c.name: CameraTableBuilder(c) for c, _, _ in located}
+    by_camera = {b.camera.name: b for b in builders.values()}
     for index, (cam, azimuth, source) in enumerate(located):
-        tables = read_camera(log, cam)
+        tables = by_camera.get(cam.name, empty[cam.name]).build()
         for what, present in (
             ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
             ("exposure metadata", tables.exposure_source is not None),

@@ -101,6 +101,10 @@ def audit(
     gate: Annotated[
         bool, typer.Option("--gate", help="Exit 10 when a camera crosses a threshold (CI gate).")
     ] = False,
+    jobs: Annotated[
+        int | None,
+        typer.Option("--jobs", "-j", help="Worker processes for MCAP chunks (default: cores)."),
+    ] = None,
 ) -> None:
     """Audit LiDAR-camera sync: Eq. 1-6 per camera, recommended delay, threshold verdict."""
     from syncaudit.audit import audit_log
@@ -110,7 +114,7 @@ def audit(
     from syncaudit.writers.atomic import write_atomic, write_text_atomic
 
     def job() -> None:
-        result = audit_log(log, load_rig(rig) if rig else None)
+        result = audit_log(log, load_rig(rig) if rig else None, jobs=jobs)
         data = result.to_dict()
         if json_out:
             write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.clock import ClockEstimator, ClockReport
 from syncaudit.lidar.revolutions import RevolutionTracker
-from syncaudit.lidar.stream import iter_packet_chunks
+from syncaudit.lidar.stream import PacketChunk, iter_packet_chunks
 from syncaudit.logs import LogReader
 
 
@@ -51,6 +51,67 @@ class LidarScan:
         return int(self.revolutions.dropped_packets.sum())
 
 
+@dataclass(slots=True)
+class LidarScanner:
+    """Reduces decoded packet chunks, fed in log order, to a LidarScan."""
+
+    topic: str
+    tracker: RevolutionTracker
+    clock: ClockEstimator
+    vendor: str = ""
+    model: str = ""
+    scans: int = 0
+    packets: int = 0
+    modes: set[int] = field(default_factory=set)
+    dual: bool = False
+
+    @classmethod
+    def create(
+        cls,
+        topic: str,
+        *,
+        zero_azimuth_deg: float = 0.0,
+        azimuth_increases: bool = True,
+        target_azimuth_deg: tuple[float, ...] = (),
+        clock_tolerance_ns: int = 50_000_000,
+    ) -> LidarScanner:
+        """A scanner for one topic with the rig's zero crossing and target azimuths."""
+        tracker = RevolutionTracker(
+            zero_azimuth_deg=zero_azimuth_deg,
+            direction=1 if azimuth_increases else -1,
+            target_azimuth_deg=target_azimuth_deg,
+        )
+        return cls(topic, tracker, ClockEstimator(tolerance_ns=clock_tolerance_ns))
+
+    def feed(self, chunk: PacketChunk) -> None:
+        """Add one scan message (or batch) of decoded packets."""
+        timing = chunk.timing
+        self.vendor, self.model = timing.vendor, timing.model
+        self.scans += 1
+        self.packets += timing.n_packets
+        self.modes.update(np.unique(timing.return_mode).tolist())
+        self.dual = self.dual or bool(timing.dual_return.any())
+        self.tracker.feed(timing, chunk.driver_stamp_ns)
+        self.clock.feed(chunk.driver_stamp_ns, timing.sensor_time_ns)
+
+    def finish(self) -> LidarScan:
+        """The reduced timing of everything fed."""
+        return LidarScan(
+            topic=self.topic,
+            vendor=self.vendor,
+            model=self.model,
+            scans=self.scans,
+            packets=self.packets,
+            return_modes=tuple(sorted(self.modes)),
+            dual_return=self.dual,
+            revolutions=self.tracker.finish(),
+            clock=self.clock.finish(),
+            omega_blocks_deg_s=self.tracker.omega_blocks_deg_s,
+            cropped_sector=self.tracker.cropped_sector(),
+            outlier_blocks=self.tracker.outlier_blocks,
+        )
+
+
 def scan_lidar(
     log: LogReader,
     topic: str,
@@ -64,36 +125,13 @@ def scan_lidar(
     stop_ns: int | None = None,
 ) -> LidarScan:
     """Stream the topic once and reduce it to revolutions and clock statistics."""
-    tracker = RevolutionTracker(
+    scanner = LidarScanner.create(
+        topic,
         zero_azimuth_deg=zero_azimuth_deg,
-        direction=1 if azimuth_increases else -1,
+        azimuth_increases=azimuth_increases,
         target_azimuth_deg=target_azimuth_deg,
+        clock_tolerance_ns=clock_tolerance_ns,
     )
-    clock = ClockEstimator(tolerance_ns=clock_tolerance_ns)
-    vendor = model = ""
-    scans = packets = 0
-    modes: set[int] = set()
-    dual = False
     for chunk in iter_packet_chunks(log, topic, start_ns, stop_ns, ouster_metadata_topic):
-        timing = chunk.timing
-        vendor, model = timing.vendor, timing.model
-        scans += 1
-        packets += timing.n_packets
-        modes.update(np.unique(timing.return_mode).tolist())
-        dual = dual or bool(timing.dual_return.any())
-        tracker.feed(timing, chunk.driver_stamp_ns)
-        clock.feed(chunk.driver_stamp_ns, timing.sensor_time_ns)
-    return LidarScan(
-        topic=topic,
-        vendor=vendor,
-        model=model,
-        scans=scans,
-        packets=packets,
-        return_modes=tuple(sorted(modes)),
-        dual_return=dual,
-        revolutions=tracker.finish(),
-        clock=clock.finish(),
-        omega_blocks_deg_s=tracker.omega_blocks_deg_s,
-        cropped_sector=tracker.cropped_sector(),
-        outlier_blocks=tracker.outlier_blocks,
-    )
+        scanner.feed(chunk)
+    return scanner.finish()

@@ -92,13 +92,13 @@ def iter_packet_chunks(
         yield from _ouster_chunks(messages, read_ouster_metadata(log, meta_topic))
         return
     for index, msg in enumerate(messages):
-        chunk = _scan_chunk(family, msg, index)
+        chunk = decode_scan(family, msg, index)
         if chunk is not None:
             yield chunk
 
 
-def _scan_chunk(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
-    """Decode one multi-packet scan message."""
+def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
+    """Decode one multi-packet scan message (None when it holds no packet)."""
     if family == "velodyne":
         stamps, data = velodyne.velodyne_scan_packets(msg.data, msg.encoding)
         if stamps.size == 0:
@@ -146,6 +146,37 @@ def _ouster_chunks(
             buffers, times, index = [], [], index + 1
     if buffers:
         yield _ouster_batch(buffers, times, meta, index)
+
+
+def decode_ouster_message(msg: RawMessage, meta: ouster.OusterMetadata) -> PacketChunk | None:
+    """Decode one single-packet Ouster message (None for other packet sizes, e.g. IMU)."""
+    buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
+    if buf.size != meta.packet_bytes:
+        return None
+    return _ouster_batch([buf], [msg.log_time_ns], meta, 0)
+
+
+def concat_chunks(chunks: list[PacketChunk]) -> PacketChunk:
+    """One chunk from consecutive ones (to feed single-packet topics in batches)."""
+    if len(chunks) == 1:
+        return chunks[0]
+    timings = [c.timing for c in chunks]
+    first = timings[0]
+    timing = PacketTiming(
+        vendor=first.vendor,
+        model=first.model,
+        sensor_time_ns=np.concatenate([t.sensor_time_ns for t in timings]),
+        block_azimuth_deg=np.concatenate([t.block_azimuth_deg for t in timings]),
+        block_time_ns=np.concatenate([t.block_time_ns for t in timings]),
+        return_mode=np.concatenate([t.return_mode for t in timings]),
+        dual_return=np.concatenate([t.dual_return for t in timings]),
+    )
+    return PacketChunk(
+        chunks[0].scan_index,
+        np.concatenate([c.log_time_ns for c in chunks]),
+        np.concatenate([c.driver_stamp_ns for c in chunks]),
+        timing,
+    )
 
 
 def _ouster_batch(

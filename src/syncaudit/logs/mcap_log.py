@@ -413,6 +413,20 @@ class McapLog(LogReader):
             self._registries[encoding] = TypeRegistry(ros1=encoding == "ros1", log_types=log_types)
         return self._registries[encoding]
 
+    def indexed_summary(self) -> Summary | None:
+        """The MCAP summary where the file has chunk indexes (for chunk-parallel reading)."""
+        if not self._indexed:
+            return None
+        summary = self._reader.get_summary()
+        return summary if summary is not None and summary.chunk_indexes else None
+
+    def raw_message(
+        self, channel: Channel, log_time_ns: int, data: bytes | memoryview
+    ) -> RawMessage:
+        """A RawMessage for a payload read straight from a chunk."""
+        info = self.summary.topics[channel.topic]
+        return RawMessage(channel.topic, info.msgtype, log_time_ns, data, info.encoding)
+
     def _close(self) -> None:
         self._file.close()
 

@@ -1,0 +1,188 @@
+"""One pass over a log for the audit: each message becomes a small item, in log order.
+
+The extraction of a message (decoding LiDAR packets, reading an image header,
+deserialising an exposure or trigger) is pure, so for an indexed MCAP it runs in
+worker processes, one group of chunks each, on all cores; the parent merges the
+groups back into log-time order (ties broken by chunk and record, as the mcap reader
+does), so the serial and parallel paths yield the same items in the same order.
+"""
+
+from __future__ import annotations
+
+import heapq
+import multiprocessing
+import os
+from collections.abc import Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from syncaudit.camera.extract import exposure_row, image_row, trigger_row
+from syncaudit.lidar import ouster
+from syncaudit.lidar.stream import SCAN_TYPES, PacketChunk, decode_ouster_message, decode_scan
+from syncaudit.logs import LogReader, RawMessage
+from syncaudit.logs.mcap_chunks import ChunkRef, group_chunks, iter_chunk_messages, read_chunk
+from syncaudit.logs.mcap_log import McapLog
+
+GROUP_BYTES = 24 * 1024 * 1024
+"""Compressed bytes of log per worker task: large enough to amortise, small for memory."""
+
+Item = tuple[str, str, Any]
+"""(kind, topic, payload): kind is 'lidar', 'image', 'exposure', 'trigger'."""
+
+
+@dataclass(frozen=True, slots=True)
+class ExtractPlan:
+    """Which topics the audit reads and what to make of each; picklable for workers."""
+
+    lidar_topic: str
+    lidar_family: str
+    ouster_meta: ouster.OusterMetadata | None = None
+    images: dict[str, str] = field(default_factory=dict)
+    """image topic -> camera."""
+    exposures: dict[str, tuple[str, str]] = field(default_factory=dict)
+    """exposure topic -> (camera, stamp semantics)."""
+    triggers: dict[str, str] = field(default_factory=dict)
+    """trigger topic -> camera."""
+
+    @property
+    def topics(self) -> list[str]:
+        """Every topic the plan reads."""
+        return sorted({self.lidar_topic, *self.images, *self.exposures, *self.triggers})
+
+
+def extract(plan: ExtractPlan, msg: RawMessage, log: LogReader) -> Item | None:
+    """The item one message contributes (None for nothing, e.g. an IMU-sized packet)."""
+    topic = msg.topic
+    if topic == plan.lidar_topic:
+        if plan.lidar_family == "ouster":
+            assert plan.ouster_meta is not None
+            chunk = decode_ouster_message(msg, plan.ouster_meta)
+        else:
+            chunk = decode_scan(plan.lidar_family, msg, 0)
+        return None if chunk is None else ("lidar", topic, chunk)
+    if topic in plan.images:
+        return ("image", topic, image_row(msg))
+    if topic in plan.exposures:
+        camera, semantics = plan.exposures[topic]
+        return ("exposure", topic, exposure_row(msg, log.deserialize(msg), camera, semantics))
+    if topic in plan.triggers:
+        return ("trigger", topic, trigger_row(msg, log.deserialize(msg), plan.triggers[topic]))
+    return None
+
+
+def default_jobs() -> int:
+    """Worker processes to use: the cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Item]:
+    """Every item of the plan's topics, in log-time order; parallel where the log allows."""
+    if jobs > 1 and isinstance(log, McapLog):
+        refs = _chunk_refs(log, plan)
+        if refs is not None and len(refs) > 1:
+            yield from _parallel_items(log, refs, plan, jobs)
+            return
+    for msg in log.messages(plan.topics):
+        item = extract(plan, msg, log)
+        if item is not None:
+            yield item
+
+
+def _chunk_refs(log: McapLog, plan: ExtractPlan) -> list[ChunkRef] | None:
+    """Chunks holding any of the plan's topics, or None where the MCAP has no index."""
+    summary = log.indexed_summary()
+    if summary is None:
+        return None
+    wanted = {cid for cid, ch in summary.channels.items() if ch.topic in plan.topics}
+    return [
+        ChunkRef(
+            ci.chunk_start_offset,
+            ci.chunk_length,
+            ci.message_start_time,
+            ci.message_end_time,
+            ci.compressed_size,
+        )
+        for ci in summary.chunk_indexes
+        if wanted & set(ci.message_index_offsets)
+    ]
+
+
+# ---- worker side -------------------------------------------------------------------------
+
+_WORKER_LOGS: dict[str, McapLog] = {}
+
+Keyed = tuple[int, int, int, Item]
+"""(log time, chunk offset, record index, item): the merge order."""
+
+
+def _worker_log(path: str) -> McapLog:
+    if path not in _WORKER_LOGS:
+        _WORKER_LOGS[path] = McapLog(Path(path))
+    return _WORKER_LOGS[path]
+
+
+def _extract_group(path: str, refs: list[ChunkRef], plan: ExtractPlan) -> list[Keyed]:
+    """Read, decompress and extract one group of chunks (runs in a worker)."""
+    log = _worker_log(path)
+    summary = log.indexed_summary()
+    assert summary is not None
+    channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in set(plan.topics)}
+    wanted = frozenset(channels)
+    out: list[Keyed] = []
+    with Path(path).open("rb") as handle:
+        for ref in refs:
+            records = read_chunk(handle, ref)
+            for index, cid, log_time, data in iter_chunk_messages(records, wanted):
+                msg = log.raw_message(channels[cid], log_time, data)
+                item = extract(plan, msg, log)
+                if item is not None:
+                    out.append((log_time, ref.offset, index, item))
+    out.sort(key=lambda k: (k[0], k[1], k[2]))
+    return out
+
+
+def _parallel_items(
+    log: McapLog, refs: list[ChunkRef], plan: ExtractPlan, jobs: int
+) -> Iterator[Item]:
+    """Groups of chunks extracted by `jobs` workers, merged back into log-time order."""
+    path = log.path
+    groups = group_chunks(refs, GROUP_BYTES)
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+    if context.get_start_method() == "fork":
+        # Forked workers inherit the open log with its type registries already built.
+        for encoding in {log.topics[t].encoding for t in plan.topics if t in log.topics}:
+            log.type_registry(encoding)
+        _WORKER_LOGS[str(path)] = log
+    pending: list[Keyed] = []
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        window: list[Future[list[Keyed]]] = []
+        submitted = 0
+        for done in range(len(groups)):
+            while submitted < len(groups) and len(window) < 2 * jobs:
+                window.append(pool.submit(_extract_group, str(path), groups[submitted], plan))
+                submitted += 1
+            result = window.pop(0).result()
+            # Everything before the next group's first message can no longer be overtaken.
+            horizon = min(c.start_ns for c in groups[done + 1]) if done + 1 < len(groups) else None
+            merged = list(heapq.merge(pending, result, key=lambda k: (k[0], k[1], k[2])))
+            if horizon is None:
+                ready, pending = merged, []
+            else:
+                cut = next((i for i, k in enumerate(merged) if k[0] >= horizon), len(merged))
+                ready, pending = merged[:cut], merged[cut:]
+            for keyed in ready:
+                yield keyed[3]
+
+
+def lidar_family(msgtype: str) -> str | None:
+    """The vendor family of a LiDAR packet message type."""
+    return SCAN_TYPES.get(msgtype)
+
+
+__all__ = ["ExtractPlan", "Item", "PacketChunk", "default_jobs", "extract", "iter_items"]

@@ -1,0 +1,102 @@
+"""Read an indexed MCAP chunk by chunk: the unit worker processes split a log by.
+
+A chunk is read with one seek and one read, decompressed (zstd, lz4 or none) and walked
+record by record with `struct`, yielding message payloads as memoryviews without
+copying; records of unwanted channels are skipped unread.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import BinaryIO
+
+import lz4.frame
+import zstandard
+
+from syncaudit.errors import LogReadError
+
+OP_CHUNK = 0x06
+OP_MESSAGE = 0x05
+_RECORD_HEAD = struct.Struct("<BQ")
+_CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkRef:
+    """Where a chunk sits in the file, as the summary's chunk index says."""
+
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+    compressed_size: int
+
+
+def group_chunks(chunks: list[ChunkRef], target_bytes: int) -> list[list[ChunkRef]]:
+    """Consecutive chunks (in time order) grouped to about `target_bytes` compressed each."""
+    groups: list[list[ChunkRef]] = []
+    current: list[ChunkRef] = []
+    size = 0
+    for chunk in sorted(chunks, key=lambda c: (c.start_ns, c.offset)):
+        current.append(chunk)
+        size += chunk.compressed_size
+        if size >= target_bytes:
+            groups.append(current)
+            current, size = [], 0
+    if current:
+        groups.append(current)
+    return groups
+
+
+def _decompress(compression: str, data: bytes, size: int) -> bytes:
+    if compression == "zstd":
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+    if compression == "lz4":
+        return bytes(lz4.frame.decompress(data))
+    if compression == "":
+        return data
+    raise LogReadError(f"unsupported MCAP chunk compression {compression!r}")
+
+
+def read_chunk(handle: BinaryIO, ref: ChunkRef) -> bytes:
+    """The decompressed records of one chunk."""
+    handle.seek(ref.offset)
+    raw = handle.read(ref.length)
+    try:
+        opcode, _length = _RECORD_HEAD.unpack_from(raw, 0)
+        if opcode != OP_CHUNK:
+            raise LogReadError(f"no chunk record at offset {ref.offset}")
+        pos = 9
+        _start, _end, size, _crc = _CHUNK_HEAD.unpack_from(raw, pos)
+        pos += _CHUNK_HEAD.size
+        (name_len,) = struct.unpack_from("<I", raw, pos)
+        compression = raw[pos + 4 : pos + 4 + name_len].decode()
+        pos += 4 + name_len
+        (data_len,) = struct.unpack_from("<Q", raw, pos)
+        pos += 8
+        return _decompress(compression, raw[pos : pos + data_len], size)
+    except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
+        raise LogReadError(f"corrupt MCAP chunk at offset {ref.offset}: {exc}") from exc
+
+
+def iter_chunk_messages(
+    records: bytes, channels: frozenset[int]
+) -> Iterator[tuple[int, int, int, memoryview]]:
+    """(record index, channel id, log time, payload) of each wanted message in a chunk."""
+    view = memoryview(records)
+    pos, index, end = 0, 0, len(records)
+    head = _RECORD_HEAD.size
+    while pos + head <= end:
+        opcode, length = _RECORD_HEAD.unpack_from(records, pos)
+        body = pos + head
+        if opcode == OP_MESSAGE:
+            channel, _seq, log_time, _pub = _MESSAGE_HEAD.unpack_from(records, body)
+            if channel in channels:
+                yield index, channel, log_time, view[body + _MESSAGE_HEAD.size : body + length]
+        pos = body + length
+        index += 1
+    if pos != end:
+        raise LogReadError("MCAP chunk records overrun the chunk (corrupt chunk)")
