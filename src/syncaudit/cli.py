@@ -95,6 +95,9 @@ def audit(
     json_out: Annotated[
         Path | None, typer.Option("--json-out", help="Also write the full JSON result here.")
     ] = None,
+    html_out: Annotated[
+        Path | None, typer.Option("--html", help="Write a self-contained HTML report here.")
+    ] = None,
     csv_out: Annotated[
         Path | None, typer.Option("--csv", help="Write the per-frame table as CSV here.")
     ] = None,
@@ -118,6 +121,10 @@ def audit(
         data = result.to_dict()
         if json_out:
             write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")
+        if html_out:
+            from syncaudit.report.html import render_audit_html
+
+            write_text_atomic(html_out, render_audit_html(result))
         if csv_out:
             frames = result.frames()
             write_atomic(csv_out, lambda handle: frames.to_csv(handle, index=False))
