@@ -95,6 +95,13 @@ def audit(
     json_out: Annotated[
         Path | None, typer.Option("--json-out", help="Also write the full JSON result here.")
     ] = None,
+    pairings_out: Annotated[
+        Path | None,
+        typer.Option(
+            "--pairings",
+            help="Write each frame's corrected timing (FramePairing) to a log: .mcap, .bag or a .db3 bag dir.",
+        ),
+    ] = None,
     html_out: Annotated[
         Path | None, typer.Option("--html", help="Write a self-contained HTML report here.")
     ] = None,
@@ -121,6 +128,10 @@ def audit(
         data = result.to_dict()
         if json_out:
             write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")
+        if pairings_out:
+            from syncaudit.writers.pairings import write_pairings
+
+            write_pairings(result, pairings_out)
         if html_out:
             from syncaudit.report.html import render_audit_html
 

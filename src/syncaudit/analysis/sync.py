@@ -274,6 +274,9 @@ def analyze_camera(
     has_rev = rev_idx >= 0
     t_est[has_rev] = crossing_host[rev_idx[has_rev]]
     t_est[t_est < 0] = np.nan
+    revolution_start = np.full(n, np.nan)
+    if revs.count:
+        revolution_start[has_rev] = revs.zero_crossing_sensor_ns[rev_idx[has_rev]] + offset
     packet_phase = np.full(n, np.nan)
     if revs.count:
         zc = (revs.zero_crossing_sensor_ns - revs.zero_packet_sensor_ns).astype(np.float64)
@@ -346,6 +349,8 @@ def analyze_camera(
             "t_error_ns": t_error,
             "paired": paired,
             "revolution": rev_idx,
+            "revolution_start_ns": revolution_start,
+            "header_stamp_ns": frames["header_stamp_ns"].to_numpy(),
             "t1_ns": lat["t1"],
             "t2_ns": lat["t2"],
             "t3_ns": lat["t3"],
