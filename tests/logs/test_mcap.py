@@ -455,3 +455,29 @@ def test_mcap_magic_with_garbage_is_an_open_error(tmp_path: Path) -> None:
     with pytest.raises(LogOpenError, match="not a valid MCAP file") as info:
         open_log(path)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+IDL_TEXT = """module idl_probe_msgs {
+  module msg {
+    struct Reading {
+      uint32 seq;
+      string label;
+    };
+  };
+};
+"""
+
+
+@pytest.mark.parametrize("sectioned", [True, False], ids=["rosbag2-sections", "plain"])
+def test_ros2idl_schema(tmp_path: Path, sectioned: bool) -> None:
+    """IDL definitions, as rosbag2 stores them ('====...\\nIDL: name\\n' per type) or bare."""
+    name = "idl_probe_msgs/msg/Reading"
+    text = f"{'=' * 80}\nIDL: {name}\n{IDL_TEXT}" if sectioned else IDL_TEXT
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg("uint32 seq\nstring label\n", name))
+    data = bytes(store.serialize_cdr(store.types[name](seq=5, label="idl"), name))
+    path = tmp_path / "idl.mcap"
+    write_mcap(path, [Channel("/idl", name, "ros2idl", text)], [Written("/idl", 1, data)])
+    with open_log(path) as log:
+        got: Any = log.deserialize(next(log.messages()))
+        assert (got.seq, got.label) == (5, "idl") and log.warnings == []

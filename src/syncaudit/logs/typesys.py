@@ -20,6 +20,8 @@ if TYPE_CHECKING:
 MSG_SCHEMA_ENCODINGS = frozenset({"ros1msg", "ros2msg", "msg"})
 IDL_SCHEMA_ENCODINGS = frozenset({"ros2idl", "idl"})
 MESSAGE_ENCODINGS = frozenset({"cdr", "ros1"})
+_SECTION = "=" * 80 + "\n"
+"""Separator between the per-type sections of a concatenated definition."""
 
 
 def schemas_dir() -> Path:
@@ -62,7 +64,14 @@ def parse_definition(encoding: str, text: str, name: str) -> Typesdict:
     other encodings hold no ROS definitions and give an empty dict.
     """
     if encoding in IDL_SCHEMA_ENCODINGS:
-        return dict(get_types_from_idl(text))
+        if not text.startswith(f"{_SECTION}IDL: "):
+            return dict(get_types_from_idl(text))
+        # rosbag2 concatenates one section per type: '====...\nIDL: pkg/msg/Name\n<idl>'
+        types: Typesdict = {}
+        for section in text.split(_SECTION)[1:]:
+            _header, _, idl = section.partition("\n")
+            types.update(get_types_from_idl(idl))
+        return types
     if encoding in MSG_SCHEMA_ENCODINGS:
         return dict(get_types_from_msg(text, normalise_type_name(name)))
     return {}
