@@ -12,7 +12,7 @@ from typing import Annotated, Any, TypeVar
 import typer
 from rich.console import Console
 
-from syncaudit.errors import SyncauditError
+from syncaudit.errors import OutputError, SyncauditError
 
 app = typer.Typer(
     name="syncaudit",
@@ -47,6 +47,11 @@ def _run(job: Callable[[], T]) -> T:
         raise typer.Exit(exc.exit_code) from None
     except KeyboardInterrupt:
         raise typer.Exit(130) from None
+    except OSError as exc:  # outputs: exists, no permission, disk full
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        reason = exc.strerror or str(exc)
+        err.print(f"[red]error:[/] {where}{reason}", highlight=False)
+        raise typer.Exit(OutputError.exit_code) from None
     except Exception as exc:
         if os.environ.get("SYNCAUDIT_DEBUG"):
             raise
@@ -115,6 +120,7 @@ def audit(
         int | None,
         typer.Option("--jobs", "-j", help="Worker processes for MCAP chunks (default: cores)."),
     ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing --pairings log.")] = False,
 ) -> None:
     """Audit LiDAR-camera sync: Eq. 1-6 per camera, recommended delay, threshold verdict."""
     from syncaudit.audit import audit_log
@@ -131,7 +137,9 @@ def audit(
         if pairings_out:
             from syncaudit.writers.pairings import write_pairings
 
-            write_pairings(result, pairings_out)
+            if pairings_out.exists() and not overwrite:
+                raise OutputError(f"{pairings_out} exists (pass --overwrite to replace it)")
+            write_pairings(result, pairings_out, overwrite=overwrite)
         if html_out:
             from syncaudit.report.html import render_audit_html
 

@@ -45,6 +45,12 @@ class NoDataError(SyncauditError):
     exit_code = 7
 
 
+class OutputError(SyncauditError):
+    """An output cannot be written: it exists (without --overwrite) or the folder is not writable."""
+
+    exit_code = 8
+
+
 class GateFailedError(SyncauditError):
     """An audit ran and its result crosses a configured threshold (CI gate)."""
 

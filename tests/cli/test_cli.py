@@ -106,3 +106,20 @@ def test_help_lists_the_verbs() -> None:
     assert result.exit_code == 0
     for verb in ("info", "audit"):
         assert verb in result.stdout
+
+
+def test_outputs_never_clobbered_and_unwritable_paths(lidar_data: Path, tmp_path: Path) -> None:
+    sample = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_short.bag"
+    args = ["audit", str(sample), "--rig", f"{sample}.rig.yaml"]
+    pairings = tmp_path / "pairs.mcap"
+    assert runner.invoke(app, [*args, "--pairings", str(pairings)]).exit_code == 0
+    before = pairings.read_bytes()
+    assert "exists" in _one_line_error(runner.invoke(app, [*args, "--pairings", str(pairings)]), 8)
+    assert pairings.read_bytes() == before
+    ok = runner.invoke(app, [*args, "--pairings", str(pairings), "--overwrite"])
+    assert ok.exit_code == 0
+    missing_dir = tmp_path / "nope" / "r.html"
+    assert "cannot write" in _one_line_error(
+        runner.invoke(app, [*args, "--html", str(missing_dir)]), 8
+    )
+    assert not list(tmp_path.glob(".*tmp"))

@@ -8,11 +8,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
+from syncaudit.errors import OutputError
+
 
 def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
     """Create `path` with what `fill` writes, never leaving a partial file behind."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write ({exc.strerror or exc})") from exc
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
             fill(handle)
