@@ -2,12 +2,14 @@
 
 A chunk is read with one seek and one read, decompressed (zstd, lz4 or none) and walked
 record by record with `struct`, yielding message payloads as memoryviews without
-copying; records of unwanted channels are skipped unread.
+copying; records of unwanted channels are skipped unread. Damage (short read, bad
+compression, CRC mismatch, records that do not tile the chunk) is a LogReadError.
 """
 
 from __future__ import annotations
 
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import BinaryIO
@@ -62,24 +64,30 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
 
 
 def read_chunk(handle: BinaryIO, ref: ChunkRef) -> bytes:
-    """The decompressed records of one chunk."""
+    """The decompressed records of one chunk, checked against the chunk's CRC."""
+    where = f"{getattr(handle, 'name', 'MCAP')}: MCAP chunk at offset {ref.offset}"
     handle.seek(ref.offset)
     raw = handle.read(ref.length)
+    if len(raw) != ref.length:
+        raise LogReadError(f"{where} runs past the end of the file")
     try:
         opcode, _length = _RECORD_HEAD.unpack_from(raw, 0)
         if opcode != OP_CHUNK:
-            raise LogReadError(f"no chunk record at offset {ref.offset}")
+            raise LogReadError(f"{where}: no chunk record there")
         pos = 9
-        _start, _end, size, _crc = _CHUNK_HEAD.unpack_from(raw, pos)
+        _start, _end, size, crc = _CHUNK_HEAD.unpack_from(raw, pos)
         pos += _CHUNK_HEAD.size
         (name_len,) = struct.unpack_from("<I", raw, pos)
         compression = raw[pos + 4 : pos + 4 + name_len].decode()
         pos += 4 + name_len
         (data_len,) = struct.unpack_from("<Q", raw, pos)
         pos += 8
-        return _decompress(compression, raw[pos : pos + data_len], size)
+        records = _decompress(compression, raw[pos : pos + data_len], size)
     except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
-        raise LogReadError(f"corrupt MCAP chunk at offset {ref.offset}: {exc}") from exc
+        raise LogReadError(f"{where} is corrupt: {' '.join(str(exc).split())}") from exc
+    if len(records) != size or (crc and zlib.crc32(records) != crc):
+        raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
+    return records
 
 
 def iter_chunk_messages(
@@ -92,6 +100,8 @@ def iter_chunk_messages(
     while pos + head <= end:
         opcode, length = _RECORD_HEAD.unpack_from(records, pos)
         body = pos + head
+        if body + length > end or (opcode == OP_MESSAGE and length < _MESSAGE_HEAD.size):
+            break  # reported below: the records do not tile the chunk
         if opcode == OP_MESSAGE:
             channel, _seq, log_time, _pub = _MESSAGE_HEAD.unpack_from(records, body)
             if channel in channels:

@@ -328,7 +328,7 @@ class McapLog(LogReader):
         for message in source:
             channel = self._channels[message.channel_id]
             if topics is None or channel.topic in topics:
-                yield self._raw(channel, message)
+                yield self.raw_message(channel, message.log_time, message.data)
 
     def _indexed_messages(
         self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
@@ -387,11 +387,6 @@ class McapLog(LogReader):
                     if isinstance(rec, Message) and _in_range(rec.log_time, start_ns, stop_ns):
                         heapq.heappush(heap, (rec.log_time, offset, index, rec))
 
-    def _raw(self, channel: Channel, rec: Message) -> RawMessage:
-        schema = self._schemas.get(channel.schema_id)
-        msgtype = normalise_type_name(schema.name) if schema else "<no schema>"
-        return RawMessage(channel.topic, msgtype, rec.log_time, rec.data, channel.message_encoding)
-
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types from this file's schemas of the given encoding, then schemas/ and ROS."""
         if encoding not in self._registries:
@@ -423,9 +418,13 @@ class McapLog(LogReader):
     def raw_message(
         self, channel: Channel, log_time_ns: int, data: bytes | memoryview
     ) -> RawMessage:
-        """A RawMessage for a payload read straight from a chunk."""
-        info = self.summary.topics[channel.topic]
-        return RawMessage(channel.topic, info.msgtype, log_time_ns, data, info.encoding)
+        """A RawMessage for one payload of `channel`, typed by that channel's own schema.
+
+        Also used for payloads read straight from chunks (`mcap_chunks`).
+        """
+        schema = self._schemas.get(channel.schema_id)
+        msgtype = normalise_type_name(schema.name) if schema else "<no schema>"
+        return RawMessage(channel.topic, msgtype, log_time_ns, data, channel.message_encoding)
 
     def _close(self) -> None:
         self._file.close()
