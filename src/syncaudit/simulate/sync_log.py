@@ -1,12 +1,12 @@
 """Simulated drive logs with known LiDAR-camera synchronisation truth.
 
-One host clock is true time. A spinning LiDAR (Velodyne VLP-16/VLP-32C, Hesai Pandar40P/
-PandarXT32) turns at a nominal RPM with a slow sinusoidal rate drift; its azimuth is the
-exact integral of the angular velocity. Packets follow the model's real firing clock
+One host clock is true time. A spinning LiDAR (Velodyne VLP-16/VLP-32C/VLS-128, Hesai
+Pandar40P/PandarXT32) turns at a nominal RPM with a slow sinusoidal rate drift; its azimuth
+is the exact integral of the angular velocity. Packets follow the model's real firing clock
 (the vendor modules' packet period and block timing rules), each block carrying the
-azimuth at its firing time, and are encoded as real vendor packets. Each packet reaches the
-LiDAR driver t1 after capture; a fraction is lost on the network (never written, never
-seen by the driver). Packets are published one scan message per revolution, cut at the
+azimuth at its firing time (the VLS-128's four banks share their sequence's start), and are
+encoded as real vendor packets. Each packet reaches the LiDAR driver t1 after capture; a
+fraction is lost on the network (never written, never seen by the driver). Packets are published one scan message per revolution, cut at the
 zero-crossing packet (the first delivered packet with a block at or past the zero azimuth).
 
 Cameras are triggered from that packet through the chain of the method (part A of
@@ -34,8 +34,9 @@ import os
 import secrets
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Literal
 
@@ -55,7 +56,7 @@ from syncaudit.lidar.velodyne import (
 )
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
-LidarModel = Literal["VLP-16", "VLP-32C", "Pandar40P", "PandarXT32"]
+LidarModel = Literal["VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32"]
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
 
@@ -68,9 +69,15 @@ FLIR_MAX_EXPOSURE_US = 20_000
 _VENDOR_OF: dict[str, str] = {
     "VLP-16": "velodyne",
     "VLP-32C": "velodyne",
+    "VLS-128": "velodyne",
     "Pandar40P": "hesai",
     "PandarXT32": "hesai",
 }
+_VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-128": 4}
+"""Consecutive blocks that carry one azimuth sample: the VLS-128's four banks (0xEEFF ..
+0xBBFF) share the azimuth sampled when their 53.3 us firing sequence starts."""
+JPEG_FORMAT = "jpeg"
+"""`CompressedImage.format` of the JPEG-like payloads written when `image_bytes` is set."""
 _X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0}
 """Packet azimuth of the LiDAR frame's +X axis in the vendors' ROS drivers: Velodyne
 x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise."""
@@ -197,6 +204,10 @@ class SyncSimConfig(_Strict):
     light: LightModel = LightModel()
     cameras: list[CameraSim] = Field(default_factory=_default_cameras, min_length=1)
     image_kind: Literal["raw", "compressed"] = "raw"
+    image_bytes: int | None = Field(default=None, ge=64, le=64 * 1024 * 1024)
+    """CompressedImage payload size in bytes (needs image_kind 'compressed'): JPEG-like
+    incompressible bytes framed by SOI/EOI, format 'jpeg', the size of a real camera's
+    frames (250-400 KB for 1080p). None: a tiny PNG of the simulated scene."""
     exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
     trigger_messages: bool = True
     controller: ControllerConfig | None = None
@@ -209,6 +220,8 @@ class SyncSimConfig(_Strict):
             raise ValueError(f"camera names must be unique: {names}")
         if len(set(self.exposure_messages)) != len(self.exposure_messages):
             raise ValueError("exposure_messages has duplicates")
+        if self.image_bytes is not None and self.image_kind != "compressed":
+            raise ValueError("image_bytes needs image_kind 'compressed'")
         return self
 
     @property
@@ -274,7 +287,10 @@ def _packet_clock(model: str, rpm: float) -> _PacketClock:
     if _VENDOR_OF[model] == "velodyne":
         sched = velodyne_revolution_schedule(model, rpm, 0, n_packets=2)
         period = int(sched.packet_stamp_ns[1] - sched.packet_stamp_ns[0])
-        offsets = velodyne_firing_offsets_ns(model, False)[:, 0].astype(np.int64)
+        first_firing = velodyne_firing_offsets_ns(model, False)[:, 0].astype(np.int64)
+        # A block's azimuth is sampled at the first firing of the first block of its group.
+        group = _VELODYNE_BLOCKS_PER_AZIMUTH[model]
+        offsets = first_firing[(np.arange(first_firing.size) // group) * group]
         return _PacketClock(period, 1, offsets, 100)
     layout = HESAI_LAYOUTS[model]
     offsets = layout.block_offset_ns(np.ones(1, dtype=np.int64))[0].astype(np.int64)
@@ -375,6 +391,15 @@ def _png_gray(pixels: NDArray[np.uint8]) -> bytes:
     )
 
 
+def _jpeg_like(size: int, seed: int) -> bytes:
+    """`size` bytes that look like a JPEG to a reader and do not compress: SOI, a JFIF APP0
+    segment, entropy-coded-like random bytes (no 0xFF, so no false markers), EOI."""
+    head = b"\xff\xd8" + b"\xff\xe0\x00\x10JFIF\x00\x01\x01\x00\x00\x01\x00\x01\x00\x00"
+    tail = b"\xff\xd9"
+    body = np.frombuffer(np.random.default_rng(seed).bytes(size - len(head) - len(tail)), np.uint8)
+    return head + np.minimum(body, np.uint8(0xFE)).tobytes() + tail
+
+
 def _camera_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
     """Rotation (x, y, z, w) of an optical frame (z forward, x right, y down) at `yaw_deg`."""
     yaw = math.radians(yaw_deg)
@@ -400,9 +425,11 @@ def _camera_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
 class _Outgoing:
     """Serialized messages waiting to be written in log-time order."""
 
-    items: list[tuple[int, int, str, bytes]]
+    items: list[tuple[int, int, str, bytes | Callable[[], bytes]]]
+    """(log time, order, topic, serialized bytes or a function making them when written:
+    large image payloads are only built as they are written, so memory stays bounded)."""
 
-    def add(self, log_time_ns: int, topic: str, data: bytes) -> None:
+    def add(self, log_time_ns: int, topic: str, data: bytes | Callable[[], bytes]) -> None:
         self.items.append((int(log_time_ns), len(self.items), topic, data))
 
 
@@ -754,7 +781,7 @@ class _Simulation:
 
     def _scan_messages(
         self, writer: LogWriter, pk: _Packets, zero_packet: NDArray[np.int64]
-    ) -> Iterator[tuple[int, int, str, bytes]]:
+    ) -> Iterator[tuple[int, int, str, bytes | Callable[[], bytes]]]:
         """One scan per zero crossing: delivered packets after the previous zero packet up
         to and including this one; header stamp and log time = last packet's driver stamp."""
         units = self.clock.azimuth_units_per_deg
@@ -791,8 +818,8 @@ class _Simulation:
         distances: NDArray[np.float64] | None = None
         if cfg.lidar_returns == "smooth":
             channels = (
-                32
-                if cfg.lidar_model in ("VLP-16", "VLP-32C")
+                32  # records per Velodyne block
+                if self.vendor == "velodyne"
                 else (HESAI_LAYOUTS[cfg.lidar_model].n_channels)
             )
             rad = np.radians(azimuth_deg)[:, :, None]
@@ -886,24 +913,32 @@ class _Simulation:
             level = 110.0 * float(arrays["exposure_ratio"][i])
             noise = pattern_rng.normal(0.0, 2.0, (height, width))
             pixels = np.clip(level * gradient + noise, 0, 255).astype(np.uint8)
-            if cfg.image_kind == "raw":
-                image = writer.new_msg(
-                    "sensor_msgs/msg/Image",
-                    header=header,
-                    height=height,
-                    width=width,
-                    encoding="mono8",
-                    step=width,
-                    data=pixels.reshape(-1),
+            image: bytes | Callable[[], bytes]
+            if cfg.image_bytes is not None:
+                jpeg_seed = int(pattern_rng.integers(0, 2**63))
+                image = partial(_jpeg_image, writer, header, cfg.image_bytes, jpeg_seed)
+            elif cfg.image_kind == "raw":
+                image = writer.serialize(
+                    writer.new_msg(
+                        "sensor_msgs/msg/Image",
+                        header=header,
+                        height=height,
+                        width=width,
+                        encoding="mono8",
+                        step=width,
+                        data=pixels.reshape(-1),
+                    )
                 )
             else:
-                image = writer.new_msg(
-                    "sensor_msgs/msg/CompressedImage",
-                    header=header,
-                    format="mono8; png compressed",
-                    data=np.frombuffer(_png_gray(pixels), dtype=np.uint8),
+                image = writer.serialize(
+                    writer.new_msg(
+                        "sensor_msgs/msg/CompressedImage",
+                        header=header,
+                        format="mono8; png compressed",
+                        data=np.frombuffer(_png_gray(pixels), dtype=np.uint8),
+                    )
                 )
-            out.add(log_ns, topics["image"], writer.serialize(image))
+            out.add(log_ns, topics["image"], image)
             t5 = frame["exposure_duration_ns"]
             if "exposure" in topics:
                 msg = writer.new_msg(
@@ -975,7 +1010,16 @@ class _Simulation:
                 key=lambda item: (item[0], item[1]),
             )
             for log_time, _order, topic, data in merged:
-                writer.write(topic, log_time, data)
+                writer.write(topic, log_time, data() if callable(data) else data)
+
+
+def _jpeg_image(writer: LogWriter, header: Any, size: int, seed: int) -> bytes:
+    """A serialized CompressedImage with a JPEG-like payload of `size` bytes."""
+    data = np.frombuffer(_jpeg_like(size, seed), dtype=np.uint8)
+    msg = writer.new_msg(
+        "sensor_msgs/msg/CompressedImage", header=header, format=JPEG_FORMAT, data=data
+    )
+    return writer.serialize(msg)
 
 
 def _write_json_atomic(path: Path, payload: dict[str, Any], overwrite: bool) -> None:
