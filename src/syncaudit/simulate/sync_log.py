@@ -6,8 +6,9 @@ is the exact integral of the angular velocity. Packets follow the model's real f
 (the vendor modules' packet period and block timing rules), each block carrying the
 azimuth at its firing time (the VLS-128's four banks share their sequence's start), and are
 encoded as real vendor packets. Each packet reaches the LiDAR driver t1 after capture; a
-fraction is lost on the network (never written, never seen by the driver). Packets are published one scan message per revolution, cut at the
-zero-crossing packet (the first delivered packet with a block at or past the zero azimuth).
+fraction is lost on the network (never written, never seen by the driver). Packets are
+published one scan message per revolution, cut at the zero-crossing packet (the first
+delivered packet with a block at or past the zero azimuth).
 
 Cameras are triggered from that packet through the chain of the method (part A of
 docs/method.md): 240 packet capture -> t1 -> 242 LiDAR driver -> t2 -> 244 camera driver
