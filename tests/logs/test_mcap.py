@@ -481,3 +481,42 @@ def test_ros2idl_schema(tmp_path: Path, sectioned: bool) -> None:
     with open_log(path) as log:
         got: Any = log.deserialize(next(log.messages()))
         assert (got.seq, got.label) == (5, "idl") and log.warnings == []
+
+
+def test_unreadable_summary_falls_back_to_a_linear_scan(tmp_path: Path, probe: Any) -> None:
+    path = tmp_path / "badsummary.mcap"
+    msgs = write_mcap(path, pair(probe), probes(probe, 40), chunk_size=300)
+    data = bytearray(path.read_bytes())
+    footer = len(data) - 8 - 29  # Footer record: opcode, length, summary_start, ...
+    assert data[footer] == 0x02
+    data[footer + 9 : footer + 17] = (len(data) + 100).to_bytes(8, "little")  # past the end
+    path.write_bytes(bytes(data))
+    with open_log(path) as log:
+        assert [w.code for w in log.warnings] == ["mcap-bad-summary"]
+        assert log.summary.message_count == 40
+        assert stream(log) == as_tuples(msgs)
+
+
+def test_broken_file_in_schemas_dir_is_a_warning(
+    tmp_path: Path, probe: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One unparseable .msg under schemas/ must not make every log unreadable."""
+    import syncaudit.logs.typesys as typesys
+
+    for pkg, text in [("good_msgs", "uint8 x\n"), ("bad_msgs", "uint8[ broken\n")]:
+        (tmp_path / "schemas" / pkg / "msg").mkdir(parents=True)
+        (tmp_path / "schemas" / pkg / "msg" / "Thing.msg").write_text(text)
+    monkeypatch.setattr(typesys, "schemas_dir", lambda: tmp_path / "schemas")
+    typesys._project_schemas.cache_clear()
+    try:
+        assert set(typesys.project_types()) == {"good_msgs/msg/Thing"}
+        path = tmp_path / "log.mcap"
+        write_mcap(path, pair(probe), probes(probe, 2))
+        with open_log(path) as log:
+            got: Any = log.deserialize(next(log.messages()))
+            assert got.label == "p0"
+            assert [(w.code, "bad_msgs/msg/Thing.msg" in w.message) for w in log.warnings] == [
+                ("bad-project-schema", True)
+            ]
+    finally:
+        typesys._project_schemas.cache_clear()

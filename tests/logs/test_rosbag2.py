@@ -252,3 +252,23 @@ def test_every_rosbag2_metadata_version(
         assert (log.summary.message_count, log.summary.start_ns, log.summary.end_ns) == (4, 5, 9)
         assert {n: t.count for n, t in log.topics.items()} == {"/a": 2, "/b": 2}
         assert stream(log) == msgs
+
+
+def test_empty_bags(tmp_path: Path, ros2_store: Typestore) -> None:
+    """A bag with a topic and no messages: count 0, no time range, nothing streamed."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    bag2 = tmp_path / "empty2"
+    with Writer(bag2, version=9) as writer:
+        writer.add_connection("/a", "std_msgs/msg/String", typestore=ros2_store)
+    bag1 = tmp_path / "empty1.bag"
+    with Ros1Writer(bag1) as writer1:
+        writer1.add_connection(
+            "/a", "std_msgs/msg/String", typestore=get_typestore(Stores.ROS1_NOETIC)
+        )
+    for path in (bag2, next(bag2.glob("*.db3")), bag1):
+        with open_log(path) as log:
+            s = log.summary
+            assert (s.message_count, s.start_ns, s.end_ns) == (0, None, None), path
+            assert list(log.messages()) == []
+            assert {n: t.count for n, t in log.topics.items()} == {"/a": 0}
