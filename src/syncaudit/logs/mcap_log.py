@@ -206,7 +206,7 @@ class McapLog(LogReader):
         if self._cut is not None:
             self.warn(
                 "mcap-truncated",
-                f"{self.path}: MCAP cut off {self._cut} (no footer: recording interrupted?); "
+                f"{self.path}: MCAP cut off {self._cut} (recording interrupted?); "
                 f"reading the {total} complete messages before the cut",
             )
         if not self._scan.ordered and self._scan.loose:
