@@ -150,7 +150,7 @@ def audit_log(path: str | Path, rig: Rig | None = None, jobs: int | None = None)
     per core); other containers, and `jobs=1`, read serially. The result is the same.
     """
     with open_log(path) as log:
-        if not log.summary.message_count:
+        if log.summary.message_count == 0:
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
         guessed: list[str] = []
         if rig is None:

@@ -147,7 +147,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
     for info in sorted(log.topics.values(), key=lambda t: t.name):
         rate = info.count / duration if info.count and duration else None
         report.topics.append(TopicRow(info.name, info.msgtype, info.count, rate))
-    if not summary.message_count:
+    if summary.message_count == 0:
         raise NoDataError(f"{summary.path}: the log holds no messages")
     lidar_topics = (
         [rig.lidar.topic]
