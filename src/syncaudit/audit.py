@@ -182,9 +182,11 @@ def _plan(
     triggers: dict[str, str] = {}
     for cam in cameras:
         builder = CameraTableBuilder(cam)
-        if cam.image_topic in log.topics:
-            images[cam.image_topic] = cam.name
-            builders[cam.image_topic] = builder
+        # Frames come from the image headers, or from CameraInfo where no image was recorded.
+        frame_topic = cam.image_topic if cam.image_topic in log.topics else cam.info_topic
+        if frame_topic in log.topics:
+            images[frame_topic] = cam.name
+            builders[frame_topic] = builder
         if cam.exposure_topic in log.topics:
             exposures[cam.exposure_topic] = (cam.name, cam.stamp)
             builders[cam.exposure_topic] = builder
