@@ -303,6 +303,10 @@ def _packet_clock(model: str, rpm: float) -> _PacketClock:
     )
 
 
+_PACKETS_PER_SLICE = 65_536
+"""Packets per slice when computing azimuths (bounds the generator's memory)."""
+
+
 @dataclass(frozen=True, slots=True)
 class _Packets:
     """Every packet the sensor sent in the simulated span (delivered or not)."""
@@ -489,8 +493,13 @@ class _Simulation:
         stamp = (t0_sensor + (clk.period_num_ns * k) // clk.period_den) // NS_PER_US * NS_PER_US
         capture = stamp - cfg.clock_offset_ns
         block_true = capture[:, None] + clk.block_offset_ns[None, :]
-        angle = self.rotation.angle_deg((block_true - cfg.start_time_ns).astype(np.float64))
-        azimuth_q = np.rint(angle * clk.azimuth_units_per_deg).astype(np.int64)
+        azimuth_q = np.empty(block_true.shape, dtype=np.int64)
+        # In slices: the rotation model's float temporaries stay small on long logs.
+        for lo in range(0, n, _PACKETS_PER_SLICE):
+            rows = slice(lo, lo + _PACKETS_PER_SLICE)
+            t_rel = (block_true[rows] - cfg.start_time_ns).astype(np.float64)
+            angle = self.rotation.angle_deg(t_rel)
+            azimuth_q[rows] = np.rint(angle * clk.azimuth_units_per_deg)
         delivered = self.rng_drop.random(n) >= cfg.packet_drop_fraction
         t1 = cfg.t1.draw_ns(self.rng_t1, n)
         return _Packets(stamp, capture, block_true, azimuth_q, delivered, t1, capture + t1)
