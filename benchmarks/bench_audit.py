@@ -1,0 +1,884 @@
+#!/usr/bin/env python
+"""Benchmark of `syncaudit audit` on a large realistic log (issue 5); prints its figures.
+
+What it does, in one run:
+
+1. Generates (once, cached in `--cache-dir`) a simulated drive log of at least `--size-gb`
+   with a VLS-128 (real-format VelodyneScan packets), six cameras with JPEG-sized
+   CompressedImage payloads, exposure metadata and trigger records, plus a log twice as
+   long; each with its ground truth and rig file.
+2. Creates (once) its own virtual environment with the peers `rosbag-doctor` and
+   `clockdoctor`, never touching the project's environment.
+3. Warms the page cache by reading the file, then runs each contender once as a
+   subprocess and measures wall time, CPU time (user + sys, reaped children included, from
+   `os.wait4`) and the peak memory of the whole process tree (sampled from /proc every
+   20 ms: the sum over processes of RSS and of PSS):
+   the audit, the bare-mcap floor, the all-cores decompression limit and the peers; then
+   the audit again on the 2x log.
+4. Prints a table, the ratios, the throughput and one verdict line per target. Nothing
+   printed is hard-coded: every figure is measured in that run.
+
+Run `python benchmarks/bench_audit.py --help`; see benchmarks/README.md for the figures.
+Only the standard library and `mcap`/`yaml` are imported here at top level, so that the
+contender subprocesses it starts are measured on their own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import datetime as dt
+import fcntl
+import hashlib
+import json
+import os
+import platform
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_CACHE = REPO / "benchmarks" / ".cache"
+GENERATOR_VERSION = 1
+"""Bump when the generated log changes: cached logs carry it in their names."""
+QUICK_GB = 0.2
+PEERS: dict[str, str] = {"rosbag-doctor": "0.1.1", "clockdoctor": "0.1.0"}
+SAMPLE_S = 0.02
+CALIBRATION_S = 2.0
+SIZE_MARGIN = 1.015
+"""Duration margin over the calibrated estimate so the log is at least the asked size."""
+TARGET_RSS_MB = 300.0
+TARGET_RSS_GROWTH = 0.10
+TARGET_LIMIT_RATIO = 1.5
+MB = 1e6
+
+# The simulated rig: a VLS-128 on the roof and six cameras all around, 60 deg apart.
+LIDAR_MODEL = "VLS-128"
+IMAGE_BYTES = 350_000
+"""Per-frame CompressedImage payload: a 1920x1080 JPEG at usual quality is 250-400 KB."""
+CAMERAS: tuple[tuple[str, float, float], ...] = (
+    ("front", 0.0, 0.0),
+    ("front_left", 60.0, 800.0),
+    ("rear_left", 120.0, 0.0),
+    ("rear", 180.0, -1_200.0),
+    ("rear_right", 240.0, 0.0),
+    ("front_right", 300.0, 0.0),
+)
+"""(name, yaw deg counter-clockwise from +X, applied-delay error us)."""
+ZERO_AZIMUTH_DEG = 305.0
+"""Trigger azimuth 55 deg before the front camera (packet azimuth 0): every camera's
+theta is 55 deg or more, so each trigger delay is positive even in the tunnel's 12 ms
+exposures (with 60 deg spacing one camera would otherwise sit on the trigger)."""
+SEED = 5
+
+FLOOR_CODE = """\
+import sys
+from mcap.reader import make_reader
+
+path, topics = sys.argv[1], sys.argv[2:]
+count = 0
+with open(path, "rb") as f:
+    for _ in make_reader(f).iter_messages(topics=topics):
+        count += 1
+print(count)
+"""
+"""The floor for a Python tool: bare mcap iteration over the audit's topics, nothing done
+per message (counting them only proves they were all read)."""
+
+LIMIT_CODE = """\
+import multiprocessing
+import os
+import sys
+
+import lz4.frame
+import zstandard
+from mcap.reader import make_reader
+
+
+def work(job):
+    path, spans = job
+    dctx = zstandard.ZstdDecompressor()
+    total = 0
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        for offset, size, compression, uncompressed in spans:
+            data = os.pread(fd, size, offset)
+            if compression == "zstd":
+                data = dctx.decompress(data, max_output_size=uncompressed)
+            elif compression == "lz4":
+                data = lz4.frame.decompress(data)
+            elif compression:
+                raise ValueError(compression)
+            total += len(data)
+    finally:
+        os.close(fd)
+    return total
+
+
+if __name__ == "__main__":
+    path, workers = sys.argv[1], os.cpu_count() or 1
+    with open(path, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    # A chunk's records are the last field of its record: they end where the chunk ends.
+    spans = [
+        (c.chunk_start_offset + c.chunk_length - c.compressed_size, c.compressed_size,
+         c.compression, c.uncompressed_size)
+        for c in chunks
+    ]
+    size = max(1, len(spans) // (8 * workers))
+    jobs = [(path, spans[i : i + size]) for i in range(0, len(spans), size)]
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        total = sum(pool.imap_unordered(work, jobs))
+    expected = sum(c.uncompressed_size for c in chunks)
+    assert total == expected, (total, expected)
+    print(len(chunks), total, workers)
+"""
+"""The machine's limit: every chunk read and decompressed (as recorded) by a pool of all
+cores, nothing else."""
+
+
+# ================================================================================ helpers
+
+
+def _log(text: str = "") -> None:
+    print(text, flush=True)
+
+
+def _gb(nbytes: float) -> str:
+    return f"{nbytes / 1e9:.2f} GB"
+
+
+@contextlib.contextmanager
+def _cache_lock(cache: Path) -> Iterator[None]:
+    """One benchmark per cache directory at a time (stale temporaries are then safe to drop)."""
+    cache.mkdir(parents=True, exist_ok=True)
+    with (cache / ".bench.lock").open("w") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise SystemExit(f"another benchmark holds {cache}/.bench.lock") from None
+        yield
+
+
+def _drop_stale_temporaries(cache: Path) -> None:
+    """Remove temporaries an interrupted run left (the writers' hidden `.*.tmp` outputs)."""
+    for entry in cache.glob(".*.tmp"):
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+
+
+def _write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
+    """Write JSON beside `path` under a temporary name, then rename it into place."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # as open() would have created it
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            json.dump(payload, handle, indent=1)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _git_rev() -> str:
+    """Short commit of the working tree (+ '-dirty'), so a result names what it measured."""
+    try:
+        rev = subprocess.run(
+            ["git", "-C", str(REPO), "describe", "--always", "--dirty"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return rev
+
+
+def _memory_gib() -> float:
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                return int(line.split()[1]) / 1024**2
+    return float("nan")
+
+
+# ============================================================================ measurement
+
+
+def _children(pid: int) -> list[int]:
+    """Direct children of `pid` (children of any of its threads), from /proc."""
+    out: list[int] = []
+    with contextlib.suppress(OSError):
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with contextlib.suppress(OSError), open(f"/proc/{pid}/task/{task}/children") as f:
+                out.extend(int(v) for v in f.read().split())
+    return out
+
+
+def _memory_kb(pid: int) -> tuple[int, int]:
+    """(RSS, PSS) of one process in KiB; (0, 0) once it is gone."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            text = f.read()
+    except OSError:
+        return 0, 0
+    rss = pss = 0
+    for line in text.splitlines():
+        if line.startswith("Rss:"):
+            rss = int(line.split()[1])
+        elif line.startswith("Pss:"):
+            pss = int(line.split()[1])
+    return rss, pss
+
+
+class TreeSampler(threading.Thread):
+    """Samples the memory of a process and all its descendants every `interval` seconds.
+
+    Keeps the peak over time of the tree's summed RSS and summed PSS (PSS splits pages
+    shared between forked workers among them, so its sum is the tree's real footprint;
+    the RSS sum counts shared pages once per process) and the most processes seen.
+    """
+
+    def __init__(self, root: int, interval: float = SAMPLE_S) -> None:
+        super().__init__(daemon=True)
+        self.root = root
+        self.interval = interval
+        self.peak_rss_kb = 0
+        self.peak_pss_kb = 0
+        self.max_procs = 0
+        self.samples = 0
+        self._stop_event = threading.Event()
+
+    def run(self) -> None:
+        while not self._stop_event.is_set():
+            self.sample()
+            self._stop_event.wait(self.interval)
+
+    def sample(self) -> None:
+        """One look at the tree."""
+        pids, todo = [], [self.root]
+        while todo:
+            pid = todo.pop()
+            pids.append(pid)
+            todo.extend(_children(pid))
+        rss = pss = alive = 0
+        for pid in pids:
+            r, p = _memory_kb(pid)
+            rss += r
+            pss += p
+            alive += r > 0
+        self.peak_rss_kb = max(self.peak_rss_kb, rss)
+        self.peak_pss_kb = max(self.peak_pss_kb, pss)
+        self.max_procs = max(self.max_procs, alive)
+        self.samples += 1
+
+    def stop(self) -> None:
+        self._stop_event.set()
+        self.join()
+
+
+@dataclasses.dataclass(slots=True)
+class Run:
+    """One measured subprocess."""
+
+    name: str
+    argv: list[str]
+    wall_s: float = float("nan")
+    cpu_s: float = float("nan")
+    rss_mb: float = float("nan")
+    """Peak over time of the tree's summed RSS (at least the largest process's ru_maxrss)."""
+    pss_mb: float = float("nan")
+    """Peak over time of the tree's summed PSS (at most the RSS figure)."""
+    procs: int = 0
+    returncode: int | None = None
+    timed_out: bool = False
+    warm_gbps: float = float("nan")
+    """Speed of the page-cache warm-up read of its log just before it ran."""
+    stdout: str = ""
+    stderr: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.returncode == 0 and not self.timed_out
+
+    def error_line(self) -> str:
+        """The last meaningful line the process printed on failure."""
+        if self.timed_out:
+            return f"timed out after {self.wall_s:.0f} s (killed)"
+        lines = [ln.strip() for ln in (self.stderr + "\n" + self.stdout).splitlines()]
+        lines = [ln for ln in lines if ln]
+        return f"exit {self.returncode}: {lines[-1] if lines else '(no output)'}"[:300]
+
+
+def measure(
+    name: str,
+    argv: Sequence[str],
+    scratch: Path,
+    timeout_s: float,
+    cwd: Path | None = None,
+    warm: Path | None = None,
+) -> Run:
+    """Run `argv` once, with stdout/stderr to files in `scratch`, and measure it; read
+    `warm` first so that the run finds its log in the page cache."""
+    run = Run(name, list(argv))
+    if warm is not None:
+        run.warm_gbps = warm_page_cache(warm)
+    slug = "".join(c if c.isalnum() else "_" for c in name)
+    out_path, err_path = scratch / f"{slug}.stdout", scratch / f"{slug}.stderr"
+    with out_path.open("wb") as out, err_path.open("wb") as err:
+        start = time.perf_counter()
+        proc = subprocess.Popen(
+            run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True
+        )
+        sampler = TreeSampler(proc.pid)
+        sampler.start()
+
+        def kill() -> None:
+            run.timed_out = True
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+
+        timer = threading.Timer(timeout_s, kill)
+        timer.start()
+        try:
+            _, status, usage = os.wait4(proc.pid, 0)
+        finally:
+            timer.cancel()
+        run.wall_s = time.perf_counter() - start
+        sampler.stop()
+        proc.returncode = run.returncode = os.waitstatus_to_exitcode(status)
+    if run.timed_out:
+        # Workers of a killed contender are in its session: take them down too.
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    run.cpu_s = usage.ru_utime + usage.ru_stime
+    run.rss_mb = max(sampler.peak_rss_kb, usage.ru_maxrss) * 1024 / MB
+    run.pss_mb = sampler.peak_pss_kb * 1024 / MB if sampler.peak_pss_kb else run.rss_mb
+    run.procs = max(sampler.max_procs, 1)
+    run.stdout = out_path.read_text(errors="replace")[-20_000:]
+    run.stderr = err_path.read_text(errors="replace")[-20_000:]
+    return run
+
+
+def warm_bytecode() -> str:
+    """Compile syncaudit's bytecode up front, so the first contender run does not pay for
+    recompiling sources edited since the last import (the peers' venv is compiled by pip)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("syncaudit")
+    if spec is None or not spec.submodule_search_locations:
+        return "syncaudit not importable"
+    where = list(spec.submodule_search_locations)
+    done = subprocess.run([sys.executable, "-m", "compileall", "-q", *where], check=False)
+    return "compiled" if done.returncode == 0 else f"compileall exit {done.returncode}"
+
+
+def warm_page_cache(path: Path) -> float:
+    """Read the whole file once (so every contender finds it in the page cache); GB/s."""
+    start = time.perf_counter()
+    total = 0
+    with path.open("rb", buffering=0) as f:
+        while block := f.read(16 * 1024 * 1024):
+            total += len(block)
+    return total / 1e9 / (time.perf_counter() - start)
+
+
+# ============================================================================== the logs
+
+
+def sim_config(duration_s: float) -> dict[str, Any]:
+    """The simulator configuration of the benchmark log (JSON form of SyncSimConfig)."""
+    return {
+        "seed": SEED,
+        "duration_s": duration_s,
+        "log_format": "mcap",
+        "overwrite": True,
+        "lidar_model": LIDAR_MODEL,
+        "lidar_returns": "random",
+        "zero_azimuth_deg": ZERO_AZIMUTH_DEG,
+        "image_kind": "compressed",
+        "image_bytes": IMAGE_BYTES,
+        "cameras": [
+            {"name": name, "yaw_deg": yaw, "delay_error_us": error} for name, yaw, error in CAMERAS
+        ],
+    }
+
+
+def generate(out: Path, duration_s: float) -> None:
+    """Simulate the log, its truth and its rig file (runs in a measured subprocess)."""
+    import yaml
+
+    from syncaudit.simulate.rig_file import rig_from_truth
+    from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+    from syncaudit.writers.atomic import write_text_atomic
+
+    truth = simulate_sync_log(out, SyncSimConfig.model_validate(sim_config(duration_s)))
+    rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
+    write_text_atomic(rig_path(out), yaml.safe_dump(rig, sort_keys=False))
+
+
+def rig_path(log: Path) -> Path:
+    return log.with_name(log.name + ".rig.yaml")
+
+
+def meta_path(log: Path) -> Path:
+    return log.with_name(log.name + ".bench.json")
+
+
+def _config_key() -> str:
+    """Short hash of everything that shapes the log but its length."""
+    payload = json.dumps([GENERATOR_VERSION, sim_config(0.0)], sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()[:10]
+
+
+def _generate_measured(out: Path, duration_s: float, scratch: Path, timeout_s: float) -> Run:
+    argv = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--generate-to",
+        str(out),
+        "--duration-s",
+        repr(duration_s),
+    ]
+    run = measure(f"generate {out.name}", argv, scratch, timeout_s, cwd=REPO)
+    if not run.ok:
+        raise SystemExit(f"generating {out} failed: {run.error_line()}")
+    return run
+
+
+def calibrate_rate(cache: Path, scratch: Path, timeout_s: float) -> float:
+    """Bytes of log per second of simulated time, from a short simulation."""
+    with tempfile.TemporaryDirectory(prefix=".calibrate.", suffix=".tmp", dir=cache) as tmp:
+        out = Path(tmp) / "calibrate.mcap"
+        _generate_measured(out, CALIBRATION_S, scratch, timeout_s)
+        return out.stat().st_size / CALIBRATION_S
+
+
+def ensure_log(
+    cache: Path, name: str, duration_s: float, scratch: Path, timeout_s: float
+) -> dict[str, Any]:
+    """The cached log `name` (generated if absent) and its metadata; the metadata file is
+    written last, so a log without it is incomplete and is generated again."""
+    log = cache / name
+    meta_file = meta_path(log)
+    if meta_file.exists() and log.exists() and rig_path(log).exists():
+        meta: dict[str, Any] = json.loads(meta_file.read_text())
+        meta["cached"] = True
+        return meta
+    _log(f"generating {log.name} ({duration_s:.1f} s of log) ...")
+    run = _generate_measured(log, duration_s, scratch, timeout_s)
+    meta = {
+        "log": str(log),
+        "duration_s": duration_s,
+        "size_bytes": log.stat().st_size,
+        "generated_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "generator_version": GENERATOR_VERSION,
+        "generation": {"wall_s": run.wall_s, "cpu_s": run.cpu_s, "peak_rss_mb": run.rss_mb},
+        "config": sim_config(duration_s),
+    }
+    _write_json_atomic(meta_file, meta)
+    meta["cached"] = False
+    return meta
+
+
+def _log_name(size_gb: float, multiple: int) -> str:
+    return f"bench_{size_gb:g}gb_x{multiple}_{_config_key()}.mcap"
+
+
+def prepare_logs(
+    cache: Path, size_gb: float, scratch: Path, timeout_s: float
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The 1x log (at least `size_gb`) and the 2x log (twice its duration)."""
+    one_name = _log_name(size_gb, 1)
+    if meta_path(cache / one_name).exists():
+        duration = float(json.loads(meta_path(cache / one_name).read_text())["duration_s"])
+    else:
+        rate = calibrate_rate(cache, scratch, timeout_s)
+        duration = round(size_gb * 1e9 / rate * SIZE_MARGIN, 1)
+    one = ensure_log(cache, one_name, duration, scratch, timeout_s)
+    two = ensure_log(cache, _log_name(size_gb, 2), 2 * one["duration_s"], scratch, timeout_s)
+    return one, two
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class LogFacts:
+    """What the benchmark needs to know about one log."""
+
+    path: Path
+    size_bytes: int
+    messages: int
+    audit_topics: list[str]
+    audit_messages: int
+    chunks: int
+    compression: str
+    uncompressed_bytes: int
+
+
+def log_facts(path: Path) -> LogFacts:
+    """Counts from the MCAP summary and the audit's topics from the rig file."""
+    import yaml
+    from mcap.reader import make_reader
+
+    rig = yaml.safe_load(rig_path(path).read_text())
+    topics = [rig["lidar"]["topic"]]
+    for cam in rig.get("cameras", []):
+        topics += [cam[k] for k in ("image_topic", "exposure_topic", "trigger_topic") if cam.get(k)]
+    if any(cam.get("frame_id") for cam in rig.get("cameras", [])):
+        topics.append("/tf_static")
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    if summary is None or summary.statistics is None:
+        raise SystemExit(f"{path}: no MCAP summary/statistics")
+    by_topic: dict[str, int] = {}
+    for channel_id, count in summary.statistics.channel_message_counts.items():
+        topic = summary.channels[channel_id].topic
+        by_topic[topic] = by_topic.get(topic, 0) + count
+    chunks = summary.chunk_indexes
+    return LogFacts(
+        path=path,
+        size_bytes=path.stat().st_size,
+        messages=summary.statistics.message_count,
+        audit_topics=topics,
+        audit_messages=sum(by_topic.get(t, 0) for t in topics),
+        chunks=len(chunks),
+        compression="/".join(sorted({c.compression or "none" for c in chunks})),
+        uncompressed_bytes=sum(c.uncompressed_size for c in chunks),
+    )
+
+
+# ================================================================================== peers
+
+
+def ensure_peers(cache: Path, scratch: Path) -> tuple[Path | None, str]:
+    """The peers' own virtual environment (created once); (bin dir or None, note)."""
+    venv = cache / "peers-venv"
+    marker = venv / ".bench-complete"
+    wanted = json.dumps(PEERS, sort_keys=True)
+    if marker.exists() and marker.read_text() == wanted:
+        return venv / "bin", "cached"
+    shutil.rmtree(venv, ignore_errors=True)
+    _log(f"creating {venv} with " + ", ".join(f"{k}=={v}" for k, v in PEERS.items()) + " ...")
+    log_file = scratch / "peers-install.log"
+    with log_file.open("w") as out:
+        steps = [
+            [sys.executable, "-m", "venv", str(venv)],
+            [str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet"]
+            + [f"{k}=={v}" for k, v in PEERS.items()],
+        ]
+        for step in steps:
+            if subprocess.run(step, stdout=out, stderr=subprocess.STDOUT).returncode != 0:
+                shutil.rmtree(venv, ignore_errors=True)
+                tail = log_file.read_text(errors="replace").strip().splitlines()[-1:]
+                return None, f"installing the peers failed: {' '.join(tail)}"
+    marker.write_text(wanted)
+    return venv / "bin", "installed now"
+
+
+def peer_runs(bin_dir: Path, log: Path, scratch: Path, timeout_s: float) -> list[Run]:
+    """Each peer once on the log, with the invocation that analyses the whole file's timing.
+
+    Both run on a symlink to the log inside `scratch`: clockdoctor writes its decoded-message
+    JSONL beside its input whatever `--out-dir` says, and must not litter the cache.
+    """
+    link = scratch / log.name
+    link.unlink(missing_ok=True)
+    link.symlink_to(log)
+    runs = [
+        measure(
+            "rosbag-doctor",
+            [str(bin_dir / "rosbag-doctor"), str(link), "--format", "json"],
+            scratch,
+            timeout_s,
+            warm=log,
+        ),
+        measure(
+            "clockdoctor",
+            [str(bin_dir / "clockdoctor"), str(link), "--out-dir", str(scratch / "clockdoctor")],
+            scratch,
+            timeout_s,
+            warm=log,
+        ),
+    ]
+    return runs
+
+
+# ================================================================================ figures
+
+
+def audit_argv(log: Path, json_out: Path) -> list[str]:
+    """`syncaudit audit LOG --rig LOG.rig.yaml --json-out F`.
+
+    The JSON goes to a scratch file, not /dev/null: the atomic writer renames a temporary
+    onto its target, which (run as root) would replace /dev/null by a regular file.
+    """
+    exe = Path(sys.executable).with_name("syncaudit")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "syncaudit.cli"]
+    return [*cmd, "audit", str(log), "--rig", str(rig_path(log)), "--json-out", str(json_out)]
+
+
+def audit_vs_truth(json_out: Path, log: Path) -> str:
+    """One line: does the audit still find the simulated truth (Eq. 5 per camera)?"""
+    try:
+        result = json.loads(json_out.read_text())
+        truth = json.loads(Path(str(log) + ".truth.json").read_text())
+    except (OSError, ValueError) as exc:
+        return f"audit output not checked: {exc}"
+    worst, paired, total = 0.0, 0, 0
+    for cam in result.get("cameras", []):
+        t = truth["cameras"].get(cam.get("camera"))
+        if t is None or cam.get("error_mean_us") is None:
+            return f"audit output not checked: camera {cam.get('camera')} not comparable"
+        worst = max(worst, abs(cam["error_mean_us"] - t["error_mean_ns"] / 1e3))
+        paired += int(cam.get("frames_paired", 0))
+        total += len(t["frames"])
+    n = len(result.get("cameras", []))
+    return (
+        f"audit vs truth: {n}/{len(truth['cameras'])} cameras, {paired}/{total} frames paired, "
+        f"max |Eq. 5 error mean - truth| = {worst:.1f} us"
+    )
+
+
+def _fmt(value: float, digits: int = 1) -> str:
+    return "-" if value != value else f"{value:,.{digits}f}"
+
+
+def table(rows: list[tuple[Run, LogFacts]]) -> str:
+    """The contenders side by side."""
+    head = (
+        f"{'contender':<28}{'wall s':>9}{'CPU s':>9}{'CPU/wall':>9}{'RSS MB':>9}{'PSS MB':>9}"
+        f"{'procs':>6}{'MB/s':>9}{'msg/s':>11}  result"
+    )
+    lines = [head, "-" * len(head)]
+    for run, facts in rows:
+        ok = run.ok
+        lines.append(
+            f"{run.name:<28}{_fmt(run.wall_s, 2):>9}{_fmt(run.cpu_s, 2):>9}"
+            f"{_fmt(run.cpu_s / run.wall_s, 2):>9}{_fmt(run.rss_mb, 0):>9}{_fmt(run.pss_mb, 0):>9}"
+            f"{run.procs:>6}{_fmt(facts.size_bytes / MB / run.wall_s, 0) if ok else '-':>9}"
+            f"{_fmt(facts.audit_messages / run.wall_s, 0) if ok else '-':>11}"
+            f"  {'ok' if ok else 'FAILED'}"
+        )
+    return "\n".join(lines)
+
+
+def _mark(met: bool) -> str:
+    return "[met]    " if met else "[NOT MET]"
+
+
+def verdicts(
+    audit: Run, floor: Run, limit: Run, audit2: Run | None, peers: list[Run], peer_note: str
+) -> list[str]:
+    """One line per target of the issue."""
+    out = []
+    if not audit.ok:
+        return [f"[NOT MET] every target: the audit failed ({audit.error_line()})"]
+    if floor.ok:
+        out.append(
+            f"{_mark(audit.wall_s <= floor.wall_s)} audit wall <= bare-mcap floor: "
+            f"{audit.wall_s:.2f} s vs {floor.wall_s:.2f} s (x{audit.wall_s / floor.wall_s:.2f})"
+        )
+    else:
+        out.append(f"[no data] audit vs floor: the floor failed ({floor.error_line()})")
+    if limit.ok:
+        ratio = audit.wall_s / limit.wall_s
+        out.append(
+            f"{_mark(ratio <= TARGET_LIMIT_RATIO)} audit wall <= {TARGET_LIMIT_RATIO}x all-cores "
+            f"limit: {audit.wall_s:.2f} s vs {limit.wall_s:.2f} s (x{ratio:.2f})"
+        )
+    else:
+        out.append(f"[no data] audit vs limit: the limit failed ({limit.error_line()})")
+    peaks = [audit.pss_mb] + ([audit2.pss_mb] if audit2 is not None and audit2.ok else [])
+    out.append(
+        f"{_mark(max(peaks) < TARGET_RSS_MB)} audit peak memory < {TARGET_RSS_MB:.0f} MB: "
+        + ", ".join(f"{p:.0f} MB" for p in peaks)
+        + " (1x"
+        + (", 2x" if len(peaks) > 1 else "")
+        + "; tree PSS sum)"
+    )
+    if audit2 is not None and audit2.ok:
+        growth = audit2.pss_mb / audit.pss_mb - 1.0
+        out.append(
+            f"{_mark(growth < TARGET_RSS_GROWTH)} flat memory, 2x log adds < "
+            f"{TARGET_RSS_GROWTH:.0%}: {audit.pss_mb:.0f} -> {audit2.pss_mb:.0f} MB "
+            f"({growth:+.1%})"
+        )
+    elif audit2 is not None:
+        out.append(f"[NOT MET] flat memory: the audit failed on the 2x log ({audit2.error_line()})")
+    if not peers:
+        out.append(f"[no data] faster than both peers: {peer_note}")
+    for peer in peers:
+        if peer.ok:
+            out.append(
+                f"{_mark(audit.wall_s < peer.wall_s)} faster than {peer.name}: "
+                f"{audit.wall_s:.2f} s vs {peer.wall_s:.2f} s (x{audit.wall_s / peer.wall_s:.2f})"
+            )
+        else:
+            out.append(
+                f"[no data] faster than {peer.name}: the peer failed on the log "
+                f"after {peer.wall_s:.1f} s ({peer.error_line()})"
+            )
+    return out
+
+
+def describe_log(label: str, meta: dict[str, Any], facts: LogFacts) -> str:
+    gen = meta["generation"]
+    how = f"cached, generated {meta['generated_at']}" if meta["cached"] else "generated now"
+    return (
+        f"{label}: {facts.path.name}  {_gb(facts.size_bytes)} on disk "
+        f"({_gb(facts.uncompressed_bytes)} in {facts.chunks} {facts.compression} chunks), "
+        f"{meta['duration_s']:.1f} s of log, {facts.messages:,} messages "
+        f"({facts.audit_messages:,} on the audit's {len(facts.audit_topics)} topics)\n"
+        f"    {how} in {gen['wall_s']:.1f} s wall, {gen['cpu_s']:.1f} s CPU, "
+        f"generator peak RSS {gen['peak_rss_mb']:.0f} MB"
+    )
+
+
+# =================================================================================== main
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        description="Benchmark `syncaudit audit` against the bare-mcap floor, the all-cores "
+        "decompression limit and two peers, on a large simulated log (issue 5)."
+    )
+    parser.add_argument("--size-gb", type=float, default=2.0, help="1x log size (default 2.0)")
+    parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE, help="logs and venv")
+    parser.add_argument("--skip-peers", action="store_true", help="do not run the peers")
+    parser.add_argument("--quick", action="store_true", help=f"a ~{QUICK_GB:g} GB smoke test")
+    parser.add_argument(
+        "--timeout-s", type=float, default=3_600.0, help="per contender (default 3600)"
+    )
+    parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--duration-s", type=float, help=argparse.SUPPRESS)
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.generate_to is not None:
+        generate(args.generate_to, args.duration_s)
+        return 0
+    if not Path("/proc/self/smaps_rollup").exists():
+        raise SystemExit("this benchmark samples memory from /proc (Linux 4.14+)")
+    size_gb = QUICK_GB if args.quick else args.size_gb
+    cache: Path = args.cache_dir.resolve()
+    with _cache_lock(cache):
+        _drop_stale_temporaries(cache)
+        scratch = cache / "run"
+        shutil.rmtree(scratch, ignore_errors=True)
+        scratch.mkdir()
+        return _bench(args, size_gb, cache, scratch)
+
+
+def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path) -> int:
+    started = dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    _log(
+        f"syncaudit audit benchmark  {started}  syncaudit {_git_rev()}  "
+        f"{os.cpu_count()} cores, {_memory_gib():.1f} GiB RAM, Python {platform.python_version()}, "
+        f"load average {os.getloadavg()[0]:.2f} (1 min; others' work on the machine skews times)"
+    )
+    one_meta, two_meta = prepare_logs(cache, size_gb, scratch, args.timeout_s)
+    one, two = log_facts(Path(one_meta["log"])), log_facts(Path(two_meta["log"]))
+    _log(
+        f"rig: {LIDAR_MODEL} (VelodyneScan, random returns), {len(CAMERAS)} cameras "
+        f"(CompressedImage {IMAGE_BYTES / 1e3:.0f} KB JPEG-like, exposure, trigger, flir meta)"
+    )
+    _log(describe_log("1x", one_meta, one))
+    _log(describe_log("2x", two_meta, two))
+
+    bin_dir: Path | None = None
+    peer_note = "skipped (--skip-peers)"
+    if not args.skip_peers:
+        bin_dir, peer_note = ensure_peers(cache, scratch)
+
+    bytecode = warm_bytecode()
+    _log(
+        f"syncaudit bytecode {bytecode}; each contender's log is read once right before it "
+        "runs (page cache warm)"
+    )
+    _log("running: audit, floor, limit" + (", peers" if bin_dir else "") + ", audit on 2x ...")
+    t_out = args.timeout_s
+    json_1x, json_2x = scratch / "audit-1x.json", scratch / "audit-2x.json"
+    audit = measure("syncaudit audit", audit_argv(one.path, json_1x), scratch, t_out, warm=one.path)
+    floor_argv = [sys.executable, "-c", FLOOR_CODE, str(one.path), *one.audit_topics]
+    floor = measure("floor: bare mcap iteration", floor_argv, scratch, t_out, warm=one.path)
+    limit_argv = [sys.executable, "-c", LIMIT_CODE, str(one.path)]
+    cores = f"limit: {os.cpu_count()}-core decompress"
+    limit = measure(cores, limit_argv, scratch, t_out, warm=one.path)
+    peers = peer_runs(bin_dir, one.path, scratch, t_out) if bin_dir else []
+    audit2_argv = audit_argv(two.path, json_2x)
+    audit2 = measure("syncaudit audit @2x log", audit2_argv, scratch, t_out, warm=two.path)
+    runs = [audit, floor, limit, *peers, audit2]
+    rows = [(run, two if run is audit2 else one) for run in runs]
+
+    _log()
+    _log(table(rows))
+    warm = [run.warm_gbps for run in runs]
+    _log(
+        "wall: elapsed; CPU: user+sys incl. reaped children (wait4); RSS/PSS: peak over time of "
+        f"the process tree's sum, sampled every {SAMPLE_S * 1e3:.0f} ms (RSS also >= ru_maxrss); "
+        f"MB/s: file bytes / wall; msg/s: messages on the audit's topics / wall; warm-up reads "
+        f"before the runs {min(warm):.1f}-{max(warm):.1f} GB/s (a few GB/s: from the page cache)"
+    )
+    for run in runs:
+        if not run.ok:
+            _log(f"{run.name} FAILED: {run.error_line()}")
+    if floor.ok and not floor.stdout.strip().endswith(str(one.audit_messages)):
+        _log(
+            f"note: the floor counted {floor.stdout.strip()} messages, expected {one.audit_messages}"
+        )
+    if audit.ok:
+        _log(audit_vs_truth(json_1x, one.path) + " (1x)")
+    if audit2.ok:
+        _log(audit_vs_truth(json_2x, two.path) + " (2x)")
+
+    _log()
+    ratios = []
+    for other in (floor, limit, *peers):
+        if audit.ok and other.ok:
+            ratios.append(f"audit/{other.name.split(':')[0]} x{audit.wall_s / other.wall_s:.2f}")
+    _log("ratios (wall time): " + ("  ".join(ratios) if ratios else "none (failures above)"))
+    if audit.ok:
+        _log(
+            f"audit throughput: {one.size_bytes / MB / audit.wall_s:,.0f} MB/s, "
+            f"{one.audit_messages / audit.wall_s:,.0f} msg/s (1x)"
+            + (
+                f"; {two.size_bytes / MB / audit2.wall_s:,.0f} MB/s, "
+                f"{two.audit_messages / audit2.wall_s:,.0f} msg/s (2x)"
+                if audit2.ok
+                else ""
+            )
+        )
+        _log(
+            f"audit peak memory: 1x RSS {audit.rss_mb:.0f} MB / PSS {audit.pss_mb:.0f} MB, "
+            + (
+                f"2x RSS {audit2.rss_mb:.0f} MB / PSS {audit2.pss_mb:.0f} MB "
+                f"({audit2.pss_mb / audit.pss_mb - 1.0:+.1%} PSS)"
+                if audit2.ok
+                else "2x failed"
+            )
+        )
+    if peers or peer_note.startswith("installing"):
+        _log(f"peers venv: {peer_note}")
+    _log()
+    _log("targets:")
+    for line in verdicts(audit, floor, limit, audit2, peers, peer_note):
+        _log("  " + line)
+    return 0 if audit.ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
