@@ -290,6 +290,14 @@ class TreeSampler(threading.Thread):
         self.join()
 
 
+def _machine_busy_s() -> float:
+    """CPU seconds the whole machine has spent busy since boot (all cores, /proc/stat)."""
+    with open("/proc/stat") as f:
+        fields = [int(v) for v in f.readline().split()[1:]]
+    user, nice, system, _idle, _iowait, irq, softirq, steal = (fields + [0] * 8)[:8]
+    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+
+
 @dataclasses.dataclass(slots=True)
 class Run:
     """One measured subprocess."""
@@ -305,6 +313,8 @@ class Run:
     procs: int = 0
     returncode: int | None = None
     timed_out: bool = False
+    other_cpu_s: float = float("nan")
+    """CPU time the rest of the machine used meanwhile (others' work competing for cores)."""
     warm_gbps: float = float("nan")
     """Speed of the page-cache warm-up read of its log just before it ran."""
     stdout: str = ""
@@ -339,6 +349,7 @@ def measure(
     slug = "".join(c if c.isalnum() else "_" for c in name)
     out_path, err_path = scratch / f"{slug}.stdout", scratch / f"{slug}.stderr"
     with out_path.open("wb") as out, err_path.open("wb") as err:
+        busy_before = _machine_busy_s()
         start = time.perf_counter()
         proc = subprocess.Popen(
             run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True
@@ -358,6 +369,7 @@ def measure(
         finally:
             timer.cancel()
         run.wall_s = time.perf_counter() - start
+        busy = _machine_busy_s() - busy_before
         sampler.stop()
         proc.returncode = run.returncode = os.waitstatus_to_exitcode(status)
     if run.timed_out:
@@ -365,6 +377,7 @@ def measure(
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
     run.cpu_s = usage.ru_utime + usage.ru_stime
+    run.other_cpu_s = max(0.0, busy - run.cpu_s)
     run.rss_mb = max(sampler.peak_rss_kb, usage.ru_maxrss) * 1024 / MB
     run.pss_mb = sampler.peak_pss_kb * 1024 / MB if sampler.peak_pss_kb else run.rss_mb
     run.procs = max(sampler.max_procs, 1)
@@ -659,7 +672,7 @@ def table(rows: list[tuple[Run, LogFacts]]) -> str:
     """The contenders side by side."""
     head = (
         f"{'contender':<28}{'wall s':>9}{'CPU s':>9}{'CPU/wall':>9}{'RSS MB':>9}{'PSS MB':>9}"
-        f"{'procs':>6}{'MB/s':>9}{'msg/s':>11}  result"
+        f"{'procs':>6}{'MB/s':>9}{'msg/s':>11}{'others':>8}  result"
     )
     lines = [head, "-" * len(head)]
     for run, facts in rows:
@@ -669,7 +682,7 @@ def table(rows: list[tuple[Run, LogFacts]]) -> str:
             f"{_fmt(run.cpu_s / run.wall_s, 2):>9}{_fmt(run.rss_mb, 0):>9}{_fmt(run.pss_mb, 0):>9}"
             f"{run.procs:>6}{_fmt(facts.size_bytes / MB / run.wall_s, 0) if ok else '-':>9}"
             f"{_fmt(facts.audit_messages / run.wall_s, 0) if ok else '-':>11}"
-            f"  {'ok' if ok else 'FAILED'}"
+            f"{_fmt(run.other_cpu_s / run.wall_s, 2):>8}  {'ok' if ok else 'FAILED'}"
         )
     return "\n".join(lines)
 
@@ -830,8 +843,9 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     _log(
         "wall: elapsed; CPU: user+sys incl. reaped children (wait4); RSS/PSS: peak over time of "
         f"the process tree's sum, sampled every {SAMPLE_S * 1e3:.0f} ms (RSS also >= ru_maxrss); "
-        f"MB/s: file bytes / wall; msg/s: messages on the audit's topics / wall; warm-up reads "
-        f"before the runs {min(warm):.1f}-{max(warm):.1f} GB/s (a few GB/s: from the page cache)"
+        f"MB/s: file bytes / wall; msg/s: messages on the audit's topics / wall; others: cores "
+        f"the rest of the machine kept busy meanwhile (of {os.cpu_count()}; the benchmark's "
+        f"sampler included); warm-up reads before the runs {min(warm):.1f}-{max(warm):.1f} GB/s"
     )
     for run in runs:
         if not run.ok:
