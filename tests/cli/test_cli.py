@@ -123,3 +123,14 @@ def test_outputs_never_clobbered_and_unwritable_paths(lidar_data: Path, tmp_path
         runner.invoke(app, [*args, "--html", str(missing_dir)]), 8
     )
     assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_outputs_to_devices_write_through() -> None:
+    sample = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_short.bag"
+    before = os.stat("/dev/null")
+    result = runner.invoke(
+        app, ["audit", str(sample), "--rig", f"{sample}.rig.yaml", "--json-out", "/dev/null"]
+    )
+    assert result.exit_code == 0, result.output
+    after = os.stat("/dev/null")
+    assert (after.st_mode, after.st_rdev) == (before.st_mode, before.st_rdev)

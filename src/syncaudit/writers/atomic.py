@@ -14,6 +14,14 @@ from syncaudit.errors import OutputError
 def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
     """Create `path` with what `fill` writes, never leaving a partial file behind."""
     path = Path(path)
+    if path.exists() and not path.is_file():
+        # A device or FIFO (/dev/null, /dev/stdout, a pipe): write through, never replace it.
+        try:
+            with path.open("w", encoding="utf-8", newline="") as handle:
+                fill(handle)
+        except OSError as exc:
+            raise OutputError(f"{path}: cannot write ({exc.strerror or exc})") from exc
+        return
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
     except OSError as exc:
