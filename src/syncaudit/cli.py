@@ -121,6 +121,9 @@ def audit(
         typer.Option("--jobs", "-j", help="Worker processes for MCAP chunks (default: cores)."),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing --pairings log.")] = False,
+    check_crc: Annotated[
+        bool, typer.Option(help="Verify every MCAP chunk's CRC (slower by about a third).")
+    ] = False,
 ) -> None:
     """Audit LiDAR-camera sync: Eq. 1-6 per camera, recommended delay, threshold verdict."""
     from syncaudit.audit import audit_log
@@ -130,7 +133,7 @@ def audit(
     from syncaudit.writers.atomic import write_atomic, write_text_atomic
 
     def job() -> None:
-        result = audit_log(log, load_rig(rig) if rig else None, jobs=jobs)
+        result = audit_log(log, load_rig(rig) if rig else None, jobs=jobs, check_crc=check_crc)
         data = result.to_dict()
         if json_out:
             write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")

@@ -351,7 +351,10 @@ def test_encode_decode_round_trip(model: str, mode: int, rpm: float) -> None:
     assert np.array_equal(timing.block_azimuth_deg, sched.block_azimuth_deg)
     assert np.array_equal(timing.sensor_time_ns, sched.packet_stamp_ns // 1000 * 1000)
     offsets = v.velodyne_firing_offsets_ns(model, mode == v.RETURN_DUAL)
-    assert np.array_equal(timing.block_time_ns, timing.sensor_time_ns[:, None] + offsets[:, 0])
+    first_firing = offsets[:, 0]
+    if model == "VLS-128":  # banks share the sequence-start azimuth, and so its time
+        first_firing = first_firing[(np.arange(12) // 4) * 4]
+    assert np.array_equal(timing.block_time_ns, timing.sensor_time_ns[:, None] + first_firing)
     assert (timing.return_mode == mode).all()
     assert abs(_rpm(timing, slice(None)) - rpm) < 0.02 * rpm / 600
     # Precision azimuth of every firing = rotor azimuth at that firing (true, ns-exact).

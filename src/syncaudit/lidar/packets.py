@@ -27,7 +27,9 @@ class PacketTiming:
     block_azimuth_deg: NDArray[np.float64]
     """(n, b) azimuth of each block in degrees, [0, 360)."""
     block_time_ns: NDArray[np.int64]
-    """(n, b) sensor time of each block's first firing, full epoch."""
+    """(n, b) sensor time at which each block's azimuth was measured, full epoch: the
+    block's first firing (on VLS-128, whose banks share the sequence-start azimuth, the
+    first firing of the block's firing sequence)."""
     return_mode: NDArray[np.uint8]
     """(n,) the vendor's return-mode code as found in the packet."""
     dual_return: NDArray[np.bool_]

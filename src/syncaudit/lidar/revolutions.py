@@ -16,13 +16,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.columns.lidar import RevolutionColumns
-from syncaudit.lidar.packets import PacketTiming
+from syncaudit.lidar.samples import PacketSamples
 
 FULL_TURN_DEG = 360.0
 MAX_BLOCK_STEP_DEG = 90.0
 """Steps larger than this between consecutive blocks are gaps, not rotation samples."""
-MAX_PACKET_SPAN_DEG = 30.0
-"""A block further than this from its packet's first block contradicts its own packet."""
 CROP_BIN_DEG = 5.0
 """Gaps that start within this angle of each other in most revolutions are a cropped sector."""
 
@@ -65,32 +63,24 @@ class RevolutionTracker:
     def _zero_oriented(self) -> float:
         return (self.direction * self.zero_azimuth_deg) % FULL_TURN_DEG
 
-    def feed(self, timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> None:
-        """Add one chunk of packets (in time order) with their driver stamps."""
-        if timing.n_packets == 0:
-            return
-        n, b = timing.block_time_ns.shape
-        times = timing.block_time_ns.reshape(-1)
-        azimuth = timing.block_azimuth_deg.reshape(-1)
-        packet_of = np.repeat(np.arange(n, dtype=np.int64), b)
-        oriented_blocks = self.direction * timing.block_azimuth_deg
-        span = (oriented_blocks - oriented_blocks[:, :1]) % FULL_TURN_DEG
-        sane = (span < MAX_PACKET_SPAN_DEG) | (span > FULL_TURN_DEG - MAX_PACKET_SPAN_DEG)
-        self.outlier_blocks += int(np.sum(~sane & np.isfinite(span)))
-        keep = np.isfinite(azimuth) & sane.reshape(-1)
-        keep[1:] &= np.diff(times) > 0  # dual returns repeat a block's time: keep the first
-        times, azimuth, packet_of = times[keep], azimuth[keep], packet_of[keep]
+    def feed(self, samples: PacketSamples) -> None:
+        """Add one chunk of packets (in time order), reduced to samples."""
+        self.outlier_blocks += samples.outlier_blocks
+        times = samples.sample_time_ns
         if times.size == 0:
             return
-        unwrapped = self._unwrap(times, self.direction * azimuth)
-        self._count_packets(timing.sensor_time_ns, unwrapped, packet_of)
-        self._find_crossings(times, unwrapped, packet_of, timing.sensor_time_ns, driver_stamp_ns)
+        packet_of = samples.sample_packet
+        unwrapped = self._unwrap(times, self.direction * samples.sample_azimuth_deg)
+        self._count_packets(samples.sensor_time_ns, unwrapped, packet_of)
+        self._find_crossings(
+            times, unwrapped, packet_of, samples.sensor_time_ns, samples.driver_stamp_ns
+        )
         last = int(packet_of[-1])
         self._carry = _Carry(
             int(times[-1]),
             float(unwrapped[-1]),
-            int(timing.sensor_time_ns[last]),
-            int(driver_stamp_ns[last]),
+            int(samples.sensor_time_ns[last]),
+            int(samples.driver_stamp_ns[last]),
         )
 
     def _unwrap(

@@ -9,7 +9,8 @@ import numpy as np
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.clock import ClockEstimator, ClockReport
 from syncaudit.lidar.revolutions import RevolutionTracker
-from syncaudit.lidar.stream import PacketChunk, iter_packet_chunks
+from syncaudit.lidar.samples import PacketSamples, packet_samples
+from syncaudit.lidar.stream import iter_packet_chunks
 from syncaudit.logs import LogReader
 
 
@@ -83,16 +84,15 @@ class LidarScanner:
         )
         return cls(topic, tracker, ClockEstimator(tolerance_ns=clock_tolerance_ns))
 
-    def feed(self, chunk: PacketChunk) -> None:
-        """Add one scan message (or batch) of decoded packets."""
-        timing = chunk.timing
-        self.vendor, self.model = timing.vendor, timing.model
-        self.scans += 1
-        self.packets += timing.n_packets
-        self.modes.update(np.unique(timing.return_mode).tolist())
-        self.dual = self.dual or bool(timing.dual_return.any())
-        self.tracker.feed(timing, chunk.driver_stamp_ns)
-        self.clock.feed(chunk.driver_stamp_ns, timing.sensor_time_ns)
+    def feed(self, samples: PacketSamples, messages: int = 1) -> None:
+        """Add one scan message (or a batch of `messages` single-packet messages)."""
+        self.vendor, self.model = samples.vendor, samples.model
+        self.scans += messages
+        self.packets += samples.n_packets
+        self.modes.update(samples.return_modes)
+        self.dual = self.dual or samples.dual_return
+        self.tracker.feed(samples)
+        self.clock.feed(samples.driver_stamp_ns, samples.sensor_time_ns)
 
     def finish(self) -> LidarScan:
         """The reduced timing of everything fed."""
@@ -133,5 +133,5 @@ def scan_lidar(
         clock_tolerance_ns=clock_tolerance_ns,
     )
     for chunk in iter_packet_chunks(log, topic, start_ns, stop_ns, ouster_metadata_topic):
-        scanner.feed(chunk)
+        scanner.feed(packet_samples(chunk.timing, chunk.driver_stamp_ns))
     return scanner.finish()

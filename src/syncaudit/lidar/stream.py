@@ -156,29 +156,6 @@ def decode_ouster_message(msg: RawMessage, meta: ouster.OusterMetadata) -> Packe
     return _ouster_batch([buf], [msg.log_time_ns], meta, 0)
 
 
-def concat_chunks(chunks: list[PacketChunk]) -> PacketChunk:
-    """One chunk from consecutive ones (to feed single-packet topics in batches)."""
-    if len(chunks) == 1:
-        return chunks[0]
-    timings = [c.timing for c in chunks]
-    first = timings[0]
-    timing = PacketTiming(
-        vendor=first.vendor,
-        model=first.model,
-        sensor_time_ns=np.concatenate([t.sensor_time_ns for t in timings]),
-        block_azimuth_deg=np.concatenate([t.block_azimuth_deg for t in timings]),
-        block_time_ns=np.concatenate([t.block_time_ns for t in timings]),
-        return_mode=np.concatenate([t.return_mode for t in timings]),
-        dual_return=np.concatenate([t.dual_return for t in timings]),
-    )
-    return PacketChunk(
-        chunks[0].scan_index,
-        np.concatenate([c.log_time_ns for c in chunks]),
-        np.concatenate([c.driver_stamp_ns for c in chunks]),
-        timing,
-    )
-
-
 def _ouster_batch(
     buffers: list[NDArray[np.uint8]], times: list[int], meta: ouster.OusterMetadata, index: int
 ) -> PacketChunk:

@@ -24,7 +24,8 @@ int64 arithmetic):
   the stamp. No product byte; detected from the alternating flags. Single return only.
 
 In dual-return mode (0x39) blocks come in pairs that share azimuth and firing times.
-`PacketTiming.block_time_ns` is the block's first firing, `sensor_time_ns` the stamp itself.
+`PacketTiming.block_time_ns` is the block's first firing (VLS-128: its sequence's first
+firing, the instant its azimuth was sampled), `sensor_time_ns` the stamp itself.
 
 Azimuths are the vendor's: degrees clockwise seen from above, as in the packet. The
 per-firing azimuth is the manual's "precision azimuth": the block azimuth advanced by the
@@ -576,6 +577,11 @@ def _decode(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> _Decoded:
     sensor_ns = resolve_hour_ns(toh, host)
     first_rec = np.stack([lay.firing_ns[:, 0] for lay in layouts])[dual_index]
     block_time = sensor_ns[:, None] + first_rec
+    if model == "VLS-128":
+        # All four banks of a firing sequence carry the azimuth sampled at the sequence
+        # start, so that is the time each block's azimuth belongs to (PacketTiming).
+        seq_first = np.where(dual[:, None], 0, (np.arange(BLOCKS) // 4) * 4)
+        block_time = np.take_along_axis(block_time, seq_first, axis=1)
     # Padding blocks (VLS-128 dual) repeat the last real block of the packet.
     if not real.all():
         last_real = np.where(real, np.arange(BLOCKS), -1).max(axis=1)

@@ -1,0 +1,109 @@
+"""Per-packet timing samples: what the revolution tracker and clock estimator consume.
+
+Each packet is reduced to one (time, azimuth) sample, its first block that agrees with
+the rest of the packet, plus its sensor time stamp and driver stamp. Linear
+interpolation between consecutive packets' samples is exact to far below a nanosecond
+for real rotation-rate drift (a 0.5 % sinusoidal drift moves the angle by ~1e-6 deg
+from the chord over a 1.3 ms packet), and a block's first-firing time matches its
+azimuth on every model (on VLS-128 the later banks reuse the sequence-start azimuth).
+The reduction runs where the packets are decoded (worker processes) and shrinks what
+crosses to the parent ~10x.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.lidar.packets import PacketTiming
+
+FULL_TURN_DEG = 360.0
+MAX_PACKET_SPAN_DEG = 30.0
+"""A block further than this from its packet's first block contradicts its own packet."""
+
+
+@dataclass(frozen=True, slots=True)
+class PacketSamples:
+    """One chunk of packets reduced for timing: per-packet stamps, one sample each."""
+
+    vendor: str
+    model: str
+    sensor_time_ns: NDArray[np.int64]
+    """(n,) packet time stamps (sensor clock)."""
+    driver_stamp_ns: NDArray[np.int64]
+    """(n,) driver stamps (checkpoint 242)."""
+    sample_time_ns: NDArray[np.int64]
+    """(m,) time of each packet's sample, m <= n (packets with no valid block drop out)."""
+    sample_azimuth_deg: NDArray[np.float64]
+    """(m,) azimuth of each sample."""
+    sample_packet: NDArray[np.int64]
+    """(m,) index of the packet each sample belongs to."""
+    return_modes: frozenset[int]
+    dual_return: bool
+    outlier_blocks: int
+    """Blocks whose azimuth contradicts the rest of their packet (ignored)."""
+
+    @property
+    def n_packets(self) -> int:
+        """Packets in the chunk."""
+        return int(self.sensor_time_ns.shape[0])
+
+
+def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> PacketSamples:
+    """Reduce decoded packets to their first and last trustworthy (time, azimuth) samples.
+
+    Two samples per packet keep the packet a zero crossing falls in exactly what it is
+    with every block (a crossing between a packet's first and last block is in it).
+    """
+    azimuth = timing.block_azimuth_deg
+    n, b = azimuth.shape
+    finite = np.isfinite(azimuth)
+    first = np.argmax(finite, axis=1)
+    rows = np.arange(n)
+    span = (azimuth - azimuth[rows, first][:, None]) % FULL_TURN_DEG
+    sane = finite & ((span < MAX_PACKET_SPAN_DEG) | (span > FULL_TURN_DEG - MAX_PACKET_SPAN_DEG))
+    outliers = int(np.sum(finite & ~sane))
+    has = sane.any(axis=1)
+    last = b - 1 - np.argmax(sane[:, ::-1], axis=1)
+    pick = np.stack([first, last], axis=1)  # (n, 2)
+    times = np.take_along_axis(timing.block_time_ns, pick, axis=1).reshape(-1)
+    azimuths = np.take_along_axis(azimuth, pick, axis=1).reshape(-1)
+    packet = np.repeat(rows, 2)
+    keep = np.repeat(has, 2)
+    keep[1:] &= np.diff(times) > 0  # one block, or dual-return pairs: the first sample only
+    keep[0] &= bool(has[0]) if n else False
+    return PacketSamples(
+        vendor=timing.vendor,
+        model=timing.model,
+        sensor_time_ns=timing.sensor_time_ns,
+        driver_stamp_ns=np.asarray(driver_stamp_ns, dtype=np.int64),
+        sample_time_ns=times[keep],
+        sample_azimuth_deg=azimuths[keep],
+        sample_packet=packet[keep].astype(np.int64),
+        return_modes=frozenset(np.unique(timing.return_mode).tolist()),
+        dual_return=bool(timing.dual_return.any()),
+        outlier_blocks=outliers,
+    )
+
+
+def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
+    """One chunk from consecutive ones (single-packet topics are fed in batches)."""
+    if len(parts) == 1:
+        return parts[0]
+    offsets = np.cumsum([0] + [p.n_packets for p in parts[:-1]])
+    return PacketSamples(
+        vendor=parts[-1].vendor,
+        model=parts[-1].model,
+        sensor_time_ns=np.concatenate([p.sensor_time_ns for p in parts]),
+        driver_stamp_ns=np.concatenate([p.driver_stamp_ns for p in parts]),
+        sample_time_ns=np.concatenate([p.sample_time_ns for p in parts]),
+        sample_azimuth_deg=np.concatenate([p.sample_azimuth_deg for p in parts]),
+        sample_packet=np.concatenate(
+            [p.sample_packet + o for p, o in zip(parts, offsets, strict=True)]
+        ),
+        return_modes=frozenset().union(*(p.return_modes for p in parts)),
+        dual_return=any(p.dual_return for p in parts),
+        outlier_blocks=sum(p.outlier_blocks for p in parts),
+    )
