@@ -5,7 +5,7 @@ from __future__ import annotations
 from functools import cache
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
@@ -90,27 +90,64 @@ def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
+def _nested_names(definition: object) -> list[str]:
+    """Type names ('pkg/msg/Name') mentioned anywhere in a rosbags field definition."""
+    found: list[str] = []
+    stack: list[object] = [definition]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            if item.count("/") == 2:
+                found.append(item)
+        elif isinstance(item, tuple | list):
+            stack.extend(item)
+    return found
+
+
 class TypeRegistry:
     """Types known for one log, built as: log definitions, then project schemas, then ROS."""
 
-    def __init__(self, ros1: bool, log_types: Typesdict | None = None) -> None:
+    def __init__(self, ros1: bool, log_types: Typesdict | None = None, eager: bool = False) -> None:
+        """`eager` registers every known type at once (writers build arbitrary messages);
+        otherwise a type and what it nests are registered when first deserialised."""
         base = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-        store = get_typestore(Stores.EMPTY)
-        if log_types:
-            store.register(log_types)
-        extra = {k: v for k, v in project_types().items() if k not in store.fielddefs}
-        if extra:
-            store.register(extra)
-        rest = {k: v for k, v in base.fielddefs.items() if k not in store.fielddefs}
-        store.register(rest)
-        self.store: Typestore = store
+        available: dict[str, Any] = dict(log_types or {})
+        for source in (project_types(), base.fielddefs):
+            available.update({k: v for k, v in source.items() if k not in available})
+        self._available = available
+        self.store: Typestore = get_typestore(Stores.EMPTY)
         self.ros1 = ros1
         self.problems: tuple[str, ...] = project_schema_problems()
         """Unparseable files under schemas/, for the log to report as warnings."""
+        self._eager = eager
+        if eager:
+            self.store.register(available)
+
+    def add_types(self, types: Typesdict) -> None:
+        """Make more definitions available (registered at once when the registry is eager)."""
+        new = {k: v for k, v in types.items() if k not in self._available}
+        self._available.update(new)
+        if self._eager and new:
+            self.store.register(new)
 
     def knows(self, msgtype: str) -> bool:
         """True where a definition for `msgtype` is available."""
-        return msgtype in self.store.fielddefs
+        return msgtype in self._available
+
+    def ensure(self, msgtype: str) -> None:
+        """Register `msgtype` and every type it nests (code generation is per type, so
+        registering only what a log deserialises keeps opening a log cheap)."""
+        if msgtype in self.store.fielddefs:
+            return
+        needed: dict[str, Any] = {}
+        stack = [msgtype]
+        while stack:
+            name = stack.pop()
+            if name in needed or name in self.store.fielddefs or name not in self._available:
+                continue
+            needed[name] = self._available[name]
+            stack.extend(_nested_names(needed[name]))
+        self.store.register(needed)
 
     def deserialize(self, data: bytes | memoryview, msgtype: str, encoding: str) -> object:
         """Deserialize one message with rosbags.
@@ -128,6 +165,7 @@ class TypeRegistry:
                 f"no definition for message type {msgtype!r} in the log or in schemas/"
             )
         try:
+            self.ensure(msgtype)
             if encoding == "ros1":
                 return self.store.deserialize_ros1(data, msgtype)
             return self.store.deserialize_cdr(data, msgtype)

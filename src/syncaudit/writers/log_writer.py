@@ -394,7 +394,7 @@ tf2_msgs/msg/TFMessage)."""
 
 def writer_registry(ros1: bool) -> TypeRegistry:
     """The readers' type registry, completed for ROS 1 with `ROS1_FROM_ROS2_PACKAGES`."""
-    registry = TypeRegistry(ros1=ros1)
+    registry = TypeRegistry(ros1=ros1, eager=True)
     if ros1:
         ros2 = get_typestore(Stores.ROS2_HUMBLE)
         extra = {
@@ -403,7 +403,7 @@ def writer_registry(ros1: bool) -> TypeRegistry:
             if name.split("/")[0] in ROS1_FROM_ROS2_PACKAGES and not registry.knows(name)
         }
         if extra:
-            registry.store.register(extra)
+            registry.add_types(extra)
     return registry
 
 

@@ -28,7 +28,8 @@ def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> i
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
-            for row in cam.sync.frames.itertuples(index=False):
+            rows: Any = cam.sync.frames.itertuples(index=False)  # pandas rows are untyped
+            for row in rows:
                 t_l = _ns(row.t_l_ns)
                 stamp = t_l or _ns(row.header_stamp_ns)
                 msg = writer.new_msg(
