@@ -5,13 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from syncaudit.analysis.controller import ControllerConfig
-from syncaudit.analysis.replay import ReplayResult, replay_controller
-from syncaudit.analysis.sync import CameraSync, analyze_camera
 from syncaudit.camera.azimuth import camera_azimuth, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.topics import detect_cameras
@@ -27,6 +23,12 @@ from syncaudit.lidar.stream import (
 )
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from syncaudit.analysis.replay import ReplayResult
+    from syncaudit.analysis.sync import CameraSync
 
 SCHEMA_VERSION = 1
 LIDAR_BATCH = 256
@@ -93,6 +95,8 @@ class AuditResult:
 
     def frames(self) -> pd.DataFrame:
         """Per-frame table of every camera (what --csv writes)."""
+        import pandas as pd
+
         tables = [c.sync.frames for c in self.cameras]
         return pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
 
@@ -236,6 +240,10 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
             builders[topic].triggers.append(payload)
     if batch:
         scanner.feed(concat_samples(batch), messages=len(batch))
+    # The analysis needs pandas; importing it only now lets the workers start first.
+    from syncaudit.analysis.replay import replay_controller
+    from syncaudit.analysis.sync import analyze_camera
+
     scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
 from syncaudit.camera.extract import exposure_row, image_row, trigger_row
 from syncaudit.lidar import ouster
 from syncaudit.lidar.samples import packet_samples
@@ -71,10 +72,16 @@ def extract(plan: ExtractPlan, msg: RawMessage, log: LogReader) -> Item | None:
         return ("image", topic, image_row(msg))
     if topic in plan.exposures:
         camera, semantics = plan.exposures[topic]
-        return ("exposure", topic, exposure_row(msg, log.deserialize(msg), camera, semantics))
+        return ("exposure", topic, exposure_row(msg, _fields(msg, log), camera, semantics))
     if topic in plan.triggers:
-        return ("trigger", topic, trigger_row(msg, log.deserialize(msg), plan.triggers[topic]))
+        return ("trigger", topic, trigger_row(msg, _fields(msg, log), plan.triggers[topic]))
     return None
+
+
+def _fields(msg: RawMessage, log: LogReader) -> Any:
+    """A message's fields: by struct for the known per-frame types, else through rosbags."""
+    fast = read_fast(msg.data, msg.msgtype, msg.encoding) if msg.msgtype in FAST_READERS else None
+    return fast if fast is not None else log.deserialize(msg)
 
 
 def default_jobs() -> int:

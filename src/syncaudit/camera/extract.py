@@ -11,13 +11,14 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
 from syncaudit.logs import LogReader, RawMessage
 from syncaudit.rig import CameraConfig
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 _STAMP = struct.Struct("<iI")
 _STAMP_BE = struct.Struct(">iI")
@@ -94,7 +95,18 @@ def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
             msg.msgtype,
         )
     sent = _time_ns(m) if msg.msgtype == "builtin_interfaces/msg/Time" else _time_ns(m.time_ref)
-    return (camera, _ros1_seq(msg), msg.log_time_ns, None, None, None, sent, None, None, msg.msgtype)
+    return (
+        camera,
+        _ros1_seq(msg),
+        msg.log_time_ns,
+        None,
+        None,
+        None,
+        sent,
+        None,
+        None,
+        msg.msgtype,
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,6 +135,8 @@ class CameraTableBuilder:
 
     def build(self) -> CameraTables:
         """The camera's frame, image and trigger tables."""
+        import pandas as pd  # deferred: worker processes extract rows without pandas
+
         cam = self.camera
         images = pd.DataFrame(
             {

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 FRAME_COLUMNS: dict[str, str] = {
     "camera": "string",
@@ -32,6 +36,8 @@ TRIGGER_COLUMNS: dict[str, str] = {
 
 
 def _empty(columns: dict[str, str]) -> pd.DataFrame:
+    import pandas as pd  # deferred: worker processes never need pandas
+
     return pd.DataFrame({k: pd.Series(np.array([]), dtype=v) for k, v in columns.items()})
 
 

@@ -1,0 +1,43 @@
+"""The struct readers give exactly what rosbags gives, on every per-frame message of a log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
+from syncaudit.camera.extract import exposure_row, trigger_row
+from syncaudit.logs import open_log
+from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+
+@pytest.fixture(scope="module")
+def log_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("fast") / "log.mcap"
+    simulate_sync_log(out, SyncSimConfig(seed=81, duration_s=1.0))
+    return out
+
+
+def test_fast_rows_equal_rosbags_rows(log_path: Path) -> None:
+    checked = dict.fromkeys(FAST_READERS, 0)
+    with open_log(log_path) as log:
+        topics = [t.name for t in log.topics.values() if t.msgtype in FAST_READERS]
+        for msg in log.messages(topics):
+            fast = read_fast(msg.data, msg.msgtype, msg.encoding)
+            slow = log.deserialize(msg)
+            assert fast is not None
+            if msg.msgtype == "syncaudit_msgs/msg/TriggerEvent":
+                assert trigger_row(msg, fast, "c") == trigger_row(msg, slow, "c")
+            else:
+                for semantics in ("exposure_start", "exposure_middle", "exposure_end"):
+                    assert exposure_row(msg, fast, "c", semantics) == exposure_row(
+                        msg, slow, "c", semantics
+                    )
+            checked[msg.msgtype] += 1
+    assert all(count >= 20 for count in checked.values()), checked
+
+
+def test_no_fast_path_for_ros1_or_other_types() -> None:
+    assert read_fast(b"\x00" * 64, "syncaudit_msgs/msg/CameraExposure", "ros1") is None
+    assert read_fast(b"\x00\x01\x00\x00" + b"\x00" * 60, "sensor_msgs/msg/Image", "cdr") is None
