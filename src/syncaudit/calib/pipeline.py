@@ -1,0 +1,678 @@
+"""`calibrate_log`: method B end to end on a recorded turntable or slow-turn session.
+
+1. read the LiDARs' PointCloud2 scans and the recorded extrinsics;
+2. find stationary stops, their turntable angles (coarse registration chain, yaw search),
+   and keep distinct angular positions;
+3. per LiDAR, align overlapping scan pairs with GICP, accept/reject each by overlap,
+   error and conditioning;
+4. per LiDAR, a pose graph (gtsam, robust kernel) anchored at the common reference stop
+   puts every scan in that LiDAR's frame at the reference stop: its local map;
+5. GICP between the reference LiDAR's map and each other LiDAR's map, seeded with the
+   recorded extrinsic: the result is `reference_from_lidar`, the extrinsic calibration;
+6. validate against the recorded extrinsic.
+
+Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown rotation
+between stops (common to all LiDARs) cancels: the turntable angle is never needed, only
+estimated, for choosing stops and seeding registrations.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.calib import extrinsics as extr
+from syncaudit.calib import io, posegraph, se3, selection
+from syncaudit.calib.config import CalibConfig
+from syncaudit.calib.registration import (
+    Alignment,
+    Cloud,
+    Conditioning,
+    align,
+    backend,
+    prepare,
+    yaw_search,
+)
+from syncaudit.calib.result import (
+    AlignmentOut,
+    CalibrationResult,
+    ExtrinsicOut,
+    LidarOut,
+    Limits,
+    PairOut,
+    PoseGraphOut,
+    StopUse,
+    TransformOut,
+    VehicleStopOut,
+)
+from syncaudit.errors import NoDataError
+
+F64 = NDArray[np.float64]
+_MIN_POINTS = 100
+"""Scans with fewer points after downsampling are skipped (blinded or empty sensor)."""
+
+
+@dataclass
+class _Scan:
+    """A scan kept in memory: points at the finest voxel used (float32), a coarse cloud."""
+
+    stamp_ns: int
+    points_m: NDArray[np.float32]
+    coarse: Cloud
+
+
+@dataclass
+class _Lidar:
+    """Working state of one LiDAR through the pipeline."""
+
+    topic: str
+    frame_id: str
+    scans: list[_Scan]
+    up: F64
+    stop_scan: dict[int, int] = field(default_factory=dict)
+    angles: dict[int, float | None] = field(default_factory=dict)
+    chain: dict[int, F64] = field(default_factory=dict)
+    dropped: dict[int, str] = field(default_factory=dict)
+    kept: list[int] = field(default_factory=list)
+    fine: dict[int, Cloud] = field(default_factory=dict)
+    hfov_deg: float | None = None
+    pairs: list[PairOut] = field(default_factory=list)
+    graph: PoseGraphOut | None = None
+    poses: dict[int, F64] = field(default_factory=dict)
+    map_cloud: Cloud | None = None
+    turn_axis: F64 | None = None
+    reason: str | None = None
+
+
+class _Timer:
+    """Wall-clock seconds per named stage."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
+
+
+def _library_versions() -> dict[str, str]:
+    out = {}
+    for dist in ("small_gicp", "gtsam"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "unknown"
+    return out
+
+
+def _choose_topics(path: Path, config: CalibConfig) -> list[str]:
+    available = io.pointcloud_topics(path)
+    if config.lidar_topics is not None:
+        missing = [t for t in config.lidar_topics if t not in available]
+        if missing:
+            raise NoDataError(f"{path}: no PointCloud2 topic {', '.join(missing)}")
+        topics = list(config.lidar_topics)
+    else:
+        topics = sorted(available)
+    if len(topics) < 2:
+        found = ", ".join(topics) or "none"
+        raise NoDataError(
+            f"{path}: calibration needs PointCloud2 from two or more LiDARs (found {found})"
+        )
+    if config.reference_topic is not None:
+        if config.reference_topic not in topics:
+            raise NoDataError(
+                f"{path}: reference topic {config.reference_topic} is not a LiDAR topic"
+            )
+        topics.remove(config.reference_topic)
+        topics.insert(0, config.reference_topic)
+    return topics
+
+
+def _read(
+    path: Path, topics: list[str], config: CalibConfig, notes: list[str]
+) -> dict[str, tuple[str, list[_Scan]]]:
+    """Scans per topic, downsampled on arrival (only voxel centroids are ever used)."""
+    sg = backend()
+    reg = config.registration
+    frames: dict[str, str] = {}
+    scans: dict[str, list[_Scan]] = {t: [] for t in topics}
+    skipped = 0
+    for scan in io.iter_scans(path, topics):
+        frames.setdefault(scan.topic, scan.frame_id)
+        if scan.frame_id != frames[scan.topic]:
+            raise NoDataError(
+                f"{path}: {scan.topic} changes frame id ({frames[scan.topic]} -> {scan.frame_id})"
+            )
+        cloud = sg.voxelgrid_sampling(
+            sg.PointCloud(np.ascontiguousarray(scan.points_m, dtype=np.float64)),
+            min(reg.voxel_m, config.map_to_map.voxel_m),
+            num_threads=1,
+        )
+        points = np.asarray(cloud.points())[:, :3].astype(np.float32)
+        if points.shape[0] < _MIN_POINTS:
+            skipped += 1
+            continue
+        coarse = prepare(points, reg.coarse_voxel_m, 20, reg.num_threads)
+        scans[scan.topic].append(_Scan(scan.stamp_ns, points, coarse))
+    if skipped:
+        notes.append(f"{skipped} scan(s) with fewer than {_MIN_POINTS} points skipped")
+    for topic in topics:
+        if not scans[topic]:
+            raise NoDataError(f"{path}: no usable PointCloud2 scans on {topic}")
+        scans[topic].sort(key=lambda s: s.stamp_ns)
+    return {t: (frames[t], scans[t]) for t in topics}
+
+
+def _recorded(path: Path, config: CalibConfig, frames: list[str]) -> extr.RecordedExtrinsics:
+    if config.extrinsics_file is not None:
+        return extr.from_file(config.extrinsics_file, frames)
+    edges = io.read_static_transforms(path, config.tf_topic)
+    if not edges:
+        raise NoDataError(
+            f"{path}: no recorded extrinsics ({config.tf_topic} missing or empty); "
+            "pass an extrinsics file"
+        )
+    return extr.from_static_transforms(edges, frames, f"{path.name}:{config.tf_topic}")
+
+
+def _find_stops(
+    lidars: list[_Lidar], config: CalibConfig, notes: list[str]
+) -> list[selection.VehicleStop]:
+    """Static runs per LiDAR, merged across LiDARs into vehicle stops."""
+    sel = config.selection
+    runs: list[selection.Run] = []
+    for lidar in lidars:
+        runs += selection.static_runs(
+            lidar.topic,
+            [s.stamp_ns for s in lidar.scans],
+            [s.coarse for s in lidar.scans],
+            min_scans=sel.min_static_scans,
+            max_rotation_deg=sel.static_rotation_deg,
+            max_translation_m=sel.static_translation_m,
+            max_gap_ns=round(sel.max_static_gap_s * 1e9),
+            min_translation_information=config.registration.min_translation_information,
+            min_rotation_information=config.registration.min_rotation_information,
+            threads=config.registration.num_threads,
+        )
+    if not runs:
+        notes.append(
+            "no stationary periods found (no consecutive scans without motion): "
+            "every scan is treated as one stop"
+        )
+        for lidar in lidars:
+            runs += [
+                selection.Run(lidar.topic, (i,), s.stamp_ns, s.stamp_ns)
+                for i, s in enumerate(lidar.scans)
+            ]
+    else:
+        moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
+        if moving:
+            notes.append(f"{moving} scan(s) taken while moving (or isolated) were not used")
+    tolerance_ns = round(sel.stop_match_tolerance_s * 1e9)
+    stops = selection.group_stops(runs, tolerance_ns)
+    for stop in stops:
+        for topic, run in stop.runs.items():
+            lidar = next(lidar for lidar in lidars if lidar.topic == topic)
+            lidar.stop_scan[stop.index] = run.representative
+    return stops
+
+
+def _reference_stop(
+    stops: list[selection.VehicleStop], lidars: list[_Lidar], config: CalibConfig
+) -> int:
+    topics = {lidar.topic for lidar in lidars}
+    if config.selection.reference_stop is not None:
+        ref = config.selection.reference_stop
+        if ref >= len(stops):
+            raise NoDataError(f"reference stop {ref} does not exist (found {len(stops)} stops)")
+        if set(stops[ref].runs) != topics:
+            raise NoDataError(f"reference stop {ref} lacks a static scan of every LiDAR")
+        return ref
+    for stop in stops:
+        if set(stop.runs) == topics:
+            return stop.index
+    raise NoDataError(
+        "no stop where every LiDAR has a static scan (needed as the common reference)"
+    )
+
+
+def _vehicle_cloud(
+    lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtrinsics, config: CalibConfig
+) -> Cloud:
+    """All LiDARs' scans at one stop in the base frame (recorded extrinsics), coarse voxels."""
+    reg = config.registration
+    parts = [
+        se3.apply(
+            recorded.base_from_frame[lidar.frame_id],
+            lidar.scans[lidar.stop_scan[stop]].coarse.points_m,
+        )
+        for lidar in lidars
+        if stop in lidar.stop_scan
+    ]
+    return prepare(np.concatenate(parts), reg.coarse_voxel_m, 20, reg.num_threads)
+
+
+def _angular_chain(
+    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, reference: int, config: CalibConfig
+) -> None:
+    """Coarse chain of the vehicle's turns between consecutive stops.
+
+    The turn is unknown but common to every LiDAR, so it is estimated once from all
+    LiDARs' scans merged in the base frame (through the recorded extrinsics): together
+    they see far more than any single LiDAR, which may face one featureless wall. Each
+    LiDAR's relative poses (only seeds for its own fine alignments) follow by carrying
+    the turn into its frame, and every stop gets its turntable angle.
+    """
+    reg = config.registration
+    order = sorted({k for lidar in lidars for k in lidar.stop_scan})
+    clouds = {k: _vehicle_cloud(lidars, k, recorded, config) for k in order}
+    segments: list[dict[int, F64]] = [{order[0]: np.eye(4)}]
+    for a, b in itertools.pairwise(order):
+        _yaw, found = yaw_search(
+            [(clouds[a], clouds[b], np.eye(4))],
+            step_deg=reg.yaw_search_step_deg,
+            max_step_deg=reg.max_step_deg,
+            max_correspondence_m=reg.coarse_max_correspondence_m,
+            overlap_distance_m=reg.coarse_voxel_m,
+            threads=reg.num_threads,
+        )
+        turn, fit = found[0]
+        if fit.overlap >= reg.min_overlap:
+            segments[-1][b] = segments[-1][a] @ turn
+        else:
+            segments.append({b: np.eye(4)})
+    home = next(seg for seg in segments if reference in seg)
+    ref_inv = se3.invert(home[reference])
+    up = np.array([0.0, 0.0, 1.0])
+    for lidar in lidars:
+        base = recorded.base_from_frame[lidar.frame_id]
+        base_inv = se3.invert(base)
+        for k in sorted(lidar.stop_scan):
+            if k in home:
+                motion = ref_inv @ home[k]
+                lidar.chain[k] = base_inv @ motion @ base
+                lidar.angles[k] = selection.signed_angle_deg(motion, up)
+            else:
+                lidar.angles[k] = None
+
+
+def _strength(cond: Conditioning) -> float:
+    return min(cond.translation_information, cond.rotation_information)
+
+
+def _well_conditioned(cond: Conditioning, config: CalibConfig) -> bool:
+    reg = config.registration
+    return (
+        cond.translation_information >= reg.min_translation_information
+        and cond.rotation_information >= reg.min_rotation_information
+    )
+
+
+def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
+    reg = config.registration
+    return align(
+        lidar.fine[a],
+        lidar.fine[b],
+        initial,
+        reg.correspondence_stages_m,
+        overlap_distance_m=reg.overlap_distance_m,
+        min_overlap=reg.min_overlap,
+        max_rmse_m=reg.max_rmse_m,
+        min_translation_information=reg.min_translation_information,
+        min_rotation_information=reg.min_rotation_information,
+        max_iterations=reg.max_iterations,
+        threads=reg.num_threads,
+    )
+
+
+def _edge(a: int, b: int, alignment: Alignment) -> posegraph.Edge:
+    return posegraph.Edge(
+        a,
+        b,
+        alignment.target_from_source,
+        alignment.after.hessian,
+        _strength(alignment.after.conditioning),
+    )
+
+
+def _solve(
+    lidar: _Lidar,
+    reference: int,
+    nodes: list[int],
+    edges: list[posegraph.Edge],
+    config: CalibConfig,
+) -> posegraph.PoseGraphSolution:
+    """Pose graph over `nodes`; outliers are dropped and the graph re-solved without them
+    (when every stop stays connected), so the robust kernel's leftover pull is gone too."""
+    axis = None
+    if config.pose_graph.motion == "planar":
+        axis = posegraph.turn_axis(edges, lidar.up)
+        lidar.turn_axis = axis
+    initial = posegraph.spanning_poses(reference, edges)
+    solution = posegraph.optimise(reference, initial, edges, config.pose_graph, axis)
+    outliers = {(r.first, r.second) for r in solution.residuals if r.outlier}
+    if not outliers:
+        return solution
+    clean = [e for e in edges if (e.first, e.second) not in outliers]
+    if posegraph.connected(nodes, clean, reference) != set(nodes):
+        return solution
+    if axis is not None:
+        axis = posegraph.turn_axis(clean, lidar.up)
+        lidar.turn_axis = axis
+    again = posegraph.optimise(reference, initial, clean, config.pose_graph, axis)
+    return posegraph.PoseGraphSolution(
+        again.poses,
+        posegraph.residuals(edges, again.poses, config.pose_graph, axis),
+        again.error_before,
+        again.error_after,
+        again.iterations,
+    )
+
+
+_REALIGN_ROTATION_DEG = 0.01
+_REALIGN_TRANSLATION_M = 0.002
+"""A pair is aligned again, seeded from the pose graph, when its result and the graph
+disagree by more than this: GICP may have stopped early along a weak direction."""
+
+
+def _graph_round(
+    lidar: _Lidar,
+    reference: int,
+    candidates: list[tuple[int, int, float, float]],
+    results: dict[tuple[int, int], Alignment],
+    config: CalibConfig,
+) -> tuple[list[int], posegraph.PoseGraphSolution | None]:
+    """Accepted edges -> stops connected to the reference -> pose graph (if enough stops)."""
+    edges = [
+        _edge(a, b, results[(a, b)]) for a, b, _s, _p in candidates if results[(a, b)].accepted
+    ]
+    reachable = posegraph.connected(lidar.kept, edges, reference)
+    nodes = sorted(reachable)
+    if len(nodes) < config.selection.min_stops:
+        return nodes, None
+    edges = [e for e in edges if e.first in reachable and e.second in reachable]
+    return nodes, _solve(lidar, reference, nodes, edges, config)
+
+
+def _align_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
+    """Steps 2-4 for one LiDAR: choose stops, align pairs, pose graph, local map."""
+    sel, reg = config.selection, config.registration
+    order = sorted(lidar.stop_scan)
+    choice = selection.choose_stops(order, lidar.angles, reference, sel.min_step_deg)
+    lidar.dropped = dict(choice.dropped)
+    lidar.kept = choice.kept
+    for k in lidar.kept:
+        lidar.fine[k] = prepare(
+            lidar.scans[lidar.stop_scan[k]].points_m, reg.voxel_m, reg.neighbours, reg.num_threads
+        )
+    lidar.hfov_deg = selection.horizontal_fov_deg(lidar.fine[reference].points_m, lidar.up)
+    candidates = selection.candidate_pairs(
+        lidar.kept, lidar.angles, lidar.hfov_deg, sel.min_predicted_overlap, sel.max_pairs_per_scan
+    )
+    # Angularly adjacent pairs first; their fine results re-seed the chain for the rest.
+    candidates.sort(key=lambda c: c[2])
+    adjacent = {(a, b) for a, b in zip(lidar.kept, lidar.kept[1:], strict=False)}
+    results: dict[tuple[int, int], Alignment] = {}
+    for a, b, _sep, _pred in candidates:
+        if (a, b) in adjacent:
+            chain_init = se3.invert(lidar.chain[a]) @ lidar.chain[b]
+            results[(a, b)] = _align_pair(lidar, a, b, chain_init, config)
+    refined = posegraph.spanning_poses(
+        reference, [_edge(a, b, r) for (a, b), r in results.items() if r.accepted]
+    )
+    seed = {k: refined.get(k, lidar.chain[k]) for k in lidar.kept}
+    for a, b, _sep, _pred in candidates:
+        if (a, b) not in results:
+            results[(a, b)] = _align_pair(lidar, a, b, se3.invert(seed[a]) @ seed[b], config)
+    nodes, solution = _graph_round(lidar, reference, candidates, results, config)
+    if solution is not None:
+        # One refinement round: pairs that disagree with the graph start again from it.
+        realigned = False
+        for (a, b), res in list(results.items()):
+            if a not in solution.poses or b not in solution.poses:
+                continue
+            predicted = se3.invert(solution.poses[a]) @ solution.poses[b]
+            rot_deg, trans_m = se3.transform_difference(res.target_from_source, predicted)
+            if rot_deg > _REALIGN_ROTATION_DEG or trans_m > _REALIGN_TRANSLATION_M:
+                results[(a, b)] = _align_pair(lidar, a, b, predicted, config)
+                realigned = True
+        if realigned:
+            nodes, solution = _graph_round(lidar, reference, candidates, results, config)
+    for k in lidar.kept:
+        if k not in nodes:
+            lidar.dropped[k] = "no accepted alignment connects it to the reference stop"
+    residuals: dict[tuple[int, int], posegraph.EdgeResidual] = {}
+    if solution is not None:
+        residuals = {(r.first, r.second): r for r in solution.residuals}
+        lidar.poses = solution.poses
+        lidar.graph = PoseGraphOut(
+            nodes=len(nodes),
+            edges=len(solution.residuals),
+            outlier_edges=sum(1 for r in solution.residuals if r.outlier),
+            error_before=solution.error_before,
+            error_after=solution.error_after,
+            iterations=solution.iterations,
+        )
+        points = np.concatenate([se3.apply(lidar.poses[k], lidar.fine[k].points_m) for k in nodes])
+        mc = config.map_to_map
+        lidar.map_cloud = prepare(points, mc.voxel_m, mc.neighbours, reg.num_threads)
+    else:
+        rejected = [r.reason for r in results.values() if not r.accepted and r.reason]
+        why = f"; e.g. {rejected[0]}" if rejected else ""
+        lidar.reason = (
+            f"{lidar.topic}: only {len(nodes)} of {len(order)} stops could be aligned to the "
+            f"reference stop ({len(rejected)} of {len(results)} pair alignments "
+            f"rejected{why}); need {sel.min_stops}"
+        )
+        lidar.dropped.setdefault(reference, "too few stops aligned to it")
+    for a, b, sep, pred in candidates:
+        graph_res = residuals.get((a, b))
+        lidar.pairs.append(
+            PairOut(
+                first_stop=a,
+                second_stop=b,
+                separation_deg=sep,
+                predicted_overlap=pred,
+                alignment=AlignmentOut.of(results[(a, b)]),
+                graph_residual_rotation_deg=None if graph_res is None else graph_res.rotation_deg,
+                graph_residual_translation_cm=(
+                    None if graph_res is None else graph_res.translation_cm
+                ),
+                graph_outlier=None if graph_res is None else graph_res.outlier,
+            )
+        )
+
+
+def _consistency(
+    ref: _Lidar, other: _Lidar, ref_from_other: F64
+) -> tuple[float | None, float | None]:
+    """Turn-angle disagreement and hand-eye rotation residual over common stops (deg)."""
+    common = sorted(set(ref.poses) & set(other.poses))
+    if len(common) < 2:
+        return None, None
+    angle_diff = 0.0
+    hand_eye = 0.0
+    inv = se3.invert(ref_from_other)
+    for k in common:
+        a, b = ref.poses[k], other.poses[k]
+        angle_diff = max(
+            angle_diff, abs(se3.rotation_angle_deg(a[:3, :3]) - se3.rotation_angle_deg(b[:3, :3]))
+        )
+        predicted = ref_from_other @ b @ inv
+        hand_eye = max(hand_eye, se3.rotation_angle_deg(a[:3, :3].T @ predicted[:3, :3]))
+    return angle_diff, hand_eye
+
+
+def _extrinsic(
+    ref: _Lidar, other: _Lidar, recorded: extr.RecordedExtrinsics, config: CalibConfig
+) -> ExtrinsicOut:
+    """Step 5 and 6 for one LiDAR against the reference LiDAR."""
+    rec = recorded.relative(ref.frame_id, other.frame_id)
+    base = {
+        "topic": other.topic,
+        "frame_id": other.frame_id,
+        "reference_topic": ref.topic,
+        "reference_frame_id": ref.frame_id,
+        "recorded": TransformOut.of(rec),
+    }
+    empty = {
+        "result": None,
+        "rotation_diff_deg": None,
+        "translation_diff_cm": None,
+        "diff_rpy_deg": None,
+        "diff_xyz_cm": None,
+        "passed": False,
+        "stop_angle_disagreement_deg": None,
+        "hand_eye_rotation_residual_deg": None,
+    }
+    if ref.map_cloud is None or other.map_cloud is None:
+        why = ref.reason if ref.map_cloud is None else other.reason
+        return ExtrinsicOut(**base, **empty, calibrated=False, reason=why, map_to_map=None)
+    mc = config.map_to_map
+    m2m = align(
+        ref.map_cloud,
+        other.map_cloud,
+        rec,
+        mc.correspondence_stages_m,
+        overlap_distance_m=mc.overlap_distance_m,
+        min_overlap=mc.min_overlap,
+        max_rmse_m=mc.max_rmse_m,
+        min_translation_information=mc.min_translation_information,
+        min_rotation_information=mc.min_rotation_information,
+        max_iterations=config.registration.max_iterations,
+        threads=config.registration.num_threads,
+    )
+    m2m_out = AlignmentOut.of(m2m)
+    if not m2m.accepted:
+        reason = f"{other.topic}: map-to-map alignment with {ref.topic} rejected: {m2m.reason}"
+        return ExtrinsicOut(**base, **empty, calibrated=False, reason=reason, map_to_map=m2m_out)
+    cal = m2m.target_from_source
+    diff = se3.invert(rec) @ cal
+    rot_deg, trans_m = se3.transform_difference(rec, cal)
+    roll, pitch, yaw = (math.degrees(v) for v in se3.matrix_to_rpy(diff[:3, :3]))
+    dx, dy, dz = (float(v) * 100.0 for v in diff[:3, 3])
+    angle_diff, hand_eye = _consistency(ref, other, cal)
+    limits = config.validation
+    return ExtrinsicOut(
+        **base,
+        calibrated=True,
+        reason=None,
+        result=TransformOut.of(cal),
+        rotation_diff_deg=rot_deg,
+        translation_diff_cm=trans_m * 100.0,
+        diff_rpy_deg=(roll, pitch, yaw),
+        diff_xyz_cm=(dx, dy, dz),
+        passed=rot_deg <= limits.max_rotation_deg and trans_m * 100.0 <= limits.max_translation_cm,
+        map_to_map=m2m_out,
+        stop_angle_disagreement_deg=angle_diff,
+        hand_eye_rotation_residual_deg=hand_eye,
+    )
+
+
+def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
+    uses = []
+    for stop in stops:
+        run = stop.runs.get(lidar.topic)
+        if run is None:
+            continue
+        used = stop.index in lidar.poses
+        reason = None if used else lidar.dropped.get(stop.index, "not aligned")
+        uses.append(
+            StopUse(
+                stop=stop.index,
+                stamp_ns=lidar.scans[run.representative].stamp_ns,
+                static_scans=len(run.indices),
+                angle_deg=lidar.angles.get(stop.index),
+                used=used,
+                reason=reason,
+            )
+        )
+    return LidarOut(
+        topic=lidar.topic,
+        frame_id=lidar.frame_id,
+        scans=len(lidar.scans),
+        horizontal_fov_deg=lidar.hfov_deg,
+        stops=uses,
+        pairs=lidar.pairs,
+        pose_graph=lidar.graph,
+        map_points=0 if lidar.map_cloud is None else lidar.map_cloud.size,
+        aligned=lidar.map_cloud is not None,
+        reason=lidar.reason,
+    )
+
+
+def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
+    """Calibrate the extrinsics between the log's LiDARs and validate the recorded ones."""
+    path = Path(path)
+    backend()
+    posegraph.backend()
+    timer = _Timer()
+    notes: list[str] = []
+    with timer.stage("read"):
+        topics = _choose_topics(path, config)
+        read = _read(path, topics, config, notes)
+        recorded = _recorded(path, config, [read[t][0] for t in topics])
+    lidars = []
+    for topic in topics:
+        frame, scans = read[topic]
+        up = recorded.base_from_frame[frame][:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        lidars.append(_Lidar(topic=topic, frame_id=frame, scans=scans, up=up))
+    with timer.stage("stops"):
+        stops = _find_stops(lidars, config, notes)
+        for lidar in lidars:
+            if len(lidar.stop_scan) < config.selection.min_stops:
+                raise NoDataError(
+                    f"{path}: {lidar.topic} has {len(lidar.stop_scan)} stop(s); calibration "
+                    f"needs at least {config.selection.min_stops}"
+                )
+        reference = _reference_stop(stops, lidars, config)
+    with timer.stage("turn_chain"):
+        _angular_chain(lidars, recorded, reference, config)
+    with timer.stage("align_lidars"):
+        for lidar in lidars:
+            _align_lidar(lidar, reference, config)
+    with timer.stage("map_to_map"):
+        extrinsics = [_extrinsic(lidars[0], other, recorded, config) for other in lidars[1:]]
+    failures = [e.reason for e in extrinsics if not e.calibrated and e.reason]
+    calibratable = not failures
+    timer.seconds["total"] = sum(timer.seconds.values())
+    return CalibrationResult(
+        log=str(path),
+        calibratable=calibratable,
+        reason=None if calibratable else "not calibratable: " + "; ".join(dict.fromkeys(failures)),
+        passed=calibratable and all(e.passed for e in extrinsics),
+        reference_topic=lidars[0].topic,
+        reference_frame_id=lidars[0].frame_id,
+        base_frame=recorded.base_frame,
+        extrinsics_source=recorded.source,
+        reference_stop=reference,
+        limits=Limits(
+            max_rotation_deg=config.validation.max_rotation_deg,
+            max_translation_cm=config.validation.max_translation_cm,
+        ),
+        stops=[
+            VehicleStopOut(
+                index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs)
+            )
+            for s in stops
+        ],
+        lidars=[_lidar_out(lidar, stops) for lidar in lidars],
+        extrinsics=extrinsics,
+        notes=notes,
+        timings_s=dict(timer.seconds),
+        libraries=_library_versions(),
+    )

@@ -1,0 +1,284 @@
+"""Scan registration with small_gicp: preprocessing, GICP, overlap/error and degeneracy tests.
+
+small_gicp does the work (voxel grid, covariances, KD-tree, GICP); this module decides
+whether a result can be trusted: how much of the source overlaps the target, the final
+point-to-plane error, and whether the eigenvalues of the point-to-plane Hessian leave a
+direction unconstrained (a degenerate alignment is flagged, never trusted).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.calib import se3
+from syncaudit.errors import ConfigError
+
+F64 = NDArray[np.float64]
+_ROTATION_EPS_RAD = 1e-4
+_TRANSLATION_EPS_M = 1e-4
+"""GICP stops when an update is below these (0.006 deg, 0.1 mm): finer limits only make
+it oscillate between correspondence sets without changing the result measurably."""
+
+
+def backend() -> Any:
+    """The small_gicp module, or a one-line ConfigError naming the extra to install."""
+    try:
+        import small_gicp
+    except ImportError:
+        raise ConfigError(
+            "LiDAR calibration needs the optional extra: pip install 'syncaudit[calib]' "
+            "(small_gicp is missing)"
+        ) from None
+    return small_gicp
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """A voxel-downsampled cloud ready for GICP: points, normals, covariances and KD-tree."""
+
+    points_m: F64
+    normals: F64
+    gicp: Any
+    tree: Any
+    voxel_m: float
+
+    @property
+    def size(self) -> int:
+        """Number of points."""
+        return int(self.points_m.shape[0])
+
+
+def prepare(points_m: NDArray[Any], voxel_m: float, neighbours: int, threads: int) -> Cloud:
+    """Downsample (single-threaded: deterministic), then estimate normals and covariances."""
+    sg = backend()
+    raw = np.ascontiguousarray(points_m, dtype=np.float64)
+    cloud = sg.voxelgrid_sampling(sg.PointCloud(raw), voxel_m, num_threads=1)
+    tree = sg.KdTree(cloud, num_threads=threads)
+    sg.estimate_normals_covariances(cloud, tree=tree, num_neighbors=neighbours, num_threads=threads)
+    points = np.asarray(cloud.points())[:, :3].copy()
+    normals = np.asarray(cloud.normals())[:, :3].copy()
+    return Cloud(points_m=points, normals=normals, gicp=cloud, tree=tree, voxel_m=voxel_m)
+
+
+@dataclass(frozen=True)
+class Conditioning:
+    """Eigen-analysis of the point-to-plane Hessian of the overlapping points.
+
+    The translation block is sum(n n^T) over the correspondences (n: target normal in the
+    source frame), the rotation block sum(m m^T) with m = (p x n) / |p| (p: source point,
+    so rotation is about the source LiDAR), both divided by the number of correspondences. Their smallest
+    eigenvalue is the mean squared constraint a point puts on the weakest direction: 1 for
+    a direction every point pins down, near 0 for one nothing constrains (sliding along a
+    lone wall, turning above bare ground).
+    """
+
+    translation_information: float
+    rotation_information: float
+    weakest_translation: tuple[float, float, float]
+    weakest_rotation_axis: tuple[float, float, float]
+
+    def describe(self) -> str:
+        """The weaker of the two blocks as text."""
+        t, r = self.weakest_translation, self.weakest_rotation_axis
+        return (
+            f"translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}): "
+            f"{self.translation_information:.4f}; rotation about "
+            f"({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}): {self.rotation_information:.4f}"
+        )
+
+
+_NO_CONDITIONING = Conditioning(0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def _weakest(rows: F64) -> tuple[float, tuple[float, float, float]]:
+    """Smallest eigenvalue of mean(rows^T rows) and its eigenvector (sign-normalised)."""
+    hessian = rows.T @ rows / max(rows.shape[0], 1)
+    values, vectors = np.linalg.eigh(hessian)
+    vec = vectors[:, 0]
+    vec = vec if vec[int(np.argmax(np.abs(vec)))] >= 0 else -vec
+    return max(float(values[0]), 0.0), (float(vec[0]), float(vec[1]), float(vec[2]))
+
+
+@dataclass(frozen=True)
+class Fit:
+    """How well a transformed source lies on the target, and how well it is constrained."""
+
+    overlap: float
+    """Fraction of source points with a target point within the overlap distance."""
+    rmse_m: float
+    """Point-to-plane RMS distance of those overlapping points (inf when none)."""
+    conditioning: Conditioning
+    hessian: F64
+    """Mean point-to-plane Hessian per correspondence, 6x6 over a perturbation
+    [rotation (rad), translation (m)] of the source in its own frame (gtsam's Pose3
+    tangent), so an edge's information in the pose graph is `hessian / sigma^2`."""
+
+
+def evaluate(
+    target: Cloud, source: Cloud, target_from_source: F64, distance_m: float, threads: int
+) -> Fit:
+    """Overlap, point-to-plane RMSE and conditioning of `source` moved by `target_from_source`."""
+    if source.size == 0 or target.size == 0:
+        return Fit(0.0, math.inf, _NO_CONDITIONING, np.zeros((6, 6)))
+    moved = se3.apply(target_from_source, source.points_m)
+    idx, sq = target.tree.batch_nearest_neighbor_search(moved, num_threads=threads)
+    idx = np.asarray(idx, dtype=np.int64)
+    dist = np.sqrt(np.asarray(sq, dtype=np.float64))
+    inlier = dist <= distance_m
+    overlap = float(inlier.mean())
+    normals = target.normals[idx[inlier]]
+    has_normal = np.linalg.norm(normals, axis=1) > 0.5
+    if has_normal.sum() < 6:
+        return Fit(overlap, math.inf, _NO_CONDITIONING, np.zeros((6, 6)))
+    normals = normals[has_normal]
+    matched = target.points_m[idx[inlier][has_normal]]
+    residual = np.einsum("ij,ij->i", moved[inlier][has_normal] - matched, normals)
+    # Jacobian of each residual w.r.t. a body-frame perturbation of the source pose.
+    points = source.points_m[inlier][has_normal]
+    normals_src = normals @ target_from_source[:3, :3]  # rows: R^T n
+    jacobian = np.hstack([np.cross(points, normals_src), normals_src])
+    hessian = jacobian.T @ jacobian / jacobian.shape[0]
+    lever_len = np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-6)
+    t_info, t_dir = _weakest(normals_src)
+    r_info, r_axis = _weakest(jacobian[:, :3] / lever_len)
+    return Fit(
+        overlap,
+        float(np.sqrt(np.mean(residual**2))),
+        Conditioning(t_info, r_info, t_dir, r_axis),
+        hessian,
+    )
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """One registration with its before/after quality and the accept/reject verdict."""
+
+    target_from_source: F64
+    converged: bool
+    iterations: int
+    before: Fit
+    after: Fit
+    accepted: bool
+    reason: str | None
+
+
+def align(
+    target: Cloud,
+    source: Cloud,
+    initial: F64,
+    max_correspondences_m: tuple[float, ...],
+    *,
+    overlap_distance_m: float,
+    min_overlap: float,
+    max_rmse_m: float,
+    min_translation_information: float,
+    min_rotation_information: float,
+    max_iterations: int,
+    threads: int,
+) -> Alignment:
+    """Coarse-to-fine GICP from `initial`, then the overlap, error and degeneracy tests."""
+    sg = backend()
+    before = evaluate(target, source, initial, overlap_distance_m, threads)
+    transform = np.asarray(initial, dtype=np.float64)
+    converged, iterations = False, 0
+    result: Any = None
+    for max_corr in max_correspondences_m:
+        result = sg.align(
+            target.gicp,
+            source.gicp,
+            target.tree,
+            init_T_target_source=transform,
+            registration_type="GICP",
+            max_correspondence_distance=max_corr,
+            num_threads=threads,
+            max_iterations=max_iterations,
+            rotation_epsilon=_ROTATION_EPS_RAD,
+            translation_epsilon=_TRANSLATION_EPS_M,
+        )
+        transform = np.asarray(result.T_target_source, dtype=np.float64)
+        converged = bool(result.converged)
+        iterations += int(result.iterations)
+    after = evaluate(target, source, transform, overlap_distance_m, threads)
+    cond = after.conditioning
+    reason = None
+    if after.overlap < min_overlap:
+        reason = f"overlap {after.overlap:.0%} < {min_overlap:.0%}"
+    elif after.rmse_m > max_rmse_m:
+        reason = f"error {after.rmse_m * 100:.1f} cm > {max_rmse_m * 100:.1f} cm"
+    elif cond.translation_information < min_translation_information:
+        t = cond.weakest_translation
+        reason = (
+            f"degenerate: translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) barely "
+            f"constrained ({cond.translation_information:.4f} < {min_translation_information})"
+        )
+    elif cond.rotation_information < min_rotation_information:
+        r = cond.weakest_rotation_axis
+        reason = (
+            f"degenerate: rotation about ({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}) barely "
+            f"constrained ({cond.rotation_information:.4f} < {min_rotation_information})"
+        )
+    return Alignment(
+        target_from_source=transform,
+        converged=converged,
+        iterations=iterations,
+        before=before,
+        after=after,
+        accepted=reason is None,
+        reason=reason,
+    )
+
+
+def yaw_search(
+    pairs: list[tuple[Cloud, Cloud, F64]],
+    *,
+    step_deg: float,
+    max_step_deg: float,
+    max_correspondence_m: float,
+    overlap_distance_m: float,
+    threads: int,
+) -> tuple[float, list[tuple[F64, Fit]]]:
+    """Vehicle turn between two stops by a search over yaw hypotheses, scored jointly.
+
+    `pairs` holds, per LiDAR, (scan at the first stop, scan at the second, recorded
+    base_from_lidar). The turn is unknown but the same for every LiDAR, and GICP only
+    converges from a few degrees away, so each hypothesis seeds a coarse GICP per LiDAR
+    (rotation about the base's z axis, carried into the LiDAR frame by the recorded
+    extrinsic) and the hypothesis with the largest summed overlap wins: a LiDAR facing a
+    symmetric view cannot pick a wrong turn on its own. Returns (yaw_deg, per-LiDAR
+    (first_from_second, coarse fit)).
+    """
+    sg = backend()
+    best: tuple[float, float, list[tuple[F64, Fit]]] = (0.0, -1.0, [])
+    n = max(1, math.floor(max_step_deg / step_deg))
+    for k in range(-n, n + 1):
+        yaw_deg = k * step_deg
+        if yaw_deg >= 180.0 and -n * step_deg <= -180.0:
+            continue  # +180 and -180 are the same hypothesis
+        turn = np.eye(4)
+        turn[:3, :3] = se3.rot_z(math.radians(yaw_deg))
+        found: list[tuple[F64, Fit]] = []
+        for target, source, base_from_lidar in pairs:
+            init = se3.invert(base_from_lidar) @ turn @ base_from_lidar
+            result = sg.align(
+                target.gicp,
+                source.gicp,
+                target.tree,
+                init_T_target_source=init,
+                registration_type="GICP",
+                max_correspondence_distance=max_correspondence_m,
+                num_threads=threads,
+                max_iterations=20,
+            )
+            transform = np.asarray(result.T_target_source, dtype=np.float64)
+            found.append(
+                (transform, evaluate(target, source, transform, overlap_distance_m, threads))
+            )
+        score = sum(fit.overlap for _, fit in found)
+        if score > best[1]:
+            best = (yaw_deg, score, found)
+    return best[0], best[2]

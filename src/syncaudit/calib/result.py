@@ -1,0 +1,235 @@
+"""Result of a calibration run: what was used, every alignment's verdict, the extrinsics.
+
+Plain pydantic models so the result serialises to JSON as is (`to_json_dict`).
+Infinite errors (nothing overlapped) are stored as null.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict
+
+from syncaudit.calib import se3
+from syncaudit.calib.registration import Alignment, Conditioning, Fit
+from syncaudit.calib.se3 import Mat
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(frozen=True)
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+class TransformOut(_Out):
+    """A rigid transform as translation, roll/pitch/yaw, quaternion and 4x4 matrix."""
+
+    translation_m: tuple[float, float, float]
+    rpy_deg: tuple[float, float, float]
+    quaternion_xyzw: tuple[float, float, float, float]
+    matrix: list[list[float]]
+
+    @classmethod
+    def of(cls, transform: Mat) -> TransformOut:
+        """From a 4x4 matrix."""
+        roll, pitch, yaw = se3.matrix_to_rpy(transform[:3, :3])
+        tx, ty, tz = (float(v) for v in transform[:3, 3])
+        return cls(
+            translation_m=(tx, ty, tz),
+            rpy_deg=(math.degrees(roll), math.degrees(pitch), math.degrees(yaw)),
+            quaternion_xyzw=se3.matrix_to_quaternion(transform[:3, :3]),
+            matrix=[[float(v) for v in row] for row in transform],
+        )
+
+
+class FitOut(_Out):
+    """Overlap fraction and point-to-plane RMS error (cm; null when nothing overlapped)."""
+
+    overlap: float
+    rmse_cm: float | None
+
+    @classmethod
+    def of(cls, fit: Fit) -> FitOut:
+        """From a registration Fit."""
+        return cls(overlap=fit.overlap, rmse_cm=_finite(fit.rmse_m * 100.0))
+
+
+class ConditioningOut(_Out):
+    """Smallest normalised eigenvalues of the point-to-plane Hessian and their directions."""
+
+    translation_information: float
+    rotation_information: float
+    weakest_translation: tuple[float, float, float]
+    weakest_rotation_axis: tuple[float, float, float]
+
+    @classmethod
+    def of(cls, cond: Conditioning) -> ConditioningOut:
+        """From a registration Conditioning."""
+        return cls(
+            translation_information=cond.translation_information,
+            rotation_information=cond.rotation_information,
+            weakest_translation=cond.weakest_translation,
+            weakest_rotation_axis=cond.weakest_rotation_axis,
+        )
+
+
+class AlignmentOut(_Out):
+    """One GICP alignment: before/after fit, conditioning, verdict."""
+
+    before: FitOut
+    after: FitOut
+    conditioning: ConditioningOut
+    converged: bool
+    iterations: int
+    accepted: bool
+    reason: str | None
+
+    @classmethod
+    def of(cls, alignment: Alignment) -> AlignmentOut:
+        """From a registration Alignment."""
+        return cls(
+            before=FitOut.of(alignment.before),
+            after=FitOut.of(alignment.after),
+            conditioning=ConditioningOut.of(alignment.after.conditioning),
+            converged=alignment.converged,
+            iterations=alignment.iterations,
+            accepted=alignment.accepted,
+            reason=alignment.reason,
+        )
+
+
+class StopUse(_Out):
+    """Whether one stop's scan of a LiDAR was used, and why not."""
+
+    stop: int
+    stamp_ns: int
+    static_scans: int
+    angle_deg: float | None
+    """Turntable angle relative to the reference stop, from the registration chain."""
+    used: bool
+    reason: str | None
+
+
+class PairOut(_Out):
+    """A cross-scan alignment (target = first stop, source = second stop)."""
+
+    first_stop: int
+    second_stop: int
+    separation_deg: float
+    predicted_overlap: float
+    alignment: AlignmentOut
+    graph_residual_rotation_deg: float | None = None
+    graph_residual_translation_cm: float | None = None
+    graph_outlier: bool | None = None
+
+
+class PoseGraphOut(_Out):
+    """Summary of one LiDAR's pose graph."""
+
+    nodes: int
+    edges: int
+    outlier_edges: int
+    error_before: float
+    error_after: float
+    iterations: int
+
+
+class LidarOut(_Out):
+    """Per-LiDAR part of the result: scans, stops, pairs, pose graph, local map."""
+
+    topic: str
+    frame_id: str
+    scans: int
+    horizontal_fov_deg: float | None
+    stops: list[StopUse]
+    pairs: list[PairOut]
+    pose_graph: PoseGraphOut | None
+    map_points: int
+    aligned: bool
+    reason: str | None
+
+
+class ExtrinsicOut(_Out):
+    """Calibrated vs recorded `reference_from_lidar`, with the pass/fail verdict."""
+
+    topic: str
+    frame_id: str
+    reference_topic: str
+    reference_frame_id: str
+    calibrated: bool
+    reason: str | None
+    recorded: TransformOut
+    result: TransformOut | None
+    rotation_diff_deg: float | None
+    translation_diff_cm: float | None
+    diff_rpy_deg: tuple[float, float, float] | None
+    diff_xyz_cm: tuple[float, float, float] | None
+    passed: bool
+    map_to_map: AlignmentOut | None
+    stop_angle_disagreement_deg: float | None
+    """Largest difference of the vehicle's turn angle as seen by this and the reference LiDAR."""
+    hand_eye_rotation_residual_deg: float | None
+    """Largest rotation misfit of A X = X B over common stops with the calibrated X."""
+
+
+class VehicleStopOut(_Out):
+    """A vehicle stop and which LiDAR topics have static scans there."""
+
+    index: int
+    start_ns: int
+    end_ns: int
+    topics: list[str]
+
+
+class Limits(_Out):
+    """Validation limits."""
+
+    max_rotation_deg: float
+    max_translation_cm: float
+
+
+class CalibrationResult(_Out):
+    """Everything `calibrate_log` found; `passed` only when calibratable and within limits."""
+
+    kind: str = "syncaudit.calibration"
+    log: str
+    calibratable: bool
+    reason: str | None
+    passed: bool
+    reference_topic: str
+    reference_frame_id: str
+    base_frame: str
+    extrinsics_source: str
+    reference_stop: int | None
+    limits: Limits
+    stops: list[VehicleStopOut]
+    lidars: list[LidarOut]
+    extrinsics: list[ExtrinsicOut]
+    notes: list[str]
+    timings_s: dict[str, float]
+    libraries: dict[str, str]
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The result as plain JSON types."""
+        return self.model_dump(mode="json")
+
+    def write_json(self, path: Path) -> None:
+        """Write the JSON atomically (temporary file beside `path`, then rename)."""
+        path = Path(path)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as handle:
+                json.dump(self.to_json_dict(), handle, indent=2)
+                handle.write("\n")
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise

@@ -1,0 +1,1 @@
+"""Simulated logs with known truth, for tests, benchmarks and demos."""
