@@ -188,8 +188,35 @@ def simulate(
     ] = True,
     compressed: Annotated[bool, typer.Option(help="CompressedImage instead of Image.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    calib: Annotated[
+        bool,
+        typer.Option(
+            "--calib",
+            help="Write a turntable calibration session of non-overlapping LiDARs instead.",
+        ),
+    ] = False,
+    beams: Annotated[int, typer.Option(help="--calib: beams per LiDAR (32 or 128-class).")] = 32,
+    stops: Annotated[int, typer.Option(help="--calib: turntable stops.")] = 12,
+    rotation_error_deg: Annotated[
+        float, typer.Option(help="--calib: recorded rear extrinsic's rotation error.")
+    ] = 0.05,
+    translation_error_cm: Annotated[
+        float, typer.Option(help="--calib: recorded rear extrinsic's translation error.")
+    ] = 0.3,
+    degenerate: Annotated[
+        bool, typer.Option(help="--calib: a scene of ground and one wall only.")
+    ] = False,
 ) -> None:
-    """Write a log with known ground truth (OUT.truth.json) and its rig file (OUT.rig.yaml)."""
+    """Write a log with known ground truth (OUT.truth.json) and its rig file (OUT.rig.yaml).
+
+    With --calib: a turntable session of two non-overlapping LiDARs (PointCloud2 per stop,
+    /tf_static with a perturbed recorded extrinsic) and its truth (OUT.truth.json).
+    """
+    if calib:
+        _simulate_calib(
+            out, seed, beams, stops, rotation_error_deg, translation_error_cm, degenerate, overwrite
+        )
+        return
     import yaml
 
     from syncaudit.analysis.controller import ControllerConfig
@@ -247,6 +274,121 @@ def simulate(
         ]
         for line in out_lines:
             out_console_print(line)
+
+    _run(job)
+
+
+def _simulate_calib(
+    out: Path,
+    seed: int,
+    beams: int,
+    stops: int,
+    rotation_error_deg: float,
+    translation_error_cm: float,
+    degenerate: bool,
+    overwrite: bool,
+) -> None:
+    from pydantic import ValidationError
+
+    from syncaudit.calib.config import CalibSceneConfig, SceneConfig, rig_preset
+    from syncaudit.errors import ConfigError
+    from syncaudit.simulate.calib_session import simulate_calib_session
+
+    def job() -> None:
+        if out.exists() and not overwrite:
+            raise ConfigError(f"{out} exists (pass --overwrite to replace it)")
+        try:
+            config = CalibSceneConfig(
+                seed=seed,
+                n_stops=stops,
+                scene=SceneConfig(kind="ground_and_wall" if degenerate else "yard"),
+                lidars=rig_preset(
+                    beams,
+                    rear_rotation_error_deg=rotation_error_deg,
+                    rear_translation_error_cm=translation_error_cm,
+                ),
+            )
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            raise ConfigError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
+        simulate_calib_session(out, config, fmt=None, overwrite=overwrite)
+        out_console_print(
+            f"wrote {out} ({stops} stops, {beams}-beam LiDARs), truth {out.name}.truth.json"
+        )
+
+    _run(job)
+
+
+@app.command()
+def calib(
+    log: Annotated[Path, typer.Argument(help="Log with PointCloud2 of two or more LiDARs.")],
+    config_file: Annotated[
+        Path | None, typer.Option("--config", help="Calibration config (YAML/TOML/JSON).")
+    ] = None,
+    extrinsics: Annotated[
+        Path | None,
+        typer.Option(help="Recorded extrinsics file to validate (default: /tf_static in the log)."),
+    ] = None,
+    topics: Annotated[
+        str | None, typer.Option(help="Comma-separated PointCloud2 topics (default: all).")
+    ] = None,
+    as_json: JsonFlag = False,
+    json_out: Annotated[
+        Path | None, typer.Option("--json-out", help="Also write the JSON result here.")
+    ] = None,
+    html_out: Annotated[
+        Path | None, typer.Option("--html", help="Write an HTML report here.")
+    ] = None,
+    gate: Annotated[
+        bool,
+        typer.Option("--gate", help="Exit 10 when validation fails or calibration is impossible."),
+    ] = False,
+) -> None:
+    """Calibrate non-overlapping LiDARs (ICP, pose graph, map-to-map ICP) and validate the
+    recorded extrinsics (method B)."""
+    from syncaudit.errors import ConfigError, GateFailedError
+    from syncaudit.writers.atomic import write_text_atomic
+
+    def job() -> None:
+        try:
+            from syncaudit.calib import (
+                CalibConfig,
+                calibrate_log,
+                html_section,
+                load_config,
+                render_calibration,
+            )
+        except ImportError as exc:  # pragma: no cover - depends on the install
+            raise ConfigError(
+                f"the calibration needs the optional extra: pip install 'syncaudit[calib]' ({exc})"
+            ) from exc
+        config: CalibConfig = (
+            load_config(config_file, CalibConfig) if config_file else CalibConfig()
+        )
+        updates: dict[str, object] = {}
+        if extrinsics is not None:
+            updates["extrinsics_file"] = extrinsics
+        if topics:
+            updates["lidar_topics"] = [t.strip() for t in topics.split(",") if t.strip()]
+        if updates:
+            config = CalibConfig.model_validate({**config.model_dump(), **updates})
+        result = calibrate_log(log, config)
+        data = result.to_json_dict()
+        if json_out:
+            write_text_atomic(json_out, json.dumps(data, indent=2, allow_nan=False) + "\n")
+        if html_out:
+            page = (
+                "<!doctype html><html lang=en><head><meta charset=utf-8>"
+                f"<title>syncaudit calib</title></head><body>{html_section(result)}</body></html>\n"
+            )
+            write_text_atomic(html_out, page)
+        if as_json:
+            _print_json(data)
+        else:
+            render_calibration(result, out)
+        if gate and not result.passed:
+            why = result.reason or "recorded extrinsics outside the limits"
+            raise GateFailedError(f"{log}: calibration check failed: {why}")
 
     _run(job)
 
