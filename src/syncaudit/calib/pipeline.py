@@ -89,6 +89,8 @@ class _Lidar:
     graph: PoseGraphOut | None = None
     poses: dict[int, F64] = field(default_factory=dict)
     map_cloud: Cloud | None = None
+    candidates: list[tuple[int, int, float, float]] = field(default_factory=list)
+    results: dict[tuple[int, int], Alignment] = field(default_factory=dict)
     turn_axis: F64 | None = None
     reason: str | None = None
 
@@ -231,9 +233,10 @@ def _find_stops(
     return stops
 
 
-def _reference_stop(
+def _provisional_reference(
     stops: list[selection.VehicleStop], lidars: list[_Lidar], config: CalibConfig
 ) -> int:
+    """The configured reference stop, else the first stop every LiDAR has a static scan of."""
     topics = {lidar.topic for lidar in lidars}
     if config.selection.reference_stop is not None:
         ref = config.selection.reference_stop
@@ -281,6 +284,7 @@ def _angular_chain(
     order = sorted({k for lidar in lidars for k in lidar.stop_scan})
     clouds = {k: _vehicle_cloud(lidars, k, recorded, config) for k in order}
     segments: list[dict[int, F64]] = [{order[0]: np.eye(4)}]
+    broken: dict[int, str] = {}
     for a, b in itertools.pairwise(order):
         _yaw, found = yaw_search(
             [(clouds[a], clouds[b], np.eye(4))],
@@ -291,10 +295,21 @@ def _angular_chain(
             threads=reg.num_threads,
         )
         turn, fit = found[0]
-        if fit.overlap >= reg.min_overlap:
-            segments[-1][b] = segments[-1][a] @ turn
-        else:
+        if fit.overlap < reg.min_overlap:
+            broken[b] = (
+                f"turn from stop {a} unknown: overlap {fit.overlap:.0%} < {reg.min_overlap:.0%}"
+            )
+        elif (
+            fit.conditioning.translation_information < reg.turn_min_translation_information
+            or fit.conditioning.rotation_information < reg.turn_min_rotation_information
+        ):
+            broken[b] = (
+                f"turn from stop {a} unknown: degenerate view ({fit.conditioning.describe()})"
+            )
+        if b in broken:
             segments.append({b: np.eye(4)})
+        else:
+            segments[-1][b] = segments[-1][a] @ turn
     home = next(seg for seg in segments if reference in seg)
     ref_inv = se3.invert(home[reference])
     up = np.array([0.0, 0.0, 1.0])
@@ -308,6 +323,9 @@ def _angular_chain(
                 lidar.angles[k] = selection.signed_angle_deg(motion, up)
             else:
                 lidar.angles[k] = None
+                lidar.dropped[k] = broken.get(k) or next(
+                    (broken[j] for j in sorted(broken, reverse=True) if j < k), "angle unknown"
+                )
 
 
 def _strength(cond: Conditioning) -> float:
@@ -408,12 +426,17 @@ def _graph_round(
     return nodes, _solve(lidar, reference, nodes, edges, config)
 
 
-def _align_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
-    """Steps 2-4 for one LiDAR: choose stops, align pairs, pose graph, local map."""
+def _align_pairs(lidar: _Lidar, provisional: int, config: CalibConfig) -> None:
+    """Steps 2-3 for one LiDAR: choose stops and pairs, align the pairs.
+
+    `provisional` is a stop common to all LiDARs; it only anchors the seeds (relative
+    poses do not depend on it) and is always kept.
+    """
     sel, reg = config.selection, config.registration
+    reference = provisional
     order = sorted(lidar.stop_scan)
     choice = selection.choose_stops(order, lidar.angles, reference, sel.min_step_deg)
-    lidar.dropped = dict(choice.dropped)
+    lidar.dropped = {**choice.dropped, **lidar.dropped}
     lidar.kept = choice.kept
     for k in lidar.kept:
         lidar.fine[k] = prepare(
@@ -425,7 +448,7 @@ def _align_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
     )
     # Angularly adjacent pairs first; their fine results re-seed the chain for the rest.
     candidates.sort(key=lambda c: c[2])
-    adjacent = {(a, b) for a, b in zip(lidar.kept, lidar.kept[1:], strict=False)}
+    adjacent = set(itertools.pairwise(lidar.kept))
     results: dict[tuple[int, int], Alignment] = {}
     for a, b, _sep, _pred in candidates:
         if (a, b) in adjacent:
@@ -438,6 +461,48 @@ def _align_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
     for a, b, _sep, _pred in candidates:
         if (a, b) not in results:
             results[(a, b)] = _align_pair(lidar, a, b, se3.invert(seed[a]) @ seed[b], config)
+    lidar.candidates = candidates
+    lidar.results = results
+
+
+def _choose_reference(lidars: list[_Lidar], config: CalibConfig) -> int:
+    """The common stop whose pose graphs reach the most stops (weakest LiDAR counts).
+
+    Both local maps must be anchored at the same vehicle stop; a stop where one LiDAR
+    faces a featureless view would leave that LiDAR's graph with nothing to anchor, so
+    the stop connecting the most stops in every LiDAR is taken (earliest on ties).
+    """
+    if config.selection.reference_stop is not None:
+        return config.selection.reference_stop
+    common = sorted(set.intersection(*(set(lidar.kept) for lidar in lidars)))
+    best, best_score = common[0], -1
+    for stop in common:
+        score = min(
+            len(
+                posegraph.connected(
+                    lidar.kept,
+                    [_edge(a, b, r) for (a, b), r in lidar.results.items() if r.accepted],
+                    stop,
+                )
+            )
+            for lidar in lidars
+        )
+        if score > best_score:
+            best, best_score = stop, score
+    return best
+
+
+def _graph_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
+    """Step 4 for one LiDAR: pose graph anchored at the reference stop, local map."""
+    sel, reg = config.selection, config.registration
+    order = sorted(lidar.stop_scan)
+    candidates, results = lidar.candidates, lidar.results
+    ref_angle = lidar.angles.get(reference)
+    if ref_angle is not None:
+        lidar.angles = {
+            k: None if v is None else selection.wrap_deg(v - ref_angle)
+            for k, v in lidar.angles.items()
+        }
     nodes, solution = _graph_round(lidar, reference, candidates, results, config)
     if solution is not None:
         # One refinement round: pairs that disagree with the graph start again from it.
@@ -472,11 +537,15 @@ def _align_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
         lidar.map_cloud = prepare(points, mc.voxel_m, mc.neighbours, reg.num_threads)
     else:
         rejected = [r.reason for r in results.values() if not r.accepted and r.reason]
-        why = f"; e.g. {rejected[0]}" if rejected else ""
+        if results:
+            why = f"{len(rejected)} of {len(results)} pair alignments rejected"
+            why += f", e.g. {rejected[0]}" if rejected else ""
+        else:
+            first = next(iter(lidar.dropped.values()), "no overlapping stops")
+            why = f"no pairs to align: {first}"
         lidar.reason = (
             f"{lidar.topic}: only {len(nodes)} of {len(order)} stops could be aligned to the "
-            f"reference stop ({len(rejected)} of {len(results)} pair alignments "
-            f"rejected{why}); need {sel.min_stops}"
+            f"reference stop ({why}); need {sel.min_stops}"
         )
         lidar.dropped.setdefault(reference, "too few stops aligned to it")
     for a, b, sep, pred in candidates:
@@ -639,12 +708,16 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
                     f"{path}: {lidar.topic} has {len(lidar.stop_scan)} stop(s); calibration "
                     f"needs at least {config.selection.min_stops}"
                 )
-        reference = _reference_stop(stops, lidars, config)
+        reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         _angular_chain(lidars, recorded, reference, config)
-    with timer.stage("align_lidars"):
+    with timer.stage("align_pairs"):
         for lidar in lidars:
-            _align_lidar(lidar, reference, config)
+            _align_pairs(lidar, reference, config)
+    with timer.stage("pose_graphs"):
+        reference = _choose_reference(lidars, config)
+        for lidar in lidars:
+            _graph_lidar(lidar, reference, config)
     with timer.stage("map_to_map"):
         extrinsics = [_extrinsic(lidars[0], other, recorded, config) for other in lidars[1:]]
     failures = [e.reason for e in extrinsics if not e.calibrated and e.reason]

@@ -102,8 +102,8 @@ class Scene:
 
         # Ground plane z = 0.
         dz = dirs[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t_ground = np.where(dz < -1e-9, -origins[:, 2] / dz, np.inf)
+        down = dz < -1e-9
+        t_ground = np.where(down, -origins[:, 2] / np.where(down, dz, -1.0), np.inf)
         take(np.where(t_ground > _EPS_M, t_ground, np.inf), np.abs(dz), self.ground_reflectivity)
         for box in self.boxes:
             t_box, cos_box = _ray_box(origins, dirs, box)
@@ -142,18 +142,18 @@ def _ray_pole(origins: F64, dirs: F64, pole: Pole) -> tuple[F64, F64]:
     c = px * px + py * py - pole.radius_m**2
     disc = b * b - 4.0 * a * c
     ok = (a > 1e-12) & (disc >= 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_side = np.where(ok, (-b - np.sqrt(np.where(ok, disc, 0.0))) / (2.0 * a), np.inf)
+    # Misses get a placeholder distance of 0 so no inf * 0 arises; they are masked below.
+    t_side = np.where(ok, (-b - np.sqrt(np.where(ok, disc, 0.0))) / np.where(ok, 2.0 * a, 1.0), 0.0)
     z_side = origins[:, 2] + t_side * dz
     side_hit = ok & (t_side > _EPS_M) & (z_side >= 0.0) & (z_side <= pole.height_m)
     nx = (px + t_side * dx) / pole.radius_m
     ny = (py + t_side * dy) / pole.radius_m
     cos_side = np.abs(nx * dx + ny * dy)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_cap = np.where(np.abs(dz) > 1e-12, (pole.height_m - origins[:, 2]) / dz, np.inf)
+    vertical = np.abs(dz) > 1e-12
+    t_cap = np.where(vertical, (pole.height_m - origins[:, 2]) / np.where(vertical, dz, 1.0), 0.0)
     cx = px + t_cap * dx
     cy = py + t_cap * dy
-    cap_hit = (t_cap > _EPS_M) & (cx * cx + cy * cy <= pole.radius_m**2)
+    cap_hit = vertical & (t_cap > _EPS_M) & (cx * cx + cy * cy <= pole.radius_m**2)
     t_side = np.where(side_hit, t_side, np.inf)
     t_cap = np.where(cap_hit, t_cap, np.inf)
     use_cap = t_cap < t_side

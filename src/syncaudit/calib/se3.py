@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,8 +28,8 @@ def invert(transform: Mat) -> Mat:
     return out
 
 
-def apply(transform: Mat, points: Mat) -> Mat:
-    """Apply a 4x4 transform to an (N, 3) array of points."""
+def apply(transform: Mat, points: NDArray[Any]) -> Mat:
+    """Apply a 4x4 transform to an (N, 3) array of points (result in float64)."""
     return np.asarray(points @ transform[:3, :3].T + transform[:3, 3], dtype=np.float64)
 
 
