@@ -82,7 +82,7 @@ def test_accuracy_across_seeds(
         rot_deg, trans_cm = _error_to_truth(result, truth)
         errors.append((seed, round(rot_deg, 4), round(trans_cm, 3)))
         assert rot_deg <= max_rot_deg and trans_cm <= max_trans_cm, errors
-        assert all(sum(s.used for s in lidar.stops) >= 6 for lidar in result.lidars)
+        assert all(sum(s.used for s in lidar.stops) >= 9 for lidar in result.lidars)
 
 
 @pytest.mark.parametrize("beams", [32, 128])
@@ -108,6 +108,9 @@ def test_result_json_html_and_console(runs: dict[tuple[int, int], Any], tmp_path
     assert {"stop", "stamp_ns", "angle_deg", "used", "reason"} <= set(lidar["stops"][0])
     pair = lidar["pairs"][0]
     assert {"before", "after", "accepted", "reason", "conditioning"} <= set(pair["alignment"])
+    assert data["anchor_stops"][0] == data["reference_stop"]
+    (ext,) = data["extrinsics"]
+    assert ext["map_pairs"] and ext["map_pairs"][0]["anchor_stop"] == data["reference_stop"]
     out = tmp_path / "calib.json"
     result.write_json(out)
     assert json.loads(out.read_text()) == data

@@ -245,7 +245,8 @@ class RegistrationConfig(ConfigModel):
     turn_min_translation_information: float = Field(default=0.01, gt=0.0, lt=1.0)
     turn_min_rotation_information: float = Field(default=0.005, gt=0.0, lt=1.0)
     """The coarse turn between stops (all LiDARs merged) is trusted as a seed above these."""
-    max_step_deg: float = Field(default=180.0, gt=0.0, le=180.0)
+    max_step_deg: float = Field(default=90.0, gt=0.0, le=180.0)
+    """Largest turn searched between consecutive stops; views overlap only below ~90 deg."""
     max_iterations: int = Field(default=30, ge=5)
     overlap_distance_m: float = Field(default=0.2, gt=0.0)
     min_overlap: float = Field(default=0.4, gt=0.0, le=1.0)

@@ -26,6 +26,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +49,7 @@ from syncaudit.calib.result import (
     ExtrinsicOut,
     LidarOut,
     Limits,
+    MapPairOut,
     PairOut,
     PoseGraphOut,
     StopUse,
@@ -87,8 +89,9 @@ class _Lidar:
     hfov_deg: float | None = None
     pairs: list[PairOut] = field(default_factory=list)
     graph: PoseGraphOut | None = None
-    poses: dict[int, F64] = field(default_factory=dict)
-    map_cloud: Cloud | None = None
+    graphs: dict[frozenset[int], posegraph.PoseGraphSolution] = field(default_factory=dict)
+    used: set[int] = field(default_factory=set)
+    map_points: int = 0
     candidates: list[tuple[int, int, float, float]] = field(default_factory=list)
     results: dict[tuple[int, int], Alignment] = field(default_factory=dict)
     turn_axis: F64 | None = None
@@ -407,25 +410,6 @@ _REALIGN_TRANSLATION_M = 0.002
 disagree by more than this: GICP may have stopped early along a weak direction."""
 
 
-def _graph_round(
-    lidar: _Lidar,
-    reference: int,
-    candidates: list[tuple[int, int, float, float]],
-    results: dict[tuple[int, int], Alignment],
-    config: CalibConfig,
-) -> tuple[list[int], posegraph.PoseGraphSolution | None]:
-    """Accepted edges -> stops connected to the reference -> pose graph (if enough stops)."""
-    edges = [
-        _edge(a, b, results[(a, b)]) for a, b, _s, _p in candidates if results[(a, b)].accepted
-    ]
-    reachable = posegraph.connected(lidar.kept, edges, reference)
-    nodes = sorted(reachable)
-    if len(nodes) < config.selection.min_stops:
-        return nodes, None
-    edges = [e for e in edges if e.first in reachable and e.second in reachable]
-    return nodes, _solve(lidar, reference, nodes, edges, config)
-
-
 def _align_pairs(lidar: _Lidar, provisional: int, config: CalibConfig) -> None:
     """Steps 2-3 for one LiDAR: choose stops and pairs, align the pairs.
 
@@ -465,77 +449,155 @@ def _align_pairs(lidar: _Lidar, provisional: int, config: CalibConfig) -> None:
     lidar.results = results
 
 
-def _choose_reference(lidars: list[_Lidar], config: CalibConfig) -> int:
-    """The common stop whose pose graphs reach the most stops (weakest LiDAR counts).
+def _accepted_edges(lidar: _Lidar, nodes: set[int] | None = None) -> list[posegraph.Edge]:
+    return [
+        _edge(a, b, lidar.results[(a, b)])
+        for a, b, _s, _p in lidar.candidates
+        if lidar.results[(a, b)].accepted and (nodes is None or (a in nodes and b in nodes))
+    ]
 
-    Both local maps must be anchored at the same vehicle stop; a stop where one LiDAR
-    faces a featureless view would leave that LiDAR's graph with nothing to anchor, so
-    the stop connecting the most stops in every LiDAR is taken (earliest on ties).
+
+def _components(lidar: _Lidar) -> list[frozenset[int]]:
+    """Groups of kept stops connected by accepted alignments."""
+    edges = _accepted_edges(lidar)
+    remaining = set(lidar.kept)
+    out = []
+    while remaining:
+        group = frozenset(posegraph.connected(lidar.kept, edges, min(remaining)))
+        out.append(group)
+        remaining -= group
+    return out
+
+
+def _anchors(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
+    """Stops at which the LiDARs' local maps are anchored, best first.
+
+    Maps of different LiDARs can only be aligned when anchored at the same vehicle stop,
+    and a LiDAR's map can only hold the stops its pose graph connects. Where a featureless
+    view splits a LiDAR's stops into groups, each combination of groups that shares a stop
+    gives its own map pair (and its own estimate of the extrinsic). The first anchor is
+    the configured reference stop, else the shared stop whose groups are largest for the
+    weakest LiDAR (earliest on ties).
     """
-    if config.selection.reference_stop is not None:
-        return config.selection.reference_stop
+    groups = {lidar.topic: _components(lidar) for lidar in lidars}
+
+    def group_of(lidar: _Lidar, stop: int) -> frozenset[int]:
+        return next(g for g in groups[lidar.topic] if stop in g)
+
     common = sorted(set.intersection(*(set(lidar.kept) for lidar in lidars)))
-    best, best_score = common[0], -1
-    for stop in common:
-        score = min(
-            len(
-                posegraph.connected(
-                    lidar.kept,
-                    [_edge(a, b, r) for (a, b), r in lidar.results.items() if r.accepted],
-                    stop,
-                )
-            )
-            for lidar in lidars
-        )
-        if score > best_score:
-            best, best_score = stop, score
-    return best
+    ranked = sorted(common, key=lambda s: (-min(len(group_of(lidar, s)) for lidar in lidars), s))
+    if config.selection.reference_stop is not None:
+        first = config.selection.reference_stop
+        ranked = [first] + [s for s in ranked if s != first]
+    anchors: list[int] = []
+    seen: set[tuple[frozenset[int], ...]] = set()
+    for stop in ranked:
+        key = tuple(group_of(lidar, stop) for lidar in lidars)
+        big_enough = min(len(g) for g in key) >= config.selection.min_stops
+        if key in seen or (anchors and not big_enough):
+            continue
+        seen.add(key)
+        anchors.append(stop)
+    return anchors
 
 
-def _graph_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
-    """Step 4 for one LiDAR: pose graph anchored at the reference stop, local map."""
-    sel, reg = config.selection, config.registration
-    order = sorted(lidar.stop_scan)
-    candidates, results = lidar.candidates, lidar.results
-    ref_angle = lidar.angles.get(reference)
-    if ref_angle is not None:
-        lidar.angles = {
-            k: None if v is None else selection.wrap_deg(v - ref_angle)
-            for k, v in lidar.angles.items()
-        }
-    nodes, solution = _graph_round(lidar, reference, candidates, results, config)
-    if solution is not None:
-        # One refinement round: pairs that disagree with the graph start again from it.
-        realigned = False
-        for (a, b), res in list(results.items()):
-            if a not in solution.poses or b not in solution.poses:
-                continue
-            predicted = se3.invert(solution.poses[a]) @ solution.poses[b]
-            rot_deg, trans_m = se3.transform_difference(res.target_from_source, predicted)
-            if rot_deg > _REALIGN_ROTATION_DEG or trans_m > _REALIGN_TRANSLATION_M:
-                results[(a, b)] = _align_pair(lidar, a, b, predicted, config)
-                realigned = True
-        if realigned:
-            nodes, solution = _graph_round(lidar, reference, candidates, results, config)
-    for k in lidar.kept:
-        if k not in nodes:
-            lidar.dropped[k] = "no accepted alignment connects it to the reference stop"
+def _solve_group(lidar: _Lidar, group: frozenset[int], anchor: int, config: CalibConfig) -> None:
+    """Pose graph of one group of stops, with one refinement round: pairs that disagree
+    with the graph are aligned again from it (GICP may have stopped early along a weak
+    direction), then the graph is solved again."""
+    nodes = set(group)
+    solution = _solve(lidar, anchor, sorted(nodes), _accepted_edges(lidar, nodes), config)
+    realigned = False
+    for (a, b), res in list(lidar.results.items()):
+        if a not in nodes or b not in nodes:
+            continue
+        predicted = se3.invert(solution.poses[a]) @ solution.poses[b]
+        rot_deg, trans_m = se3.transform_difference(res.target_from_source, predicted)
+        if rot_deg > _REALIGN_ROTATION_DEG or trans_m > _REALIGN_TRANSLATION_M:
+            lidar.results[(a, b)] = _align_pair(lidar, a, b, predicted, config)
+            realigned = True
+    if realigned:
+        nodes = posegraph.connected(nodes, _accepted_edges(lidar, nodes), anchor)
+        if len(nodes) >= config.selection.min_stops:
+            edges = _accepted_edges(lidar, nodes)
+            solution = _solve(lidar, anchor, sorted(nodes), edges, config)
+    if len(nodes) >= config.selection.min_stops:
+        lidar.graphs[group] = solution
+
+
+def _poses_at(lidar: _Lidar, anchor: int) -> dict[int, F64] | None:
+    """The LiDAR's solved poses re-anchored at `anchor` (None if no graph holds it)."""
+    for solution in lidar.graphs.values():
+        if anchor in solution.poses:
+            inv = se3.invert(solution.poses[anchor])
+            return {k: inv @ pose for k, pose in solution.poses.items()}
+    return None
+
+
+def _map_at(lidar: _Lidar, anchor: int, config: CalibConfig) -> tuple[Cloud, list[int]] | None:
+    """The LiDAR's local map in its own frame at `anchor`, and the stops it holds."""
+    poses = _poses_at(lidar, anchor)
+    if poses is None:
+        return None
+    nodes = sorted(poses)
+    points = np.concatenate([se3.apply(poses[k], lidar.fine[k].points_m) for k in nodes])
+    mc = config.map_to_map
+    return prepare(points, mc.voxel_m, mc.neighbours, config.registration.num_threads), nodes
+
+
+def _graph_lidars(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
+    """Step 4: anchors, then one pose graph per group of a LiDAR's stops an anchor uses."""
+    anchors = _anchors(lidars, config)
+    for lidar in lidars:
+        groups = _components(lidar)
+        for anchor in anchors:
+            group = next(g for g in groups if anchor in g)
+            if group not in lidar.graphs and len(group) >= config.selection.min_stops:
+                _solve_group(lidar, group, anchor, config)
+    main = anchors[0]
+    for lidar in lidars:
+        ref_angle = lidar.angles.get(main)
+        if ref_angle is not None:
+            lidar.angles = {
+                k: None if v is None else selection.wrap_deg(v - ref_angle)
+                for k, v in lidar.angles.items()
+            }
+        _summarise_lidar(lidar, main, config)
+    return anchors
+
+
+def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
+    """Used stops, reasons for the others, pose-graph totals and per-pair output."""
+    sel = config.selection
+    used: set[int] = set()
     residuals: dict[tuple[int, int], posegraph.EdgeResidual] = {}
-    if solution is not None:
-        residuals = {(r.first, r.second): r for r in solution.residuals}
-        lidar.poses = solution.poses
+    for solution in lidar.graphs.values():
+        used |= set(solution.poses)
+        residuals.update({(r.first, r.second): r for r in solution.residuals})
+    lidar.used = used
+    for group in _components(lidar):
+        for k in group - used:
+            if len(group) < sel.min_stops:
+                lidar.dropped.setdefault(
+                    k,
+                    f"its group of {len(group)} connected stop(s) is too small "
+                    f"(need {sel.min_stops})",
+                )
+            else:
+                lidar.dropped.setdefault(k, "its group shares no stop with the other LiDARs' maps")
+    if lidar.graphs:
+        sols = list(lidar.graphs.values())
         lidar.graph = PoseGraphOut(
-            nodes=len(nodes),
-            edges=len(solution.residuals),
-            outlier_edges=sum(1 for r in solution.residuals if r.outlier),
-            error_before=solution.error_before,
-            error_after=solution.error_after,
-            iterations=solution.iterations,
+            graphs=len(sols),
+            nodes=sum(len(s.poses) for s in sols),
+            edges=sum(len(s.residuals) for s in sols),
+            outlier_edges=sum(1 for s in sols for r in s.residuals if r.outlier),
+            error_before=sum(s.error_before for s in sols),
+            error_after=sum(s.error_after for s in sols),
+            iterations=max(s.iterations for s in sols),
         )
-        points = np.concatenate([se3.apply(lidar.poses[k], lidar.fine[k].points_m) for k in nodes])
-        mc = config.map_to_map
-        lidar.map_cloud = prepare(points, mc.voxel_m, mc.neighbours, reg.num_threads)
     else:
+        results = lidar.results
         rejected = [r.reason for r in results.values() if not r.accepted and r.reason]
         if results:
             why = f"{len(rejected)} of {len(results)} pair alignments rejected"
@@ -543,12 +605,13 @@ def _graph_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
         else:
             first = next(iter(lidar.dropped.values()), "no overlapping stops")
             why = f"no pairs to align: {first}"
+        largest = max((len(g) for g in _components(lidar)), default=0)
         lidar.reason = (
-            f"{lidar.topic}: only {len(nodes)} of {len(order)} stops could be aligned to the "
-            f"reference stop ({why}); need {sel.min_stops}"
+            f"{lidar.topic}: at most {largest} of {len(lidar.stop_scan)} stops could be "
+            f"aligned together ({why}); need {sel.min_stops}"
         )
-        lidar.dropped.setdefault(reference, "too few stops aligned to it")
-    for a, b, sep, pred in candidates:
+        lidar.dropped.setdefault(main, "too few stops aligned to it")
+    for a, b, sep, pred in lidar.candidates:
         graph_res = residuals.get((a, b))
         lidar.pairs.append(
             PairOut(
@@ -556,7 +619,7 @@ def _graph_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
                 second_stop=b,
                 separation_deg=sep,
                 predicted_overlap=pred,
-                alignment=AlignmentOut.of(results[(a, b)]),
+                alignment=AlignmentOut.of(lidar.results[(a, b)]),
                 graph_residual_rotation_deg=None if graph_res is None else graph_res.rotation_deg,
                 graph_residual_translation_cm=(
                     None if graph_res is None else graph_res.translation_cm
@@ -567,38 +630,44 @@ def _graph_lidar(lidar: _Lidar, reference: int, config: CalibConfig) -> None:
 
 
 def _consistency(
-    ref: _Lidar, other: _Lidar, ref_from_other: F64
+    ref: _Lidar, other: _Lidar, ref_from_other: F64, anchors: list[int]
 ) -> tuple[float | None, float | None]:
     """Turn-angle disagreement and hand-eye rotation residual over common stops (deg)."""
-    common = sorted(set(ref.poses) & set(other.poses))
-    if len(common) < 2:
-        return None, None
-    angle_diff = 0.0
-    hand_eye = 0.0
+    angle_diff: float | None = None
+    hand_eye: float | None = None
     inv = se3.invert(ref_from_other)
-    for k in common:
-        a, b = ref.poses[k], other.poses[k]
-        angle_diff = max(
-            angle_diff, abs(se3.rotation_angle_deg(a[:3, :3]) - se3.rotation_angle_deg(b[:3, :3]))
-        )
-        predicted = ref_from_other @ b @ inv
-        hand_eye = max(hand_eye, se3.rotation_angle_deg(a[:3, :3].T @ predicted[:3, :3]))
+    for anchor in anchors:
+        ref_poses, other_poses = _poses_at(ref, anchor), _poses_at(other, anchor)
+        if ref_poses is None or other_poses is None:
+            continue
+        for k in sorted(set(ref_poses) & set(other_poses) - {anchor}):
+            a, b = ref_poses[k], other_poses[k]
+            turn = abs(se3.rotation_angle_deg(a[:3, :3]) - se3.rotation_angle_deg(b[:3, :3]))
+            predicted = ref_from_other @ b @ inv
+            residual = se3.rotation_angle_deg(a[:3, :3].T @ predicted[:3, :3])
+            angle_diff = max(angle_diff or 0.0, turn)
+            hand_eye = max(hand_eye or 0.0, residual)
     return angle_diff, hand_eye
 
 
 def _extrinsic(
-    ref: _Lidar, other: _Lidar, recorded: extr.RecordedExtrinsics, config: CalibConfig
+    ref: _Lidar,
+    other: _Lidar,
+    anchors: list[int],
+    recorded: extr.RecordedExtrinsics,
+    config: CalibConfig,
 ) -> ExtrinsicOut:
-    """Step 5 and 6 for one LiDAR against the reference LiDAR."""
+    """Steps 5 and 6 for one LiDAR against the reference LiDAR: map pairs at every anchor
+    both LiDARs can use, accepted estimates fused, then compared with the recorded one."""
     rec = recorded.relative(ref.frame_id, other.frame_id)
-    base = {
+    base: dict[str, Any] = {
         "topic": other.topic,
         "frame_id": other.frame_id,
         "reference_topic": ref.topic,
         "reference_frame_id": ref.frame_id,
         "recorded": TransformOut.of(rec),
     }
-    empty = {
+    empty: dict[str, Any] = {
         "result": None,
         "rotation_diff_deg": None,
         "translation_diff_cm": None,
@@ -608,33 +677,66 @@ def _extrinsic(
         "stop_angle_disagreement_deg": None,
         "hand_eye_rotation_residual_deg": None,
     }
-    if ref.map_cloud is None or other.map_cloud is None:
-        why = ref.reason if ref.map_cloud is None else other.reason
-        return ExtrinsicOut(**base, **empty, calibrated=False, reason=why, map_to_map=None)
     mc = config.map_to_map
-    m2m = align(
-        ref.map_cloud,
-        other.map_cloud,
-        rec,
-        mc.correspondence_stages_m,
-        overlap_distance_m=mc.overlap_distance_m,
-        min_overlap=mc.min_overlap,
-        max_rmse_m=mc.max_rmse_m,
-        min_translation_information=mc.min_translation_information,
-        min_rotation_information=mc.min_rotation_information,
-        max_iterations=config.registration.max_iterations,
-        threads=config.registration.num_threads,
-    )
-    m2m_out = AlignmentOut.of(m2m)
-    if not m2m.accepted:
-        reason = f"{other.topic}: map-to-map alignment with {ref.topic} rejected: {m2m.reason}"
-        return ExtrinsicOut(**base, **empty, calibrated=False, reason=reason, map_to_map=m2m_out)
-    cal = m2m.target_from_source
+    pairs: list[MapPairOut] = []
+    estimates: list[tuple[F64, F64]] = []
+    first: Alignment | None = None
+    seen: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
+    for anchor in anchors:
+        ref_map, other_map = _map_at(ref, anchor, config), _map_at(other, anchor, config)
+        if ref_map is None or other_map is None:
+            continue
+        key = (tuple(ref_map[1]), tuple(other_map[1]))
+        if key in seen:
+            continue
+        seen.add(key)
+        m2m = align(
+            ref_map[0],
+            other_map[0],
+            rec,
+            mc.correspondence_stages_m,
+            overlap_distance_m=mc.overlap_distance_m,
+            min_overlap=mc.min_overlap,
+            max_rmse_m=mc.max_rmse_m,
+            min_translation_information=mc.min_translation_information,
+            min_rotation_information=mc.min_rotation_information,
+            max_iterations=config.registration.max_iterations,
+            threads=config.registration.num_threads,
+        )
+        first = first or m2m
+        pairs.append(
+            MapPairOut(
+                anchor_stop=anchor,
+                reference_stops=ref_map[1],
+                lidar_stops=other_map[1],
+                alignment=AlignmentOut.of(m2m),
+                result=TransformOut.of(m2m.target_from_source) if m2m.accepted else None,
+            )
+        )
+        if m2m.accepted:
+            weight = m2m.after.correspondences / mc.overlap_distance_m**2
+            estimates.append((m2m.target_from_source, m2m.after.hessian * weight))
+    if first is None:
+        why = ref.reason if not ref.graphs else other.reason
+        why = why or f"{other.topic}: no stop anchors both LiDARs' local maps"
+        return ExtrinsicOut(**base, **empty, calibrated=False, reason=why, map_to_map=None)
+    if not estimates:
+        reason = f"{other.topic}: map-to-map alignment with {ref.topic} rejected: {first.reason}"
+        return ExtrinsicOut(
+            **base,
+            **empty,
+            calibrated=False,
+            reason=reason,
+            map_to_map=AlignmentOut.of(first),
+            map_pairs=pairs,
+        )
+    cal = posegraph.fuse(estimates)
+    spreads = [se3.transform_difference(cal, t) for t, _ in estimates]
     diff = se3.invert(rec) @ cal
     rot_deg, trans_m = se3.transform_difference(rec, cal)
     roll, pitch, yaw = (math.degrees(v) for v in se3.matrix_to_rpy(diff[:3, :3]))
     dx, dy, dz = (float(v) * 100.0 for v in diff[:3, 3])
-    angle_diff, hand_eye = _consistency(ref, other, cal)
+    angle_diff, hand_eye = _consistency(ref, other, cal, anchors)
     limits = config.validation
     return ExtrinsicOut(
         **base,
@@ -646,7 +748,10 @@ def _extrinsic(
         diff_rpy_deg=(roll, pitch, yaw),
         diff_xyz_cm=(dx, dy, dz),
         passed=rot_deg <= limits.max_rotation_deg and trans_m * 100.0 <= limits.max_translation_cm,
-        map_to_map=m2m_out,
+        map_to_map=AlignmentOut.of(first),
+        map_pairs=pairs,
+        estimate_spread_deg=max(r for r, _ in spreads) if len(spreads) > 1 else None,
+        estimate_spread_cm=max(t for _, t in spreads) * 100.0 if len(spreads) > 1 else None,
         stop_angle_disagreement_deg=angle_diff,
         hand_eye_rotation_residual_deg=hand_eye,
     )
@@ -658,7 +763,7 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
         run = stop.runs.get(lidar.topic)
         if run is None:
             continue
-        used = stop.index in lidar.poses
+        used = stop.index in lidar.used
         reason = None if used else lidar.dropped.get(stop.index, "not aligned")
         uses.append(
             StopUse(
@@ -678,8 +783,8 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
         stops=uses,
         pairs=lidar.pairs,
         pose_graph=lidar.graph,
-        map_points=0 if lidar.map_cloud is None else lidar.map_cloud.size,
-        aligned=lidar.map_cloud is not None,
+        map_points=lidar.map_points,
+        aligned=bool(lidar.graphs),
         reason=lidar.reason,
     )
 
@@ -715,11 +820,31 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         for lidar in lidars:
             _align_pairs(lidar, reference, config)
     with timer.stage("pose_graphs"):
-        reference = _choose_reference(lidars, config)
-        for lidar in lidars:
-            _graph_lidar(lidar, reference, config)
+        anchors = _graph_lidars(lidars, config)
+        reference = anchors[0]
     with timer.stage("map_to_map"):
-        extrinsics = [_extrinsic(lidars[0], other, recorded, config) for other in lidars[1:]]
+        extrinsics = [
+            _extrinsic(lidars[0], other, anchors, recorded, config) for other in lidars[1:]
+        ]
+        for lidar in lidars:
+            local = _map_at(lidar, reference, config)
+            lidar.map_points = 0 if local is None else local[0].size
+    limits = config.validation
+    for ext in extrinsics:
+        spread_deg, spread_cm = ext.estimate_spread_deg, ext.estimate_spread_cm
+        if (
+            spread_deg is not None
+            and spread_cm is not None
+            and (
+                spread_deg > limits.max_rotation_deg / 2
+                or spread_cm > limits.max_translation_cm / 2
+            )
+        ):
+            notes.append(
+                f"{ext.frame_id}: the map pairs' estimates differ from their fused result by up "
+                f"to {spread_deg:.3f} deg / {spread_cm:.2f} cm (over half the limits): more stops "
+                "or a richer scene would make the calibration firmer"
+            )
     failures = [e.reason for e in extrinsics if not e.calibrated and e.reason]
     calibratable = not failures
     timer.seconds["total"] = sum(timer.seconds.values())
@@ -733,6 +858,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         base_frame=recorded.base_frame,
         extrinsics_source=recorded.source,
         reference_stop=reference,
+        anchor_stops=anchors,
         limits=Limits(
             max_rotation_deg=config.validation.max_rotation_deg,
             max_translation_cm=config.validation.max_translation_cm,

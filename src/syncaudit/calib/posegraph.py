@@ -299,3 +299,25 @@ def residuals(
     """Residuals of `edges` against given poses (e.g. outliers left out of the solution)."""
     plane = None if axis is None else _Plane.about(axis)
     return _residuals(backend(), edges, poses, config, plane)
+
+
+def fuse(estimates: list[tuple[F64, F64]]) -> F64:
+    """Weighted mean of rigid transforms, each with a 6x6 information (gtsam's Pose3
+    tangent at the estimate): the pose minimising the sum of their whitened errors."""
+    if len(estimates) == 1:
+        return estimates[0][0]
+    gtsam = backend()
+    graph = gtsam.NonlinearFactorGraph()
+    for transform, info in estimates:
+        regular = info + np.eye(6) * 1e-9 * max(float(np.trace(info)), 1.0)
+        graph.add(
+            gtsam.PriorFactorPose3(
+                0, _pose3(gtsam, transform), gtsam.noiseModel.Gaussian.Information(regular)
+            )
+        )
+    values = gtsam.Values()
+    values.insert(0, _pose3(gtsam, estimates[0][0]))
+    result = gtsam.LevenbergMarquardtOptimizer(
+        graph, values, gtsam.LevenbergMarquardtParams()
+    ).optimize()
+    return np.asarray(result.atPose3(0).matrix(), dtype=np.float64)

@@ -120,6 +120,8 @@ class Fit:
     rmse_m: float
     """Point-to-plane RMS distance of those overlapping points (inf when none)."""
     conditioning: Conditioning
+    correspondences: int
+    """Number of overlapping source points with a target normal (the Hessian's sample)."""
     hessian: F64
     """Mean point-to-plane Hessian per correspondence, 6x6 over a perturbation
     [rotation (rad), translation (m)] of the source in its own frame (gtsam's Pose3
@@ -131,7 +133,7 @@ def evaluate(
 ) -> Fit:
     """Overlap, point-to-plane RMSE and conditioning of `source` moved by `target_from_source`."""
     if source.size == 0 or target.size == 0:
-        return Fit(0.0, math.inf, _NO_CONDITIONING, np.zeros((6, 6)))
+        return Fit(0.0, math.inf, _NO_CONDITIONING, 0, np.zeros((6, 6)))
     moved = se3.apply(target_from_source, source.points_m)
     idx, sq = target.tree.batch_nearest_neighbor_search(moved, num_threads=threads)
     idx = np.asarray(idx, dtype=np.int64)
@@ -141,7 +143,7 @@ def evaluate(
     normals = target.normals[idx[inlier]]
     has_normal = np.linalg.norm(normals, axis=1) > 0.5
     if has_normal.sum() < 6:
-        return Fit(overlap, math.inf, _NO_CONDITIONING, np.zeros((6, 6)))
+        return Fit(overlap, math.inf, _NO_CONDITIONING, 0, np.zeros((6, 6)))
     normals = normals[has_normal]
     matched = target.points_m[idx[inlier][has_normal]]
     residual = np.einsum("ij,ij->i", moved[inlier][has_normal] - matched, normals)
@@ -157,6 +159,7 @@ def evaluate(
         overlap,
         float(np.sqrt(np.mean(residual**2))),
         Conditioning(t_info, r_info, t_dir, r_axis),
+        int(jacobian.shape[0]),
         hessian,
     )
 

@@ -96,6 +96,20 @@ def _alignment_cells(alignment: AlignmentOut) -> str:
     )
 
 
+def _map_pair_rows(result: CalibrationResult) -> str:
+    rows = []
+    for ext in result.extrinsics:
+        for pair in ext.map_pairs:
+            rows.append(
+                "<tr>"
+                f'<td class="l">{escape(ext.frame_id)}</td><td>{pair.anchor_stop}</td>'
+                f"<td>{len(pair.reference_stops)} / {len(pair.lidar_stops)}</td>"
+                + _alignment_cells(pair.alignment)
+                + "</tr>"
+            )
+    return "".join(rows)
+
+
 def _lidar_block(lidar: LidarOut) -> str:
     used = sum(1 for s in lidar.stops if s.used)
     accepted = sum(1 for p in lidar.pairs if p.alignment.accepted)
@@ -124,7 +138,8 @@ def _lidar_block(lidar: LidarOut) -> str:
     )
     graph = lidar.pose_graph
     graph_line = (
-        f"pose graph: {graph.nodes} stops, {graph.edges} edges, {graph.outlier_edges} outliers, "
+        f"{graph.graphs} pose graph(s): {graph.nodes} stops, {graph.edges} edges, "
+        f"{graph.outlier_edges} outliers, "
         f"cost {graph.error_before:.3g} → {graph.error_after:.3g}"
         if graph
         else "no pose graph"
@@ -169,6 +184,12 @@ def html_section(result: CalibrationResult) -> str:
         "<th>map error (cm) before → after</th><th>hand-eye (deg)</th><th class='l'>verdict</th></tr>"
         + _extrinsic_rows(result)
         + "</table>"
+        + "<details open><summary>Map-to-map alignments (local maps anchored at a shared stop;"
+        " accepted ones are fused)</summary><table><tr><th class='l'>LiDAR</th><th>anchor stop</th>"
+        "<th>stops in maps (reference / LiDAR)</th><th>overlap before → after</th>"
+        "<th>error (cm) before → after</th><th>information t / r</th><th class='l'>verdict</th></tr>"
+        + _map_pair_rows(result)
+        + "</table></details>"
         + "".join(_lidar_block(lidar) for lidar in result.lidars)
         + (f"<ul>{notes}</ul>" if notes else "")
         + f'<p class="muted">{escape(timings)}; {libs}</p>'

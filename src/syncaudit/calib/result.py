@@ -131,8 +131,9 @@ class PairOut(_Out):
 
 
 class PoseGraphOut(_Out):
-    """Summary of one LiDAR's pose graph."""
+    """Summary of one LiDAR's pose graphs (one per group of connected stops used)."""
 
+    graphs: int
     nodes: int
     edges: int
     outlier_edges: int
@@ -156,6 +157,16 @@ class LidarOut(_Out):
     reason: str | None
 
 
+class MapPairOut(_Out):
+    """One map-to-map alignment: both LiDARs' local maps anchored at the same stop."""
+
+    anchor_stop: int
+    reference_stops: list[int]
+    lidar_stops: list[int]
+    alignment: AlignmentOut
+    result: TransformOut | None
+
+
 class ExtrinsicOut(_Out):
     """Calibrated vs recorded `reference_from_lidar`, with the pass/fail verdict."""
 
@@ -173,6 +184,12 @@ class ExtrinsicOut(_Out):
     diff_xyz_cm: tuple[float, float, float] | None
     passed: bool
     map_to_map: AlignmentOut | None
+    """The map pair at the main anchor stop."""
+    map_pairs: list[MapPairOut] = []
+    """Every map pair; accepted ones are fused (weighted by their information) into `result`."""
+    estimate_spread_deg: float | None = None
+    estimate_spread_cm: float | None = None
+    """Largest rotation / translation of an accepted map pair's estimate from `result`."""
     stop_angle_disagreement_deg: float | None
     """Largest difference of the vehicle's turn angle as seen by this and the reference LiDAR."""
     hand_eye_rotation_residual_deg: float | None
@@ -208,6 +225,8 @@ class CalibrationResult(_Out):
     base_frame: str
     extrinsics_source: str
     reference_stop: int | None
+    anchor_stops: list[int] = []
+    """Stops at which local maps were anchored and aligned (the first is `reference_stop`)."""
     limits: Limits
     stops: list[VehicleStopOut]
     lidars: list[LidarOut]
