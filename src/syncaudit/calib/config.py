@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from typing_extensions import Self
 
 from syncaudit.errors import ConfigError
 
@@ -38,6 +39,14 @@ class ConfigModel(BaseModel):
             super().__init__(**data)
         except ValidationError as exc:
             raise ConfigError(_one_line(exc, type(self).__name__)) from None
+
+    @classmethod
+    def model_validate(cls, *args: Any, **kwargs: Any) -> Self:
+        """pydantic's model_validate, with failures as one-line `ConfigError`s."""
+        try:
+            return super().model_validate(*args, **kwargs)
+        except ValidationError as exc:
+            raise ConfigError(_one_line(exc, cls.__name__)) from None
 
     @classmethod
     def from_mapping(cls, data: Any) -> Any:
@@ -332,10 +341,20 @@ class CalibConfig(ConfigModel):
 
 
 def load_config(path: Path, model: type[ConfigModel]) -> Any:
-    """Read a YAML or JSON file into `model`; `ConfigError` on unreadable or invalid content."""
+    """Read a YAML, JSON (.json) or TOML (.toml) file into `model`; `ConfigError` on
+    unreadable or invalid content."""
     try:
         text = path.read_text(encoding="utf-8")
-        data = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
+        if path.suffix == ".json":
+            data = json.loads(text)
+        elif path.suffix == ".toml":
+            try:
+                import tomllib
+            except ImportError:  # Python 3.10
+                raise ConfigError(f"cannot read config {path}: TOML needs Python 3.11+") from None
+            data = tomllib.loads(text)
+        else:
+            data = yaml.safe_load(text)
     except (OSError, ValueError, yaml.YAMLError) as exc:
         raise ConfigError(f"cannot read config {path}: {exc}".splitlines()[0]) from None
     return model.from_mapping(data or {})

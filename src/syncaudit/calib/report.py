@@ -198,28 +198,17 @@ def html_section(result: CalibrationResult) -> str:
 
 
 def _extrinsic_table(extrinsics: list[ExtrinsicOut]) -> Table:
-    table = Table(title="Extrinsics (reference_from_lidar)")
-    for col in (
-        "LiDAR",
-        "calibrated xyz (m)",
-        "calibrated rpy (deg)",
-        "Δrot (deg)",
-        "Δtrans (cm)",
-        "map error (cm)",
-        "verdict",
-    ):
+    table = Table(title="Extrinsics vs recorded (reference_from_lidar)")
+    for col in ("LiDAR", "Δrot (deg)", "Δtrans (cm)", "map error (cm)", "verdict"):
         table.add_column(col, justify="left" if col in ("LiDAR", "verdict") else "right")
     for ext in extrinsics:
-        cal = ext.result
         m2m = ext.map_to_map
         if ext.calibrated:
             verdict = "[green]pass[/]" if ext.passed else "[red]fail[/]"
         else:
-            verdict = f"[yellow]not calibrated[/] {ext.reason or ''}"
+            verdict = "[yellow]not calibrated[/]"
         table.add_row(
             ext.frame_id,
-            _xyz_rpy(cal.translation_m, 4) if cal else "-",
-            _xyz_rpy(cal.rpy_deg, 3) if cal else "-",
             _num(ext.rotation_diff_deg),
             _num(ext.translation_diff_cm, 2),
             f"{_num(m2m.before.rmse_cm, 2)} → {_num(m2m.after.rmse_cm, 2)}" if m2m else "-",
@@ -241,6 +230,16 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
         f"{result.limits.max_translation_cm:g} cm"
     )
     console.print(_extrinsic_table(result.extrinsics))
+    for ext in result.extrinsics:
+        if ext.result is not None:
+            console.print(
+                f"{ext.frame_id}: calibrated xyz {_xyz_rpy(ext.result.translation_m, 4)} m, "
+                f"rpy {_xyz_rpy(ext.result.rpy_deg, 3)} deg; recorded xyz "
+                f"{_xyz_rpy(ext.recorded.translation_m, 4)} m, rpy "
+                f"{_xyz_rpy(ext.recorded.rpy_deg, 3)} deg"
+            )
+        elif ext.reason:
+            console.print(f"[yellow]{ext.frame_id}: {ext.reason}[/]")
     table = Table(title="Per LiDAR")
     for col in ("LiDAR", "stops used", "pairs accepted", "graph outliers", "map points", "status"):
         table.add_column(col, justify="left" if col in ("LiDAR", "status") else "right")
