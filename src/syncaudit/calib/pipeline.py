@@ -335,14 +335,6 @@ def _strength(cond: Conditioning) -> float:
     return min(cond.translation_information, cond.rotation_information)
 
 
-def _well_conditioned(cond: Conditioning, config: CalibConfig) -> bool:
-    reg = config.registration
-    return (
-        cond.translation_information >= reg.min_translation_information
-        and cond.rotation_information >= reg.min_rotation_information
-    )
-
-
 def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
     reg = config.registration
     return align(
@@ -775,11 +767,18 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
                 reason=reason,
             )
         )
+    axis, tilt = None, None
+    if lidar.turn_axis is not None:
+        axis = (float(lidar.turn_axis[0]), float(lidar.turn_axis[1]), float(lidar.turn_axis[2]))
+        cos = float(np.clip(lidar.turn_axis @ lidar.up / np.linalg.norm(lidar.up), -1.0, 1.0))
+        tilt = math.degrees(math.acos(cos))
     return LidarOut(
         topic=lidar.topic,
         frame_id=lidar.frame_id,
         scans=len(lidar.scans),
         horizontal_fov_deg=lidar.hfov_deg,
+        turn_axis=axis,
+        turn_axis_vs_recorded_deg=tilt,
         stops=uses,
         pairs=lidar.pairs,
         pose_graph=lidar.graph,

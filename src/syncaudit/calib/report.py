@@ -147,7 +147,8 @@ def _lidar_block(lidar: LidarOut) -> str:
     return (
         f"<h4>{escape(lidar.frame_id)} <span class='muted'>{escape(lidar.topic)}</span></h4>"
         f"<p>{status}; {used} of {len(lidar.stops)} stops used, {accepted} of {len(lidar.pairs)} "
-        f"pair alignments accepted; {graph_line}; horizontal view {_num(lidar.horizontal_fov_deg, 0)} deg</p>"
+        f"pair alignments accepted; {graph_line}; horizontal view {_num(lidar.horizontal_fov_deg, 0)} deg; "
+        f"turn axis vs recorded vertical {_num(lidar.turn_axis_vs_recorded_deg)} deg</p>"
         "<details><summary>Stops</summary><table><tr><th>stop</th><th>stamp (s)</th>"
         "<th>static scans</th><th>angle (deg)</th><th class='l'>use</th></tr>"
         f"{stops}</table></details>"

@@ -149,6 +149,11 @@ class LidarOut(_Out):
     frame_id: str
     scans: int
     horizontal_fov_deg: float | None
+    turn_axis: tuple[float, float, float] | None = None
+    """The turntable axis in this LiDAR's frame, estimated from its alignments (planar model)."""
+    turn_axis_vs_recorded_deg: float | None = None
+    """Angle between that axis and the base's z axis per the recorded extrinsic: the recorded
+    roll/pitch error relative to the floor, independent of the map-to-map step."""
     stops: list[StopUse]
     pairs: list[PairOut]
     pose_graph: PoseGraphOut | None

@@ -9,7 +9,6 @@ which stops are kept (distinct positions) and which pairs should overlap.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -233,8 +232,3 @@ def candidate_pairs(
 def signed_angle_deg(transform: F64, up: F64) -> float:
     """Rotation of a relative pose about the turntable axis `up`, signed, in degrees."""
     return se3.signed_angle_about_deg(transform[:3, :3], up / np.linalg.norm(up))
-
-
-def is_finite_angle(value: float | None) -> bool:
-    """True for a known, finite angle."""
-    return value is not None and math.isfinite(value)
