@@ -1,19 +1,24 @@
 """`calibrate_log`: method B end to end on a recorded turntable or slow-turn session.
 
 1. read the LiDARs' PointCloud2 scans and the recorded extrinsics;
-2. find stationary stops, their turntable angles (coarse registration chain, yaw search),
-   and keep distinct angular positions;
+2. find stationary stops (runs of scans without motion; scans taken while turning are
+   left out), the vehicle's turn between consecutive stops (all LiDARs merged in the base
+   frame, yaw search + coarse GICP) and so each stop's turntable angle; keep distinct
+   angular positions;
 3. per LiDAR, align overlapping scan pairs with GICP, accept/reject each by overlap,
-   error and conditioning;
-4. per LiDAR, a pose graph (gtsam, robust kernel) anchored at the common reference stop
-   puts every scan in that LiDAR's frame at the reference stop: its local map;
-5. GICP between the reference LiDAR's map and each other LiDAR's map, seeded with the
-   recorded extrinsic: the result is `reference_from_lidar`, the extrinsic calibration;
-6. validate against the recorded extrinsic.
+   point-to-plane error and conditioning (degenerate alignments are rejected);
+4. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
+   stops the accepted alignments connect, anchored at a stop shared with the other
+   LiDARs: every scan lands in that LiDAR's frame at the anchor stop -- its local map;
+5. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
+   stop, seeded with the recorded extrinsic: the result is `reference_from_lidar`, the
+   extrinsic calibration (estimates from several anchors are fused by their information);
+6. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
 
-Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown rotation
-between stops (common to all LiDARs) cancels: the turntable angle is never needed, only
-estimated, for choosing stops and seeding registrations.
+Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
+stops (common to all LiDARs) cancels: the turntable angle is never needed, only
+estimated, to choose stops and seed registrations. The recorded extrinsics seed the
+coarse turn chain and the map-to-map GICP; the result does not otherwise depend on them.
 """
 
 from __future__ import annotations
