@@ -177,6 +177,29 @@ class Alignment:
     reason: str | None
 
 
+def gicp(
+    target: Cloud,
+    source: Cloud,
+    initial: F64,
+    max_correspondence_m: float,
+    threads: int,
+    max_iterations: int,
+    **tolerances: float,
+) -> Any:
+    """One small_gicp GICP run of `source` onto `target` from `initial` (its raw result)."""
+    return backend().align(
+        target.gicp,
+        source.gicp,
+        target.tree,
+        init_T_target_source=initial,
+        registration_type="GICP",
+        max_correspondence_distance=max_correspondence_m,
+        num_threads=threads,
+        max_iterations=max_iterations,
+        **tolerances,
+    )
+
+
 def align(
     target: Cloud,
     source: Cloud,
@@ -192,21 +215,18 @@ def align(
     threads: int,
 ) -> Alignment:
     """Coarse-to-fine GICP from `initial`, then the overlap, error and degeneracy tests."""
-    sg = backend()
     before = evaluate(target, source, initial, overlap_distance_m, threads)
     transform = np.asarray(initial, dtype=np.float64)
     converged, iterations = False, 0
     result: Any = None
     for max_corr in max_correspondences_m:
-        result = sg.align(
-            target.gicp,
-            source.gicp,
-            target.tree,
-            init_T_target_source=transform,
-            registration_type="GICP",
-            max_correspondence_distance=max_corr,
-            num_threads=threads,
-            max_iterations=max_iterations,
+        result = gicp(
+            target,
+            source,
+            transform,
+            max_corr,
+            threads,
+            max_iterations,
             rotation_epsilon=_ROTATION_EPS_RAD,
             translation_epsilon=_TRANSLATION_EPS_M,
         )
@@ -262,7 +282,6 @@ def yaw_search(
     symmetric view cannot pick a wrong turn on its own. Returns (yaw_deg, per-LiDAR
     (first_from_second, coarse fit)).
     """
-    sg = backend()
     best: tuple[float, float, list[tuple[F64, Fit]]] = (0.0, -1.0, [])
     n = max(1, math.floor(max_step_deg / step_deg))
     for k in range(-n, n + 1):
@@ -274,16 +293,7 @@ def yaw_search(
         found: list[tuple[F64, Fit]] = []
         for target, source, base_from_lidar in pairs:
             init = se3.invert(base_from_lidar) @ turn @ base_from_lidar
-            result = sg.align(
-                target.gicp,
-                source.gicp,
-                target.tree,
-                init_T_target_source=init,
-                registration_type="GICP",
-                max_correspondence_distance=max_correspondence_m,
-                num_threads=threads,
-                max_iterations=20,
-            )
+            result = gicp(target, source, init, max_correspondence_m, threads, 20)
             transform = np.asarray(result.T_target_source, dtype=np.float64)
             found.append(
                 (transform, evaluate(target, source, transform, overlap_distance_m, threads))

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import Cloud, backend, evaluate
+from syncaudit.calib.registration import Cloud, evaluate, gicp
 
 F64 = NDArray[np.float64]
 
@@ -46,19 +46,9 @@ def motion_between(
     """Rotation (deg), translation (m) between two coarse scans registered from identity,
     and whether the registration was well conditioned enough to tell "no motion" apart
     from "motion the geometry cannot see" (e.g. turning above bare ground)."""
-    sg = backend()
     transform = np.eye(4)
     for max_corr in (4.0 * a.voxel_m, 2.0 * a.voxel_m):
-        result = sg.align(
-            a.gicp,
-            b.gicp,
-            a.tree,
-            init_T_target_source=transform,
-            registration_type="GICP",
-            max_correspondence_distance=max_corr,
-            num_threads=threads,
-            max_iterations=30,
-        )
+        result = gicp(a, b, transform, max_corr, threads, 30)
         transform = np.asarray(result.T_target_source, dtype=np.float64)
     cond = evaluate(a, b, transform, 2.0 * a.voxel_m, threads).conditioning
     well_conditioned = (
