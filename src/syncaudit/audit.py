@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
@@ -242,16 +244,11 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         scanner.feed(concat_samples(batch), messages=len(batch))
     # The analysis needs pandas; importing it only now lets the workers start first.
     from syncaudit.analysis.replay import replay_controller
-    from syncaudit.analysis.sync import analyze_camera
+    from syncaudit.analysis.sync import analyze_camera, host_offset_ns
 
     scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
-    if scan.clock is not None and not scan.clock.synchronised:
-        warnings.append(
-            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
-            f"(not synchronised); t1 reported as spread above the minimum"
-        )
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     controller = ControllerConfig(
@@ -261,12 +258,21 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         mode=rig.analysis.correction,
         min_frames=rig.analysis.window_frames,
     )
-    offset = 0 if scan.clock is None or scan.clock.synchronised else scan.clock.offset_ns
-    result_cams: list[CameraAudit] = []
     empty = {c.name: CameraTableBuilder(c) for c, _, _ in located}
     by_camera = {b.camera.name: b for b in builders.values()}
-    for index, (cam, azimuth, source) in enumerate(located):
-        tables = by_camera.get(cam.name, empty[cam.name]).build()
+    all_tables = [by_camera.get(c.name, empty[c.name]).build() for c, _, _ in located]
+    packet_ns = [t.triggers["lidar_packet_ns"].dropna().to_numpy(np.int64) for t in all_tables]
+    offset, how = host_offset_ns(
+        scan, np.concatenate(packet_ns) if packet_ns else np.empty(0, np.int64)
+    )
+    if scan.clock is not None and not scan.clock.synchronised:
+        warnings.append(
+            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
+            f"(not synchronised): offset {offset / 1e9:+.6f} s {how}; t1 reported as "
+            "spread above the minimum"
+        )
+    result_cams: list[CameraAudit] = []
+    for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
         for what, present in (
             ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
             ("exposure metadata", tables.exposure_source is not None),
@@ -280,6 +286,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
             cam,
             azimuth,
             tables,
+            offset,
             lidar_cfg.zero_azimuth_deg,
             lidar_cfg.azimuth_increases,
             rig.analysis,

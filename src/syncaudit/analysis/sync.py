@@ -131,12 +131,16 @@ def theta_deg(camera_azimuth_deg: float, zero_azimuth_deg: float, azimuth_increa
     return (delta if azimuth_increases else -delta) % FULL_TURN_DEG
 
 
-def host_offset_ns(scan: LidarScan, triggers: pd.DataFrame) -> tuple[int, str]:
-    """Host minus sensor clock: 0 when synchronised, else from triggers or the clock floor."""
+def host_offset_ns(scan: LidarScan, packet_ns: NDArray[np.int64]) -> tuple[int, str]:
+    """Host minus sensor clock: 0 when synchronised, else from triggers or the clock floor.
+
+    `packet_ns` are the triggers' checkpoint-240 stamps (the zero-crossing packet in host
+    time) of every camera; it is a property of the LiDAR, computed once per log.
+    """
     clock = scan.clock
     if clock is None or clock.synchronised:
         return 0, "synchronised"
-    packet = triggers["lidar_packet_ns"].dropna().to_numpy(np.int64)
+    packet = packet_ns
     zero_pkt = scan.revolutions.zero_packet_sensor_ns
     if packet.size and zero_pkt.size:
         # The trigger's 240 stamp is the zero-crossing packet in host time: pair by the
@@ -228,24 +232,19 @@ def analyze_camera(
     camera: CameraConfig,
     camera_azimuth_deg: float,
     tables: CameraTables,
+    offset: int,
     zero_azimuth_deg: float,
     azimuth_increases: bool,
     analysis: AnalysisConfig,
     thresholds: Thresholds,
 ) -> CameraSync:
-    """Eq. 1-6 for one camera over the whole log."""
+    """Eq. 1-6 for one camera over the whole log; `offset` is host minus sensor clock (ns)."""
     warnings: list[str] = []
     revs = scan.revolutions
     theta = theta_deg(camera_azimuth_deg, zero_azimuth_deg, azimuth_increases)
     omega = revs.omega_deg_s[np.isfinite(revs.omega_deg_s)]
     omega_mean = float(omega.mean()) if omega.size else math.nan
     t_rotate = theta / omega_mean * 1e9 if omega_mean else math.nan
-    offset, how = host_offset_ns(scan, tables.triggers)
-    if how != "synchronised":
-        warnings.append(
-            f"LiDAR clock not synchronised with the host; offset {offset / 1e9:+.6f} s {how}"
-        )
-
     frames = pair_triggers(tables.frames, tables.triggers)
     n = len(frames)
     start = _col(frames, "exposure_start_ns")
