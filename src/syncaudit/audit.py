@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +24,7 @@ from syncaudit.lidar.stream import (
 )
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
+from syncaudit.units import finite_or_none, ns_to_us
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -57,22 +57,14 @@ class CameraAudit:
             else {
                 "adjustments": self.replay.adjustments,
                 "final_delay_us": self.replay.final_delay_ns / 1e3,
-                "error_mean_us": _us(self.replay.error_mean_ns),
-                "error_var_us2": _f(self.replay.error_var_ns2 / 1e6),
-                "error_signed_mean_us": _us(self.replay.error_signed_mean_ns),
-                "settled_error_mean_us": _us(self.replay.settled_error_mean_ns),
-                "settled_error_var_us2": _f(self.replay.settled_error_var_ns2 / 1e6),
+                "error_mean_us": ns_to_us(self.replay.error_mean_ns),
+                "error_var_us2": finite_or_none(self.replay.error_var_ns2 / 1e6),
+                "error_signed_mean_us": ns_to_us(self.replay.error_signed_mean_ns),
+                "settled_error_mean_us": ns_to_us(self.replay.settled_error_mean_ns),
+                "settled_error_var_us2": finite_or_none(self.replay.settled_error_var_ns2 / 1e6),
             }
         )
         return out
-
-
-def _f(v: float) -> float | None:
-    return v if math.isfinite(v) else None
-
-
-def _us(v: float) -> float | None:
-    return v / 1e3 if math.isfinite(v) else None
 
 
 @dataclass(slots=True)

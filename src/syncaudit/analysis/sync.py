@@ -21,6 +21,7 @@ from syncaudit.analysis.stats import error_mean, error_variance, rolling_mean, r
 from syncaudit.camera.extract import CameraTables
 from syncaudit.lidar.scan import LidarScan
 from syncaudit.rig import AnalysisConfig, CameraConfig, Thresholds
+from syncaudit.units import finite_or_none, ns_to_us
 
 FULL_TURN_DEG = 360.0
 PAIR_TOLERANCE_NS = 50_000_000
@@ -43,9 +44,9 @@ class LatencyStats:
         """JSON form in microseconds."""
         return {
             "status": self.status,
-            "mean_us": _us(self.mean_ns),
-            "p50_us": _us(self.p50_ns),
-            "p99_us": _us(self.p99_ns),
+            "mean_us": ns_to_us(self.mean_ns),
+            "p50_us": ns_to_us(self.p50_ns),
+            "p99_us": ns_to_us(self.p99_ns),
             "count": self.count,
         }
 
@@ -91,38 +92,30 @@ class CameraSync:
         """JSON form (times in microseconds, see schemas/audit.schema.json)."""
         return {
             "camera": self.camera,
-            "theta_deg": _f(self.theta_deg),
-            "omega_deg_s": _f(self.omega_deg_s),
-            "t_rotate_us": _us(self.t_rotate_ns),
-            "packet_phase_us": _us(self.packet_phase_ns),
+            "theta_deg": finite_or_none(self.theta_deg),
+            "omega_deg_s": finite_or_none(self.omega_deg_s),
+            "t_rotate_us": ns_to_us(self.t_rotate_ns),
+            "packet_phase_us": ns_to_us(self.packet_phase_ns),
             "latencies": {k: v.to_dict() for k, v in self.latencies.items()},
-            "t5_mean_us": _us(self.t5_mean_ns),
-            "delay_applied_us": _us(self.delay_applied_ns),
-            "delay_recommended_us": _us(self.delay_recommended_ns),
-            "delay_from_error_us": _us(self.delay_from_error_ns),
+            "t5_mean_us": ns_to_us(self.t5_mean_ns),
+            "delay_applied_us": ns_to_us(self.delay_applied_ns),
+            "delay_recommended_us": ns_to_us(self.delay_recommended_ns),
+            "delay_from_error_us": ns_to_us(self.delay_from_error_ns),
             "frames_total": self.frames_total,
             "frames_paired": self.frames_paired,
             "unpaired": dict(self.unpaired),
-            "error_signed_mean_us": _us(self.error_signed_mean_ns),
-            "error_mean_us": _us(self.error_mean_ns),
-            "error_var_us2": _f(self.error_var_ns2 / 1e6),
-            "error_p99_us": _us(self.error_p99_ns),
-            "error_max_us": _us(self.error_max_ns),
-            "rolling_mean_max_us": _us(self.rolling_mean_max_ns),
-            "rolling_var_max_us2": _f(self.rolling_var_max_ns2 / 1e6),
+            "error_signed_mean_us": ns_to_us(self.error_signed_mean_ns),
+            "error_mean_us": ns_to_us(self.error_mean_ns),
+            "error_var_us2": finite_or_none(self.error_var_ns2 / 1e6),
+            "error_p99_us": ns_to_us(self.error_p99_ns),
+            "error_max_us": ns_to_us(self.error_max_ns),
+            "rolling_mean_max_us": ns_to_us(self.rolling_mean_max_ns),
+            "rolling_var_max_us2": finite_or_none(self.rolling_var_max_ns2 / 1e6),
             "mean_threshold_exceeded": self.mean_exceeded,
             "var_threshold_exceeded": self.var_exceeded,
             "needs_correction": self.needs_correction,
             "warnings": list(self.warnings),
         }
-
-
-def _f(value: float) -> float | None:
-    return None if value is None or not math.isfinite(value) else float(value)
-
-
-def _us(value_ns: float) -> float | None:
-    return None if value_ns is None or not math.isfinite(value_ns) else value_ns / 1e3
 
 
 def theta_deg(camera_azimuth_deg: float, zero_azimuth_deg: float, azimuth_increases: bool) -> float:
