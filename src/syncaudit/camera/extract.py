@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
-from syncaudit.logs import LogReader, RawMessage
+from syncaudit.logs import RawMessage
 from syncaudit.rig import CameraConfig
 
 if TYPE_CHECKING:
@@ -178,19 +178,3 @@ class CameraTableBuilder:
             self.exposures[0][-1] if self.exposures else None,
             self.triggers[0][-1] if self.triggers else None,
         )
-
-
-def read_camera(log: LogReader, cam: CameraConfig) -> CameraTables:
-    """Read one camera's image, exposure and trigger topics into tables (one pass)."""
-    builder = CameraTableBuilder(cam)
-    roles = {cam.image_topic: "image", cam.exposure_topic: "exposure", cam.trigger_topic: "trigger"}
-    topics = [t for t in roles if t is not None and t in log.topics]
-    for msg in log.messages(topics):
-        role = roles[msg.topic]
-        if role == "image":
-            builder.images.append(image_row(msg))
-        elif role == "exposure":
-            builder.exposures.append(exposure_row(msg, log.deserialize(msg), cam.name, cam.stamp))
-        else:
-            builder.triggers.append(trigger_row(msg, log.deserialize(msg), cam.name))
-    return builder.build()
