@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +16,7 @@ from pydantic import BaseModel, ConfigDict
 from syncaudit.calib import se3
 from syncaudit.calib.registration import Alignment, Conditioning, Fit
 from syncaudit.calib.se3 import Mat
+from syncaudit.writers.atomic import write_text_atomic
 
 
 class _Out(BaseModel):
@@ -246,14 +245,4 @@ class CalibrationResult(_Out):
 
     def write_json(self, path: Path) -> None:
         """Write the JSON atomically (temporary file beside `path`, then rename)."""
-        path = Path(path)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as handle:
-                json.dump(self.to_json_dict(), handle, indent=2)
-                handle.write("\n")
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_text_atomic(Path(path), json.dumps(self.to_json_dict(), indent=2) + "\n")

@@ -14,8 +14,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +24,7 @@ from numpy.typing import NDArray
 from syncaudit.calib import se3
 from syncaudit.calib.config import CalibSceneConfig, LidarSimConfig
 from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_scan
+from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
 __all__ = ["CalibSceneConfig", "simulate_calib_session", "truth_path"]
@@ -187,16 +186,7 @@ def _tf_msg(
 
 def _write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
     """Write JSON to a temporary file beside `path`, then move it into place."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(payload, handle, indent=2)
-            handle.write("\n")
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; a sidecar is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, json.dumps(payload, indent=2) + "\n")
 
 
 def simulate_calib_session(

@@ -31,8 +31,6 @@ from __future__ import annotations
 import heapq
 import json
 import math
-import os
-import secrets
 import struct
 import zlib
 from collections.abc import Callable, Iterator
@@ -55,6 +53,7 @@ from syncaudit.lidar.velodyne import (
     velodyne_firing_offsets_ns,
     velodyne_revolution_schedule,
 )
+from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
 LidarModel = Literal["VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32"]
@@ -1036,16 +1035,7 @@ def _write_json_atomic(path: Path, payload: dict[str, Any], overwrite: bool) -> 
     """Write JSON to a temporary file beside `path` (normal permissions), then rename."""
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists already; pass overwrite=True to replace it")
-    tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(payload, handle, indent=1, allow_nan=True)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, json.dumps(payload, indent=1, allow_nan=True) + "\n")
 
 
 def simulate_sync_log(out: Path, config: SyncSimConfig) -> dict[str, Any]:
