@@ -220,10 +220,11 @@ def simulate(
     import yaml
 
     from syncaudit.analysis.controller import ControllerConfig
-    from syncaudit.errors import ConfigError
+    from syncaudit.errors import ConfigError, validation_summary
     from syncaudit.simulate.rig_file import rig_from_truth
     from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
     from syncaudit.writers.atomic import write_text_atomic
+    from syncaudit.writers.log_writer import infer_format
 
     def job() -> None:
         from pydantic import ValidationError
@@ -243,7 +244,7 @@ def simulate(
                 {
                     "seed": seed,
                     "duration_s": duration_s,
-                    "log_format": fmt or _format_of(out),
+                    "log_format": fmt or infer_format(out),
                     "overwrite": overwrite,
                     "lidar_model": lidar,
                     "clock_offset_ns": round(clock_offset_s * 1e9),
@@ -258,8 +259,7 @@ def simulate(
                 }
             )
         except ValidationError as exc:
-            first = exc.errors()[0]
-            raise ConfigError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
+            raise ConfigError(validation_summary(exc)) from exc
         if out.exists() and not overwrite:
             raise ConfigError(f"{out} exists (pass --overwrite to replace it)")
         truth = simulate_sync_log(out, config)
@@ -288,8 +288,6 @@ def _simulate_calib(
     degenerate: bool,
     overwrite: bool,
 ) -> None:
-    from pydantic import ValidationError
-
     from syncaudit.calib.config import CalibSceneConfig, SceneConfig, rig_preset
     from syncaudit.errors import ConfigError
     from syncaudit.simulate.calib_session import simulate_calib_session
@@ -297,20 +295,17 @@ def _simulate_calib(
     def job() -> None:
         if out.exists() and not overwrite:
             raise ConfigError(f"{out} exists (pass --overwrite to replace it)")
-        try:
-            config = CalibSceneConfig(
-                seed=seed,
-                n_stops=stops,
-                scene=SceneConfig(kind="ground_and_wall" if degenerate else "yard"),
-                lidars=rig_preset(
-                    beams,
-                    rear_rotation_error_deg=rotation_error_deg,
-                    rear_translation_error_cm=translation_error_cm,
-                ),
-            )
-        except ValidationError as exc:
-            first = exc.errors()[0]
-            raise ConfigError(f"{'.'.join(map(str, first['loc']))}: {first['msg']}") from exc
+        # The calibration's config models raise one-line ConfigErrors themselves.
+        config = CalibSceneConfig(
+            seed=seed,
+            n_stops=stops,
+            scene=SceneConfig(kind="ground_and_wall" if degenerate else "yard"),
+            lidars=rig_preset(
+                beams,
+                rear_rotation_error_deg=rotation_error_deg,
+                rear_translation_error_cm=translation_error_cm,
+            ),
+        )
         simulate_calib_session(out, config, fmt=None, overwrite=overwrite)
         out_console_print(
             f"wrote {out} ({stops} stops, {beams}-beam LiDARs), truth {out.name}.truth.json"
@@ -396,14 +391,6 @@ def calib(
 def out_console_print(line: str) -> None:
     """One plain line on stdout."""
     out.print(line, highlight=False)
-
-
-def _format_of(path: Path) -> str:
-    if path.suffix == ".bag":
-        return "bag"
-    if path.suffix == ".mcap":
-        return "mcap"
-    return "db3"
 
 
 def main() -> None:

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pydantic import ValidationError
+
 
 class SyncauditError(Exception):
     """Base of every error syncaudit raises on purpose; carries the CLI exit code."""
@@ -55,3 +60,13 @@ class GateFailedError(SyncauditError):
     """An audit ran and its result crosses a configured threshold (CI gate)."""
 
     exit_code = 10
+
+
+def validation_summary(exc: ValidationError) -> str:
+    """A pydantic ValidationError on one line: `field.path: message (+N more)`."""
+    errors = exc.errors()
+    first = errors[0]
+    where = ".".join(str(part) for part in first["loc"]) or "(top level)"
+    message = " ".join(str(first["msg"]).split())
+    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{where}: {message}{more}"

@@ -15,7 +15,7 @@ import tomllib
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from syncaudit.errors import ConfigError
+from syncaudit.errors import ConfigError, validation_summary
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 
@@ -129,10 +129,7 @@ def load_rig(path: str | Path) -> Rig:
     try:
         return Rig.model_validate(raw)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        more = f" (+{exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
-        raise ConfigError(f"{path}: {where}: {err['msg']}{more}") from exc
+        raise ConfigError(f"{path}: {validation_summary(exc)}") from exc
 
 
 def rig_json_schema() -> dict[str, object]:

@@ -16,17 +16,12 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from typing_extensions import Self
 
-from syncaudit.errors import ConfigError
+from syncaudit.errors import ConfigError, validation_summary
 
 
 def _one_line(exc: ValidationError, model: str) -> str:
     """First validation error of `exc` as `model: field.path: message (+N more)`."""
-    errors = exc.errors()
-    first = errors[0]
-    loc = ".".join(str(part) for part in first["loc"]) or "(model)"
-    msg = str(first["msg"]).replace("\n", " ")
-    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
-    return f"invalid {model}: {loc}: {msg}{more}"
+    return f"invalid {model}: {validation_summary(exc)}"
 
 
 class ConfigModel(BaseModel):

@@ -59,7 +59,10 @@ def infer_format(path: Path) -> LogFormat:
         return "bag"
     if suffix in ("", ".db3"):
         return "db3"
-    raise ConfigError(f"{path}: cannot tell the log format from suffix {suffix!r}; pass fmt")
+    raise ConfigError(
+        f"{path}: cannot tell the log format from suffix {suffix!r}; "
+        "name it .mcap, .bag or .db3 (or give the format explicitly)"
+    )
 
 
 def ros_time(stamp_ns: int, store: Any) -> Any:
