@@ -24,7 +24,7 @@ from syncaudit.lidar.stream import (
 )
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
-from syncaudit.units import finite_or_none, ns_to_us
+from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -96,9 +96,7 @@ class AuditResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (schemas/audit.schema.json)."""
-        from syncaudit.inspect_log import _clean
-
-        cleaned: dict[str, Any] = _clean(
+        cleaned: dict[str, Any] = json_ready(
             {
                 "schema_version": SCHEMA_VERSION,
                 "path": self.path,

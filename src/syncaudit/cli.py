@@ -21,8 +21,8 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-out = Console()
-err = Console(stderr=True, soft_wrap=True)
+stdout = Console()
+stderr = Console(stderr=True, soft_wrap=True)
 
 EXIT_INTERNAL = 70
 T = TypeVar("T")
@@ -43,19 +43,19 @@ def _run(job: Callable[[], T]) -> T:
     try:
         return job()
     except SyncauditError as exc:
-        err.print(f"[red]error:[/] {exc}", highlight=False)
+        stderr.print(f"[red]error:[/] {exc}", highlight=False)
         raise typer.Exit(exc.exit_code) from None
     except KeyboardInterrupt:
         raise typer.Exit(130) from None
     except OSError as exc:  # outputs: exists, no permission, disk full
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         reason = exc.strerror or str(exc)
-        err.print(f"[red]error:[/] {where}{reason}", highlight=False)
+        stderr.print(f"[red]error:[/] {where}{reason}", highlight=False)
         raise typer.Exit(OutputError.exit_code) from None
     except Exception as exc:
         if os.environ.get("SYNCAUDIT_DEBUG"):
             raise
-        err.print(
+        stderr.print(
             f"[red]internal error:[/] {type(exc).__name__}: {exc} "
             "(set SYNCAUDIT_DEBUG=1 for a traceback and please report it)",
             highlight=False,
@@ -85,7 +85,7 @@ def info(
         if as_json:
             _print_json(report.to_dict())
         else:
-            render_info(report, out)
+            render_info(report, stdout)
 
     _run(job)
 
@@ -153,7 +153,7 @@ def audit(
         if as_json:
             _print_json(data)
         else:
-            render_audit(result, out)
+            render_audit(result, stdout)
         if gate and not result.passed:
             raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
 
@@ -273,7 +273,7 @@ def simulate(
             f"truth {out.name}.truth.json, rig {rig_path.name}",
         ]
         for line in out_lines:
-            out_console_print(line)
+            stdout.print(line, highlight=False)
 
     _run(job)
 
@@ -307,8 +307,9 @@ def _simulate_calib(
             ),
         )
         simulate_calib_session(out, config, fmt=None, overwrite=overwrite)
-        out_console_print(
-            f"wrote {out} ({stops} stops, {beams}-beam LiDARs), truth {out.name}.truth.json"
+        stdout.print(
+            f"wrote {out} ({stops} stops, {beams}-beam LiDARs), truth {out.name}.truth.json",
+            highlight=False,
         )
 
     _run(job)
@@ -380,17 +381,12 @@ def calib(
         if as_json:
             _print_json(data)
         else:
-            render_calibration(result, out)
+            render_calibration(result, stdout)
         if gate and not result.passed:
             why = result.reason or "recorded extrinsics outside the limits"
             raise GateFailedError(f"{log}: calibration check failed: {why}")
 
     _run(job)
-
-
-def out_console_print(line: str) -> None:
-    """One plain line on stdout."""
-    out.print(line, highlight=False)
 
 
 def main() -> None:

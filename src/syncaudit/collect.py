@@ -149,7 +149,8 @@ def _extract_group(path: str, refs: list[ChunkRef], plan: ExtractPlan) -> list[K
     log = _worker_log(path)
     summary = log.indexed_summary()
     assert summary is not None
-    channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in set(plan.topics)}
+    topics = set(plan.topics)
+    channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
     wanted = frozenset(channels)
     out: list[Keyed] = []
     reader = ChunkReader(path, check_crc=plan.check_crc)

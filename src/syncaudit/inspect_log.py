@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.stream import is_packet_topic
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
+from syncaudit.units import json_ready
 
 CHECKPOINTS_BY_TYPE: dict[str, tuple[int, ...]] = {
     "syncaudit_msgs/msg/TriggerEvent": (240, 242, 244, 246, 248),
@@ -86,18 +86,8 @@ class InfoReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; NaN becomes None."""
-        cleaned: dict[str, Any] = _clean(asdict(self))
+        cleaned: dict[str, Any] = json_ready(asdict(self))
         return cleaned
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    return value
 
 
 def lidar_row(scan: LidarScan) -> LidarRow:

@@ -134,3 +134,28 @@ def test_outputs_to_devices_write_through() -> None:
     assert result.exit_code == 0, result.output
     after = os.stat("/dev/null")
     assert (after.st_mode, after.st_rdev) == (before.st_mode, before.st_rdev)
+
+
+def test_simulate_writes_log_truth_and_rig_then_audits(tmp_path: Path) -> None:
+    out = tmp_path / "sim.mcap"
+    made = runner.invoke(app, ["simulate", str(out), "--duration", "1", "--seed", "3"])
+    assert made.exit_code == 0, made.output
+    assert f"wrote {out}" in made.stdout
+    for suffix in ("", ".truth.json", ".rig.yaml"):
+        assert Path(f"{out}{suffix}").is_file()
+    audited = runner.invoke(app, ["audit", str(out), "--rig", f"{out}.rig.yaml", "--json"])
+    assert audited.exit_code == 0, audited.output
+    assert len(json.loads(audited.stdout)["cameras"]) == 3
+    again = runner.invoke(app, ["simulate", str(out), "--duration", "1"])
+    assert "exists" in _one_line_error(again, 6)
+    assert "suffix" in _one_line_error(runner.invoke(app, ["simulate", str(tmp_path / "x.xyz")]), 6)
+
+
+def test_simulate_calib_writes_session(tmp_path: Path) -> None:
+    out = tmp_path / "calib.mcap"
+    made = runner.invoke(app, ["simulate", str(out), "--calib", "--stops", "3", "--seed", "1"])
+    assert made.exit_code == 0, made.output
+    assert "3 stops" in made.stdout and Path(f"{out}.truth.json").is_file()
+    assert "n_stops" in _one_line_error(
+        runner.invoke(app, ["simulate", str(tmp_path / "c2.mcap"), "--calib", "--stops", "1"]), 6
+    )
