@@ -4,14 +4,7 @@ Conventions: every time is int64 nanoseconds in the host clock unless the name s
 `sensor_`; durations in ns as int64 (`_ns`) or float seconds (`_s`); angles in degrees.
 """
 
-from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS, empty_frames, empty_triggers
-from syncaudit.columns.lidar import PacketColumns, RevolutionColumns
+from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
+from syncaudit.columns.lidar import RevolutionColumns
 
-__all__ = [
-    "FRAME_COLUMNS",
-    "TRIGGER_COLUMNS",
-    "PacketColumns",
-    "RevolutionColumns",
-    "empty_frames",
-    "empty_triggers",
-]
+__all__ = ["FRAME_COLUMNS", "TRIGGER_COLUMNS", "RevolutionColumns"]

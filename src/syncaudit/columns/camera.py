@@ -2,13 +2,6 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-import numpy as np
-
-if TYPE_CHECKING:
-    import pandas as pd
-
 FRAME_COLUMNS: dict[str, str] = {
     "camera": "string",
     "frame_sequence": "Int64",
@@ -33,19 +26,3 @@ TRIGGER_COLUMNS: dict[str, str] = {
     "source": "string",
 }
 """Trigger table: the five checkpoints 240..248 of the method, <NA> where not recorded."""
-
-
-def _empty(columns: dict[str, str]) -> pd.DataFrame:
-    import pandas as pd  # deferred: worker processes never need pandas
-
-    return pd.DataFrame({k: pd.Series(np.array([]), dtype=v) for k, v in columns.items()})
-
-
-def empty_frames() -> pd.DataFrame:
-    """A frame table with no rows and the right dtypes."""
-    return _empty(FRAME_COLUMNS)
-
-
-def empty_triggers() -> pd.DataFrame:
-    """A trigger table with no rows and the right dtypes."""
-    return _empty(TRIGGER_COLUMNS)

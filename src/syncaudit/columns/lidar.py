@@ -7,28 +7,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.lidar.packets import PacketTiming
-
-
-@dataclass(frozen=True, slots=True)
-class PacketColumns:
-    """Every packet of one LiDAR topic: where it sits in the log plus its decoded timing."""
-
-    topic: str
-    driver_stamp_ns: NDArray[np.int64]
-    """(n,) per-packet stamp set by the LiDAR driver on receipt (checkpoint 242), host clock."""
-    log_time_ns: NDArray[np.int64]
-    """(n,) log time of the scan message that carried the packet."""
-    scan_index: NDArray[np.int64]
-    """(n,) index of that scan message in the topic."""
-    timing: PacketTiming
-    """Sensor-clock timing and azimuths per packet and block."""
-
-    @property
-    def t1_raw_ns(self) -> NDArray[np.int64]:
-        """Driver stamp minus sensor time: t1 plus any host/sensor clock offset."""
-        return self.driver_stamp_ns - self.timing.sensor_time_ns
-
 
 @dataclass(frozen=True, slots=True)
 class RevolutionColumns:
