@@ -7,12 +7,13 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, TypeVar, get_args
 
 import typer
 from rich.console import Console
 
 from syncaudit.errors import OutputError, SyncauditError
+from syncaudit.simulate import LidarModel
 
 app = typer.Typer(
     name="syncaudit",
@@ -160,7 +161,7 @@ def audit(
     _run(job)
 
 
-LIDAR_MODELS = ("VLP-16", "VLP-32C", "Pandar40P", "PandarXT32")
+LIDAR_MODELS: tuple[str, ...] = get_args(LidarModel)
 
 
 @app.command()

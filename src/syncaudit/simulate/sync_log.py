@@ -53,10 +53,10 @@ from syncaudit.lidar.velodyne import (
     velodyne_firing_offsets_ns,
     velodyne_revolution_schedule,
 )
+from syncaudit.simulate import LidarModel
 from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
-LidarModel = Literal["VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32"]
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
 
