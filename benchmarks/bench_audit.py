@@ -94,6 +94,7 @@ print(count)
 per message (counting them only proves they were all read)."""
 
 LIMIT_CODE = """\
+import mmap
 import multiprocessing
 import os
 import sys
@@ -104,22 +105,33 @@ from mcap.reader import make_reader
 
 
 def work(job):
+    # Each chunk mapped and decompressed into one reused buffer: no read copy and no
+    # allocation per chunk (the fastest way we know; syncaudit's ChunkReader does the same).
     path, spans = job
     dctx = zstandard.ZstdDecompressor()
+    out = bytearray(max(u for _, _, _, u in spans))
     total = 0
-    fd = os.open(path, os.O_RDONLY)
-    try:
+    with open(path, "rb") as f:
         for offset, size, compression, uncompressed in spans:
-            data = os.pread(fd, size, offset)
+            start = offset - offset % mmap.ALLOCATIONGRANULARITY
+            m = mmap.mmap(f.fileno(), offset + size - start, offset=start, access=mmap.ACCESS_READ)
+            view = memoryview(m)
+            data = view[offset - start :]
             if compression == "zstd":
-                data = dctx.decompress(data, max_output_size=uncompressed)
+                reader = dctx.stream_reader(data, read_across_frames=False, closefd=False)
+                got = reader.readinto(memoryview(out)[:uncompressed])
+                reader.close()
+                del reader
             elif compression == "lz4":
-                data = lz4.frame.decompress(data)
+                got = len(lz4.frame.decompress(data))
             elif compression:
                 raise ValueError(compression)
-            total += len(data)
-    finally:
-        os.close(fd)
+            else:
+                got = len(data)
+            data.release()
+            view.release()
+            m.close()
+            total += got
     return total
 
 

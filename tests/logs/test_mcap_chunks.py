@@ -136,3 +136,32 @@ def test_group_chunks_by_time_and_size() -> None:
     ]
     groups = group_chunks(refs, target_bytes=100)
     assert [[r.start_ns for r in g] for g in groups] == [[10, 20, 30], [40, 50]]
+
+
+@pytest.mark.parametrize("damage", ["flip", "short"])
+def test_damaged_zstd_chunk_is_a_log_read_error(tmp_path: Path, probe: Any, damage: str) -> None:
+    """Damaged compressed data fails to decompress (no CRC check needed) with one line, and
+    the reader stays usable for the next chunk."""
+    path = tmp_path / "log.mcap"
+    _write(path, probe, CompressionType.ZSTD)
+    with open_log(path) as log:
+        assert isinstance(log, McapLog)
+        refs = _refs(log)
+    data = bytearray(path.read_bytes())
+    ref = refs[1]
+    if damage == "flip":
+        at = ref.offset + ref.length - 40
+        data[at : at + 8] = bytes(b ^ 0xA5 for b in data[at : at + 8])
+    else:  # the chunk claims more uncompressed bytes than its frame holds
+        size_at = ref.offset + 9 + 16
+        size = int.from_bytes(data[size_at : size_at + 8], "little")
+        data[size_at : size_at + 8] = (size + 100).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    reader = ChunkReader(str(path))
+    try:
+        with pytest.raises(LogReadError, match="corrupt") as info:
+            reader.read(ref)
+        assert str(path) in str(info.value) and "\n" not in str(info.value)
+        assert len(reader.read(refs[2])) > 0
+    finally:
+        reader.close()
