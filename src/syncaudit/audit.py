@@ -9,13 +9,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from syncaudit.analysis.controller import ControllerConfig
-from syncaudit.camera.azimuth import camera_azimuth, tf_static_yaws
+from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.topics import detect_cameras
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
-from syncaudit.lidar.samples import PacketSamples, concat_samples
 from syncaudit.lidar.scan import LidarScanner
 from syncaudit.lidar.stream import (
     find_ouster_metadata_topic,
@@ -33,8 +32,6 @@ if TYPE_CHECKING:
     from syncaudit.analysis.sync import CameraSync
 
 SCHEMA_VERSION = 1
-LIDAR_BATCH = 256
-"""Single-packet messages (Ouster) are fed to the tracker this many at a time."""
 
 
 @dataclass(slots=True)
@@ -200,7 +197,8 @@ def _plan(
 def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
     warnings: list[str] = []
     missing: list[str] = []
-    tf_yaws = tf_static_yaws(log) if any(c.frame_id for c in rig.cameras) else {}
+    # /tf_static is read (and its types built) only for cameras the rig gives no angle.
+    tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
     located: list[tuple[CameraConfig, float, str]] = []
     for cam in rig.cameras:
         azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws)
@@ -217,21 +215,15 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
     plan, builders = _plan(log, rig, [c for c, _, _ in located], check_crc)
-    batch: list[PacketSamples] = []
     for kind, topic, payload in iter_items(log, plan, jobs):
         if kind == "lidar":
-            batch.append(payload)
-            if len(batch) >= LIDAR_BATCH or plan.lidar_family != "ouster":
-                scanner.feed(concat_samples(batch), messages=len(batch))
-                batch = []
+            scanner.feed(payload)
         elif kind == "image":
             builders[topic].images.append(payload)
         elif kind == "exposure":
             builders[topic].exposures.append(payload)
         else:
             builders[topic].triggers.append(payload)
-    if batch:
-        scanner.feed(concat_samples(batch), messages=len(batch))
     # The analysis needs pandas; importing it only now lets the workers start first.
     from syncaudit.analysis.replay import replay_controller
     from syncaudit.analysis.sync import analyze_camera, host_offset_ns

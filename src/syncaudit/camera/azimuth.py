@@ -47,6 +47,11 @@ def yaw_to_azimuth(yaw_deg: float, lidar: LidarConfig) -> float | None:
     return (lidar.azimuth_of_x_axis_deg + sign * yaw_deg) % 360.0
 
 
+def needs_tf_static(cam: CameraConfig) -> bool:
+    """True when only /tf_static can say where the camera looks (the rig gives no angle)."""
+    return cam.azimuth_deg is None and cam.yaw_deg is None and bool(cam.frame_id)
+
+
 def camera_azimuth(
     cam: CameraConfig, lidar: LidarConfig, tf_yaws: dict[str, float]
 ) -> tuple[float | None, str]:
