@@ -25,14 +25,41 @@ CROP_BIN_DEG = 5.0
 """Gaps that start within this angle of each other in most revolutions are a cropped sector."""
 
 
+def _interpolate(
+    angles: NDArray[np.float64],
+    unwrapped: NDArray[np.float64],
+    times: NDArray[np.int64],
+    at: NDArray[np.intp],
+) -> NDArray[np.int64]:
+    """Time of each angle, linear between the samples around it (`at`: first at/after).
+
+    Local to the two samples, in integer nanoseconds from the earlier one, so the result
+    does not depend on what else is in the chunk.
+    """
+    right = np.clip(at, 1, unwrapped.size - 1)
+    left = right - 1
+    span = unwrapped[right] - unwrapped[left]
+    safe = np.where(span > 0, span, 1.0)
+    fraction = np.clip(np.where(span > 0, (angles - unwrapped[left]) / safe, 1.0), 0.0, 1.0)
+    dt = (times[right] - times[left]).astype(np.float64)
+    crossing: NDArray[np.int64] = times[left] + np.rint(fraction * dt).astype(np.int64)
+    return crossing
+
+
 @dataclass(slots=True)
 class _Carry:
     """The last sample of the previous chunk, so interpolation spans chunk borders."""
 
     time_ns: int
-    unwrapped_deg: float
+    oriented_deg: float
+    turns: int
     packet_sensor_ns: int
     packet_driver_ns: int
+
+    @property
+    def unwrapped_deg(self) -> float:
+        """The sample's unwrapped angle, computed exactly as `_unwrap` computes it."""
+        return self.oriented_deg + FULL_TURN_DEG * self.turns
 
 
 @dataclass(slots=True)
@@ -70,7 +97,9 @@ class RevolutionTracker:
         if times.size == 0:
             return
         packet_of = samples.sample_packet
-        unwrapped = self._unwrap(times, self.direction * samples.sample_azimuth_deg)
+        oriented = (self.direction * samples.sample_azimuth_deg) % FULL_TURN_DEG
+        turns = self._turns(times, oriented)
+        unwrapped = oriented + FULL_TURN_DEG * turns
         self._count_packets(samples.sensor_time_ns, unwrapped, packet_of)
         self._find_crossings(
             times, unwrapped, packet_of, samples.sensor_time_ns, samples.driver_stamp_ns
@@ -78,28 +107,40 @@ class RevolutionTracker:
         last = int(packet_of[-1])
         self._carry = _Carry(
             int(times[-1]),
-            float(unwrapped[-1]),
+            float(oriented[-1]),
+            int(turns[-1]),
             int(samples.sensor_time_ns[last]),
             int(samples.driver_stamp_ns[last]),
         )
 
-    def _unwrap(
-        self, times: NDArray[np.int64], oriented: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        """Monotonic angle: each step is the forward angle, plus whole turns across gaps."""
+    def _turns(self, times: NDArray[np.int64], oriented: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Whole turns before each sample: its unwrapped angle is oriented + 360 * turns.
+
+        Each step is the forward angle, plus whole turns across gaps. Counting turns as
+        integers (not summing float steps) makes every unwrapped angle independent of how
+        the packets were cut into chunks, so a block exactly at a crossing azimuth falls on
+        the same side of it however the log is read.
+        """
         if self._carry is None:
-            prev_t, prev_u = int(times[0]), float(oriented[0] % FULL_TURN_DEG)
+            prev_t, prev_o, prev_turns = int(times[0]), float(oriented[0]), 0
         else:
-            prev_t, prev_u = self._carry.time_ns, self._carry.unwrapped_deg
-        step = np.diff(np.concatenate(([prev_u], oriented))) % FULL_TURN_DEG
+            prev_t, prev_o, prev_turns = (
+                self._carry.time_ns,
+                self._carry.oriented_deg,
+                self._carry.turns,
+            )
+        delta = np.diff(np.concatenate(([prev_o], oriented)))
+        wraps = (delta < 0).astype(np.int64)
+        step = delta + FULL_TURN_DEG * wraps
         dts = np.diff(np.concatenate(([prev_t], times))).astype(np.float64)
         moving = (dts > 0) & (step > 0) & (step < MAX_BLOCK_STEP_DEG)
         if np.any(moving):
             self._omega_deg_ns = float(np.median(step[moving] / dts[moving]))
         if math.isfinite(self._omega_deg_ns):
             expected = self._omega_deg_ns * dts
-            step = step + FULL_TURN_DEG * np.round((expected - step) / FULL_TURN_DEG)
-        return prev_u + np.cumsum(step)
+            wraps += np.round((expected - step) / FULL_TURN_DEG).astype(np.int64)
+        turns: NDArray[np.int64] = prev_turns + np.cumsum(wraps)
+        return turns
 
     def _count_packets(
         self,
@@ -147,8 +188,6 @@ class RevolutionTracker:
             times = np.concatenate(([self._carry.time_ns], times))
             unwrapped = np.concatenate(([self._carry.unwrapped_deg], unwrapped))
             packet_of = np.concatenate(([-1], packet_of))
-        base = int(times[0])
-        rel = (times - base).astype(np.float64)
         z = self._zero_oriented
         lo, hi = float(unwrapped[0]), float(unwrapped[-1])
         offsets = [0.0] + [
@@ -160,13 +199,14 @@ class RevolutionTracker:
             if k_hi < k_lo:
                 continue
             ks = np.arange(k_lo, k_hi + 1)
-            angles = z + offset + FULL_TURN_DEG * ks
-            t_cross = np.rint(np.interp(angles, unwrapped, rel)).astype(np.int64) + base
+            angles = (z + offset + FULL_TURN_DEG * ks).astype(np.float64)
+            at = np.searchsorted(unwrapped, angles, side="left")  # first sample at/after
+            t_cross = _interpolate(angles, unwrapped, times, at)
             if j > 0:
                 for k, t in zip(ks.tolist(), t_cross.tolist(), strict=True):
                     self._targets[(k, j - 1)] = t
                 continue
-            at = np.minimum(np.searchsorted(unwrapped, angles, side="left"), packet_of.size - 1)
+            at = np.minimum(at, packet_of.size - 1)
             for k, t, p in zip(ks.tolist(), t_cross.tolist(), packet_of[at].tolist(), strict=True):
                 if p < 0 and self._carry is not None:
                     self._zero[k] = (t, self._carry.packet_sensor_ns, self._carry.packet_driver_ns)

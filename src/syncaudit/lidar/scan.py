@@ -9,7 +9,7 @@ import numpy as np
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.clock import ClockEstimator, ClockReport
 from syncaudit.lidar.revolutions import RevolutionTracker
-from syncaudit.lidar.samples import PacketSamples, packet_samples
+from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
 from syncaudit.lidar.stream import iter_packet_chunks
 from syncaudit.logs import LogReader
 
@@ -52,6 +52,11 @@ class LidarScan:
         return int(self.revolutions.dropped_packets.sum())
 
 
+FEED_PACKETS = 4096
+"""Packets gathered before the tracker and clock run: their numpy work per call is then
+amortised over several scans (or many single-packet messages), memory still bounded."""
+
+
 @dataclass(slots=True)
 class LidarScanner:
     """Reduces decoded packet chunks, fed in log order, to a LidarScan."""
@@ -65,6 +70,8 @@ class LidarScanner:
     packets: int = 0
     modes: set[int] = field(default_factory=set)
     dual: bool = False
+    _pending: list[PacketSamples] = field(default_factory=list)
+    _pending_packets: int = 0
 
     @classmethod
     def create(
@@ -91,11 +98,23 @@ class LidarScanner:
         self.packets += samples.n_packets
         self.modes.update(samples.return_modes)
         self.dual = self.dual or samples.dual_return
-        self.tracker.feed(samples)
-        self.clock.feed(samples.driver_stamp_ns, samples.sensor_time_ns)
+        self._pending.append(samples)
+        self._pending_packets += samples.n_packets
+        if self._pending_packets >= FEED_PACKETS:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Run the tracker and the clock over the gathered packets."""
+        if not self._pending:
+            return
+        batch = concat_samples(self._pending)
+        self._pending, self._pending_packets = [], 0
+        self.tracker.feed(batch)
+        self.clock.feed(batch.driver_stamp_ns, batch.sensor_time_ns)
 
     def finish(self) -> LidarScan:
         """The reduced timing of everything fed."""
+        self._flush()
         return LidarScan(
             topic=self.topic,
             vendor=self.vendor,
