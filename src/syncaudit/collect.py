@@ -104,9 +104,12 @@ def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Ite
             if jobs > 1 and len(groups) > 1:
                 yield from _merged(groups, _parallel_results(log, groups, plan, jobs))
             else:
-                _WORKER_LOGS[str(log.path)] = log
-                results = (_extract_group(str(log.path), g, plan) for g in groups)
-                yield from _merged(groups, results)
+                reader = ChunkReader(str(log.path), check_crc=plan.check_crc)
+                try:
+                    results = (_extract_chunks(log, reader, g, plan) for g in groups)
+                    yield from _merged(groups, results)
+                finally:
+                    reader.close()
             return
     for msg in log.messages(plan.topics):
         item = extract(plan, msg, log)
@@ -135,38 +138,41 @@ def _chunk_refs(log: McapLog, plan: ExtractPlan) -> list[ChunkRef] | None:
 
 # ---- worker side -------------------------------------------------------------------------
 
-_WORKER_LOGS: dict[str, McapLog] = {}
-
 Keyed = tuple[int, int, int, Item]
 """(log time, chunk offset, record index, item): the merge order."""
 
-
-def _worker_log(path: str) -> McapLog:
-    if path not in _WORKER_LOGS:
-        _WORKER_LOGS[path] = McapLog(Path(path))
-    return _WORKER_LOGS[path]
+_INHERITED_LOGS: dict[str, McapLog] = {}
+"""Logs open in the parent while its pool runs: forked workers use them as they are."""
+_WORKER_SOURCES: dict[tuple[str, bool], tuple[McapLog, ChunkReader]] = {}
+"""Per worker process: the log and one chunk reader (its buffers reused for every task)."""
 
 
 def _extract_group(path: str, refs: list[ChunkRef], plan: ExtractPlan) -> list[Keyed]:
-    """Read, decompress and extract one group of chunks (runs in a worker)."""
-    log = _worker_log(path)
+    """Read, decompress and extract one group of chunks (the worker task)."""
+    key = (path, plan.check_crc)
+    if key not in _WORKER_SOURCES:
+        log = _INHERITED_LOGS.get(path) or McapLog(Path(path))
+        _WORKER_SOURCES[key] = (log, ChunkReader(path, check_crc=plan.check_crc))
+    log, reader = _WORKER_SOURCES[key]
+    return _extract_chunks(log, reader, refs, plan)
+
+
+def _extract_chunks(
+    log: McapLog, reader: ChunkReader, refs: list[ChunkRef], plan: ExtractPlan
+) -> list[Keyed]:
+    """The items of a group of chunks, sorted into merge order."""
     summary = log.indexed_summary()
     assert summary is not None
     topics = set(plan.topics)
     channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
     wanted = frozenset(channels)
     out: list[Keyed] = []
-    reader = ChunkReader(path, check_crc=plan.check_crc)
-    try:
-        for ref in refs:
-            records = reader.read(ref)
-            for index, cid, log_time, data in iter_chunk_messages(records, wanted):
-                msg = log.raw_message(channels[cid], log_time, data)
-                item = extract(plan, msg, log)
-                if item is not None:
-                    out.append((log_time, ref.offset, index, item))
-    finally:
-        reader.close()
+    for ref in refs:
+        records = reader.read(ref)
+        for index, cid, log_time, data in iter_chunk_messages(records, wanted):
+            item = extract(plan, log.raw_message(channels[cid], log_time, data), log)
+            if item is not None:
+                out.append((log_time, ref.offset, index, item))
     out.sort(key=lambda k: (k[0], k[1], k[2]))
     return out
 
@@ -183,15 +189,18 @@ def _parallel_results(
         # built once here (parsing a log's schemas costs ~80 ms: only where needed).
         for encoding in _deserialised_encodings(log, plan):
             log.type_registry(encoding)
-        _WORKER_LOGS[path] = log
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        window: list[Future[list[Keyed]]] = []
-        submitted = 0
-        for _ in range(len(groups)):
-            while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
-                window.append(pool.submit(_extract_group, path, groups[submitted], plan))
-                submitted += 1
-            yield window.pop(0).result()
+        _INHERITED_LOGS[path] = log
+    try:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            window: list[Future[list[Keyed]]] = []
+            submitted = 0
+            for _ in range(len(groups)):
+                while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
+                    window.append(pool.submit(_extract_group, path, groups[submitted], plan))
+                    submitted += 1
+                yield window.pop(0).result()
+    finally:
+        _INHERITED_LOGS.pop(path, None)
 
 
 def _deserialised_encodings(log: McapLog, plan: ExtractPlan) -> set[str]:
