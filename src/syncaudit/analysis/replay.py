@@ -62,7 +62,9 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
     errors = np.empty(values.shape[0])
     delays = np.empty(values.shape[0], dtype=np.int64)
     delay = int(values[0, 6])
-    for i, (t1, t2, t3, t4, t5, err, applied, _) in enumerate(values):
+    rotate_list = rotate.tolist()
+    # Python floats: the loop is per frame (the online algorithm), numpy scalars are slow.
+    for i, (t1, t2, t3, t4, t5, err, applied, _) in enumerate(values.tolist()):
         corrected = err + (delay - applied)
         errors[i], delays[i] = corrected, delay
         delay = controller.update(
@@ -73,7 +75,7 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
                 t4_ns=round(t4),
                 exposure_ns=round(t5),
                 error_ns=round(corrected),
-                t_rotate_ns=round(rotate[i]),
+                t_rotate_ns=round(rotate_list[i]),
             )
         )
     abs_err = np.abs(errors)
