@@ -474,3 +474,109 @@ def test_malformed_packets_raise(vlp16: list[Scan]) -> None:
         v.decode_velodyne(good[:0], host[:0])
     with pytest.raises(ValueError, match="pairs"):
         v.encode_velodyne("VLP-16", np.arange(12.0)[None], [0], v.RETURN_DUAL)
+
+
+# ----------------------------------------------------------------------------- decode paths
+
+
+def _vls128_dual(n: int) -> tuple[NDArray[np.uint8], NDArray[np.int64]]:
+    """VLS-128 dual-return packets: 8 real blocks (banks in pairs), 4 padding blocks.
+
+    The encoder does not write this mode (layout unverified), so single-return packets are
+    rewritten: pair flags, one azimuth per packet, return mode 0x39, junk in the padding.
+    """
+    sched = v.velodyne_revolution_schedule("VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=n)
+    packets = v.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us)
+    blocks = packets[:, :1200].reshape(n, 12, 100)
+    base = blocks[:, 0, 2].astype(np.int64) | (blocks[:, 0, 3].astype(np.int64) << 8)
+    for k, flag in enumerate([0xEEFF, 0xEEFF, 0xDDFF, 0xDDFF, 0xCCFF, 0xCCFF, 0xBBFF, 0xBBFF]):
+        az_raw = (base + 3 * (k // 2)) % 36000  # pairs share an azimuth
+        blocks[:, k, :2] = (flag & 0xFF, flag >> 8)
+        blocks[:, k, 2] = az_raw & 0xFF
+        blocks[:, k, 3] = az_raw >> 8
+    blocks[:, 8:, :4] = (0x12, 0x34, 0xFF, 0xFF)  # padding: any flag, azimuth not checked
+    packets[:, 1204] = v.RETURN_DUAL
+    return packets, sched.packet_stamp_ns
+
+
+def test_vls128_dual_padding_repeats_the_last_real_block() -> None:
+    packets, host = _vls128_dual(5)
+    timing = v.decode_velodyne(packets, host)
+    assert timing.dual_return.all()
+    az = timing.block_azimuth_deg
+    assert (az[:, 0:8:2] == az[:, 1:8:2]).all() and (az[:, 2] != az[:, 0]).all()
+    assert (az[:, 8:] == az[:, 7:8]).all()  # padding repeats the last real block
+    first = timing.sensor_time_ns - 8_700  # one firing sequence: all blocks sampled at once
+    assert (timing.block_time_ns == first[:, None]).all()
+    bad = packets.copy()
+    bad[2, 7 * 100 + 1] = 0xEE  # a real block's flag
+    with pytest.raises(DecodeError, match=r"packet 2 block 7: flag 0xEEFF .* \(expected 0xBBFF\)"):
+        v.decode_velodyne(bad, host)
+    bad = packets.copy()
+    bad[3, 6 * 100 + 3] = 0x90  # a real block's azimuth
+    with pytest.raises(DecodeError, match="packet 3 block 6: azimuth"):
+        v.decode_velodyne(bad, host)
+
+
+def _same_timing(a: PacketTiming, b: PacketTiming) -> None:
+    for field in dataclasses.fields(PacketTiming):
+        x, y = getattr(a, field.name), getattr(b, field.name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and np.array_equal(x, y), field.name
+        else:
+            assert x == y, field.name
+
+
+def test_mixed_return_modes_decode_packet_by_packet() -> None:
+    """A packet's timing depends on its own mode only, however the modes are mixed."""
+    rng = np.random.default_rng(3)
+    cases = [_vls128_dual(6)]
+    sched = v.velodyne_revolution_schedule("VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=6)
+    cases.append(
+        (
+            v.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us),
+            sched.packet_stamp_ns,
+        )
+    )
+    for model in ("VLP-16", "HDL-32E"):
+        for mode in (v.RETURN_STRONGEST, v.RETURN_DUAL):
+            sched = v.velodyne_revolution_schedule(
+                model, 600.0, 1_700_000_000_000_000_000, return_mode=mode, n_packets=6
+            )
+            cases.append(
+                (
+                    v.encode_velodyne(model, sched.block_azimuth_deg, sched.packet_toh_us, mode),
+                    sched.packet_stamp_ns,
+                )
+            )
+    for a, b in ((0, 1), (2, 3), (4, 5)):
+        packets = np.concatenate([cases[a][0], cases[b][0]])
+        host = np.concatenate([cases[a][1], cases[b][1]])
+        order = rng.permutation(packets.shape[0])
+        mixed = v.decode_velodyne(packets[order], host[order])
+        assert mixed.dual_return.any() and not mixed.dual_return.all()
+        for i, k in enumerate(order.tolist()):
+            part, row = cases[a] if k < 6 else cases[b], k % 6
+            alone = v.decode_velodyne(part[0][row : row + 1], part[1][row : row + 1])
+            assert alone.model == mixed.model
+            for name in (
+                "sensor_time_ns",
+                "block_azimuth_deg",
+                "block_time_ns",
+                "return_mode",
+                "dual_return",
+            ):
+                assert np.array_equal(getattr(alone, name)[0], getattr(mixed, name)[i]), name
+
+
+def test_packet_views_of_any_layout_decode_alike(vlp16: list[Scan]) -> None:
+    scan = vlp16[0]
+    want = v.decode_velodyne(scan.data, scan.stamps_ns)
+    wide = np.zeros((scan.data.shape[0], 1300), dtype=np.uint8)
+    wide[:, 3 : 3 + 1206] = scan.data
+    for data in (scan.data.copy(), np.asfortranarray(scan.data), wide[:, 3 : 3 + 1206]):
+        _same_timing(v.decode_velodyne(data, scan.stamps_ns), want)
+    ros1 = v.build_velodyne_scan(0, "velodyne", scan.stamps_ns, scan.data, "ros1")
+    stamps, data = v.velodyne_scan_packets(ros1, "ros1")  # stride 1214: unaligned fields
+    _same_timing(v.decode_velodyne(data, stamps), want)
+    assert v.detect_velodyne_model(data[::-1]) == "VLP-16"

@@ -22,6 +22,9 @@ from syncaudit.lidar.packets import PacketTiming
 FULL_TURN_DEG = 360.0
 MAX_PACKET_SPAN_DEG = 30.0
 """A block further than this from its packet's first block contradicts its own packet."""
+SURELY_SANE_DEG = 29.0
+"""Blocks this close to their packet's first block pass the MAX_PACKET_SPAN_DEG test
+whatever the rounding: packet_samples skips the exact test for such packets."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,18 +61,11 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
     with every block (a crossing between a packet's first and last block is in it).
     """
     azimuth = timing.block_azimuth_deg
-    n, b = azimuth.shape
-    finite = np.isfinite(azimuth)
-    first = np.argmax(finite, axis=1)
+    n = azimuth.shape[0]
     rows = np.arange(n)
-    span = (azimuth - azimuth[rows, first][:, None]) % FULL_TURN_DEG
-    sane = finite & ((span < MAX_PACKET_SPAN_DEG) | (span > FULL_TURN_DEG - MAX_PACKET_SPAN_DEG))
-    outliers = int(np.sum(finite & ~sane))
-    has = sane.any(axis=1)
-    last = b - 1 - np.argmax(sane[:, ::-1], axis=1)
-    pick = np.stack([first, last], axis=1)  # (n, 2)
-    times = np.take_along_axis(timing.block_time_ns, pick, axis=1).reshape(-1)
-    azimuths = np.take_along_axis(azimuth, pick, axis=1).reshape(-1)
+    pick, has, outliers = _sample_blocks(azimuth)
+    times = timing.block_time_ns[rows[:, None], pick].reshape(-1)
+    azimuths = azimuth[rows[:, None], pick].reshape(-1)
     packet = np.repeat(rows, 2)
     keep = np.repeat(has, 2)
     keep[1:] &= np.diff(times) > 0  # one block, or dual-return pairs: the first sample only
@@ -82,10 +78,68 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
         sample_time_ns=times[keep],
         sample_azimuth_deg=azimuths[keep],
         sample_packet=packet[keep].astype(np.int64),
-        return_modes=frozenset(np.unique(timing.return_mode).tolist()),
+        return_modes=_distinct(timing.return_mode),
         dual_return=bool(timing.dual_return.any()),
         outlier_blocks=outliers,
     )
+
+
+def _sample_blocks(
+    azimuth: NDArray[np.float64],
+) -> tuple[NDArray[np.intp], NDArray[np.bool_], int]:
+    """(n, 2) first and last trustworthy block of each packet, whether it has one, and the
+    number of outlier blocks.
+
+    Packets whose blocks all lie near block 0 (nearly all of them) take blocks 0 and b - 1
+    without the exact test, whose float remainder is by far the dearest step.
+    """
+    n, b = azimuth.shape
+    if azimuth.size == 0:  # nothing to gain; keep the exact path's behaviour (and errors)
+        return _sample_blocks_exact(azimuth)
+    pick = np.zeros((n, 2), dtype=np.intp)
+    pick[:, 1] = b - 1
+    has = np.ones(n, dtype=bool)
+    odd = np.flatnonzero(~_near_first_block(azimuth))
+    if odd.size == 0:
+        return pick, has, 0
+    pick[odd], has[odd], outliers = _sample_blocks_exact(azimuth[odd])
+    return pick, has, outliers
+
+
+def _near_first_block(azimuth: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(n,) True where every block is finite and within SURELY_SANE_DEG of block 0, either
+    way round the circle: the exact test then finds every block sane, however the float
+    remainder rounds (its threshold is a degree further out)."""
+    with np.errstate(invalid="ignore"):  # inf - inf: such packets take the exact test
+        step = np.abs(azimuth - azimuth[:, :1])
+    near = (step < SURELY_SANE_DEG) | (
+        (step > FULL_TURN_DEG - SURELY_SANE_DEG) & (step < FULL_TURN_DEG)
+    )
+    all_near: NDArray[np.bool_] = np.all(near, axis=1)
+    return all_near
+
+
+def _sample_blocks_exact(
+    azimuth: NDArray[np.float64],
+) -> tuple[NDArray[np.intp], NDArray[np.bool_], int]:
+    """_sample_blocks for any packets: the first finite block, and the last block within
+    MAX_PACKET_SPAN_DEG of it; blocks further away are outliers."""
+    n, b = azimuth.shape
+    finite = np.isfinite(azimuth)
+    first = np.argmax(finite, axis=1)
+    span = (azimuth - azimuth[np.arange(n), first][:, None]) % FULL_TURN_DEG
+    sane = finite & ((span < MAX_PACKET_SPAN_DEG) | (span > FULL_TURN_DEG - MAX_PACKET_SPAN_DEG))
+    outliers = int(np.sum(finite & ~sane))
+    has = sane.any(axis=1)
+    last = b - 1 - np.argmax(sane[:, ::-1], axis=1)
+    return np.stack([first, last], axis=1), has, outliers
+
+
+def _distinct(values: NDArray[np.uint8]) -> frozenset[int]:
+    """The distinct values, as Python ints (one comparison when they are all the same)."""
+    if values.size and (values == values[0]).all():
+        return frozenset(values[:1].tolist())
+    return frozenset(np.unique(values).tolist())
 
 
 def concat_samples(parts: list[PacketSamples]) -> PacketSamples:

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cache
-from typing import Final, Literal
+from typing import Final, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -461,28 +461,51 @@ def velodyne_laser_angles(model: str) -> tuple[NDArray[np.float64], NDArray[np.f
 # Decode
 # --------------------------------------------------------------------------------------
 
+_BLOCK_HEAD: Final = np.dtype(
+    {
+        "names": ["flag", "azimuth"],
+        "formats": ["<u2", "<u2"],
+        "offsets": [0, 2],
+        "itemsize": BLOCK_BYTES,
+    }
+)
+"""The head of a data block: flag and azimuth (the records after them are not read)."""
+_PACKET_HEAD: Final = np.dtype(
+    {
+        "names": ["block", "toh_us", "return_mode", "product_id"],
+        "formats": [(_BLOCK_HEAD, (BLOCKS,)), "<u4", "u1", "u1"],
+        "offsets": [0, TOH_OFFSET, RETURN_MODE_OFFSET, PRODUCT_ID_OFFSET],
+        "itemsize": PACKET_BYTES,
+    }
+)
+"""The fields of a packet that timing reads, laid over its 1206 bytes."""
 
-def _flags(data: NDArray[np.uint8]) -> NDArray[np.uint16]:
-    """(n, 12) block flags as little-endian uint16."""
-    blocks = data[:, :TOH_OFFSET].reshape(-1, BLOCKS, BLOCK_BYTES)
-    return (blocks[:, :, 0].astype(np.uint16) | (blocks[:, :, 1].astype(np.uint16) << 8)).astype(
-        np.uint16
-    )
+_Scalar = TypeVar("_Scalar", bound=np.generic)
+_HDL64E_FLAGS: Final = [BANK_FLAGS[k % 2] for k in range(BLOCKS)]
+_KNOWN_RETURN_MODE: Final = np.isin(np.arange(256), RETURN_MODES)
+"""Lookup table: True at the return-mode bytes a packet may carry."""
 
 
-def _u16(data: NDArray[np.uint8], offset: int) -> NDArray[np.int64]:
-    """(n, 12) little-endian uint16 at `offset` within each block."""
-    blocks = data[:, :TOH_OFFSET].reshape(-1, BLOCKS, BLOCK_BYTES)
-    return blocks[:, :, offset].astype(np.int64) | (blocks[:, :, offset + 1].astype(np.int64) << 8)
+def _fields(data: NDArray[np.uint8]) -> NDArray[np.void]:
+    """(n,) structured view of the packet fields (copied first if a packet is not contiguous).
+
+    Each field then costs one numpy call instead of an astype and shift per byte.
+    """
+    if data.strides[1] != 1:
+        data = np.ascontiguousarray(data)
+    fields: NDArray[np.void] = data.view(_PACKET_HEAD)[:, 0]
+    return fields
 
 
-def _toh_us(data: NDArray[np.uint8]) -> NDArray[np.int64]:
+def _flags(fields: NDArray[np.void]) -> NDArray[np.uint16]:
+    """(n, 12) block flags as little-endian uint16 (a view)."""
+    flags: NDArray[np.uint16] = fields["block"]["flag"]
+    return flags
+
+
+def _toh_us(fields: NDArray[np.void]) -> NDArray[np.int64]:
     """(n,) the 4-byte time stamp, microseconds past the hour."""
-    t = data[:, TOH_OFFSET : TOH_OFFSET + 4].astype(np.int64)
-    return t[:, 0] | (t[:, 1] << 8) | (t[:, 2] << 16) | (t[:, 3] << 24)
-
-
-_HDL64E_FLAGS: Final = np.array([BANK_FLAGS[k % 2] for k in range(BLOCKS)], dtype=np.uint16)
+    return fields["toh_us"].astype(np.int64)
 
 
 def detect_velodyne_model(data: NDArray[np.uint8]) -> str:
@@ -490,9 +513,14 @@ def detect_velodyne_model(data: NDArray[np.uint8]) -> str:
     arr = _check_packets(data)
     if arr.shape[0] == 0:
         raise DecodeError("no Velodyne packets to detect a model from")
-    if np.array_equal(_flags(arr[:1])[0], _HDL64E_FLAGS):
+    return _first_packet_model(_fields(arr[:1]))
+
+
+def _first_packet_model(fields: NDArray[np.void]) -> str:
+    """detect_velodyne_model on the fields of a non-empty packet array."""
+    if _flags(fields)[0].tolist() == _HDL64E_FLAGS:
         return "HDL-64E"
-    pid = int(arr[0, PRODUCT_ID_OFFSET])
+    pid = int(fields["product_id"][0])
     model = PRODUCT_IDS.get(pid)
     if model is None:
         raise DecodeError(f"Velodyne product id 0x{pid:02X} is not a supported model")
@@ -517,6 +545,61 @@ class _Decoded:
     dual_index: NDArray[np.intp]
 
 
+@dataclass(frozen=True, slots=True)
+class _ModeTables:
+    """Per-block constants of one model for decoding; row 0 single return, row 1 dual."""
+
+    flags: NDArray[np.uint16]
+    """(2, 12) expected block flags; 0 where any flag is accepted (padding)."""
+    real: NDArray[np.bool_]
+    """(2, 12) True for blocks that carry data (not padding)."""
+    fill: NDArray[np.intp]
+    """(2, 12) block whose azimuth each block reports: itself, or for padding the last
+    real block of the packet."""
+    block_offset_ns: NDArray[np.int64]
+    """(2, 12) block_time_ns minus the packet stamp (padding as its fill block)."""
+
+
+@cache
+def _mode_tables(model: str) -> _ModeTables:
+    """_ModeTables of `model`, built once from its two _Layouts (not on every decode)."""
+    b = np.arange(BLOCKS)
+    flags, real, fill, offset = [], [], [], []
+    for dual in (False, True):
+        lay = _layout(model, dual)
+        is_real = lay.flags != 0
+        block_fill = np.where(is_real, b, b[is_real].max())
+        sample = b
+        if model == "VLS-128":
+            # All four banks of a firing sequence carry the azimuth sampled at the sequence
+            # start, so that is the time each block's azimuth belongs to (PacketTiming).
+            sample = np.zeros(BLOCKS, dtype=np.int64) if dual else (b // 4) * 4
+        flags.append(lay.flags)
+        real.append(is_real)
+        fill.append(block_fill)
+        offset.append(lay.firing_ns[sample[block_fill], 0])
+    return _ModeTables(
+        flags=np.stack(flags).astype(np.uint16),
+        real=np.stack(real),
+        fill=np.stack(fill).astype(np.intp),
+        block_offset_ns=np.stack(offset).astype(np.int64),
+    )
+
+
+def _per_packet(table: NDArray[_Scalar], dual: NDArray[np.bool_]) -> NDArray[_Scalar]:
+    """Each packet's row of a (2, 12) per-mode table: (n, 12), or (12,) to broadcast when
+    all packets share one mode (the common case, and cheaper than a gather)."""
+    mode: int | NDArray[np.intp]
+    if not dual.any():
+        mode = 0
+    elif dual.all():
+        mode = 1
+    else:
+        mode = dual.astype(np.intp)
+    rows: NDArray[_Scalar] = table[mode]
+    return rows
+
+
 def resolve_hour_ns(toh_us: ArrayLike, host_stamp_ns: ArrayLike) -> NDArray[np.int64]:
     """Full-epoch sensor time of microseconds-past-the-hour stamps, hour taken from the host.
 
@@ -532,72 +615,92 @@ def resolve_hour_ns(toh_us: ArrayLike, host_stamp_ns: ArrayLike) -> NDArray[np.i
     return sensor
 
 
+def _return_modes(fields: NDArray[np.void], model: str) -> NDArray[np.uint8]:
+    """(n,) return-mode bytes, checked together with the product byte (HDL-64E: zeros)."""
+    n = fields.shape[0]
+    if model == "HDL-64E":
+        return np.zeros(n, dtype=np.uint8)
+    rmode: NDArray[np.uint8] = fields["return_mode"].copy()
+    known = _KNOWN_RETURN_MODE[rmode]
+    if not known.all():
+        i = int(np.argmin(known))
+        raise DecodeError(f"packet {i}: return-mode byte 0x{int(rmode[i]):02X} is unknown")
+    pid = fields["product_id"]
+    mixed = pid != MODEL_PRODUCT_ID[model]
+    if mixed.any():
+        i = int(np.argmax(mixed))
+        raise DecodeError(f"packet {i}: product id 0x{int(pid[i]):02X} differs from {model}")
+    return rmode
+
+
+def _check_flags(
+    fields: NDArray[np.void], model: str, tables: _ModeTables, dual: NDArray[np.bool_]
+) -> None:
+    """Raise on the first block whose flag is not the one its model and mode expect."""
+    flags = _flags(fields)
+    bad = flags != _per_packet(tables.flags, dual)
+    real = _per_packet(tables.real, dual)
+    if not real.all():
+        bad &= real
+    if bad.any():
+        i, blk = (int(v) for v in np.argwhere(bad)[0])
+        expected = int(tables.flags[int(dual[i]), blk])
+        raise DecodeError(
+            f"packet {i} block {blk}: flag 0x{int(flags[i, blk]):04X} is not a {model} "
+            f"block flag (expected 0x{expected:04X})"
+        )
+
+
+def _azimuth_raw(
+    fields: NDArray[np.void], tables: _ModeTables, dual: NDArray[np.bool_]
+) -> NDArray[np.int64]:
+    """(n, 12) block azimuths in hundredths of a degree, checked; padding blocks repeat the
+    last real block of their packet."""
+    az_raw: NDArray[np.int64] = fields["block"]["azimuth"].astype(np.int64)
+    too_big = az_raw >= 36000
+    real = _per_packet(tables.real, dual)
+    padded = not real.all()
+    if padded:
+        too_big &= real
+    if too_big.any():
+        i, blk = (int(v) for v in np.argwhere(too_big)[0])
+        raise DecodeError(f"packet {i} block {blk}: azimuth {int(az_raw[i, blk])} >= 36000")
+    if padded:
+        rows = np.arange(az_raw.shape[0])[:, None]
+        az_raw = az_raw[rows, _per_packet(tables.fill, dual)]
+    return az_raw
+
+
 def _decode(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> _Decoded:
     arr = _check_packets(data)
     n = arr.shape[0]
     host = np.asarray(host_stamp_ns, dtype=np.int64).reshape(-1)
     if host.shape != (n,):
         raise DecodeError(f"{host.size} host stamps for {n} Velodyne packets")
-    model = detect_velodyne_model(arr)
-    flags = _flags(arr)
-    if model == "HDL-64E":
-        rmode = np.zeros(n, dtype=np.uint8)
-        dual = np.zeros(n, dtype=bool)
-    else:
-        rmode = arr[:, RETURN_MODE_OFFSET].copy()
-        bad_mode = ~np.isin(rmode, RETURN_MODES)
-        if bad_mode.any():
-            i = int(np.argmax(bad_mode))
-            raise DecodeError(f"packet {i}: return-mode byte 0x{int(rmode[i]):02X} is unknown")
-        pid = arr[:, PRODUCT_ID_OFFSET]
-        mixed = pid != MODEL_PRODUCT_ID[model]
-        if mixed.any():
-            i = int(np.argmax(mixed))
-            raise DecodeError(f"packet {i}: product id 0x{int(pid[i]):02X} differs from {model}")
-        dual = rmode == RETURN_DUAL
-    dual_index = dual.astype(np.intp)
-    layouts = (_layout(model, False), _layout(model, True))
-    expected = np.stack([lay.flags for lay in layouts])[dual_index]
-    bad_flag = (flags != expected) & (expected != 0)
-    if bad_flag.any():
-        i, blk = (int(v) for v in np.argwhere(bad_flag)[0])
-        raise DecodeError(
-            f"packet {i} block {blk}: flag 0x{int(flags[i, blk]):04X} is not a {model} "
-            f"block flag (expected 0x{int(expected[i, blk]):04X})"
-        )
-    az_raw = _u16(arr, 2)
-    real = expected != 0
-    if (az_raw[real] >= 36000).any():
-        i, blk = (int(v) for v in np.argwhere((az_raw >= 36000) & real)[0])
-        raise DecodeError(f"packet {i} block {blk}: azimuth {int(az_raw[i, blk])} >= 36000")
-    toh = _toh_us(arr)
-    if (toh >= HOUR_US).any():
+    if n == 0:
+        raise DecodeError("no Velodyne packets to detect a model from")
+    fields = _fields(arr)
+    model = _first_packet_model(fields)
+    rmode = _return_modes(fields, model)
+    dual = rmode == RETURN_DUAL
+    tables = _mode_tables(model)
+    _check_flags(fields, model, tables, dual)
+    az_raw = _azimuth_raw(fields, tables, dual)
+    toh = _toh_us(fields)
+    if toh.max() >= HOUR_US:
         i = int(np.argmax(toh >= HOUR_US))
         raise DecodeError(f"packet {i}: time stamp {int(toh[i])} us is past the hour")
     sensor_ns = resolve_hour_ns(toh, host)
-    first_rec = np.stack([lay.firing_ns[:, 0] for lay in layouts])[dual_index]
-    block_time = sensor_ns[:, None] + first_rec
-    if model == "VLS-128":
-        # All four banks of a firing sequence carry the azimuth sampled at the sequence
-        # start, so that is the time each block's azimuth belongs to (PacketTiming).
-        seq_first = np.where(dual[:, None], 0, (np.arange(BLOCKS) // 4) * 4)
-        block_time = np.take_along_axis(block_time, seq_first, axis=1)
-    # Padding blocks (VLS-128 dual) repeat the last real block of the packet.
-    if not real.all():
-        last_real = np.where(real, np.arange(BLOCKS), -1).max(axis=1)
-        fill = np.where(real, np.arange(BLOCKS), last_real[:, None])
-        az_raw = np.take_along_axis(az_raw, fill, axis=1)
-        block_time = np.take_along_axis(block_time, fill, axis=1)
     timing = PacketTiming(
         vendor="velodyne",
         model=model,
         sensor_time_ns=sensor_ns,
         block_azimuth_deg=az_raw / 100.0,
-        block_time_ns=block_time.astype(np.int64),
+        block_time_ns=sensor_ns[:, None] + _per_packet(tables.block_offset_ns, dual),
         return_mode=rmode,
         dual_return=dual,
     )
-    return _Decoded(timing, az_raw, dual_index)
+    return _Decoded(timing, az_raw, dual.astype(np.intp))
 
 
 def decode_velodyne(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> PacketTiming:
