@@ -29,7 +29,7 @@ from syncaudit.logs.mcap_log import McapLog
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
-TASKS_PER_WORKER = 4
+TASKS_PER_WORKER = 8
 """Tasks in flight per worker: enough queued work that workers never wait on a parent
 busy with something else (its one-off imports); results are small, so memory stays low."""
 
