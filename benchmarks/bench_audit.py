@@ -9,12 +9,13 @@ What it does, in one run:
    long; each with its ground truth and rig file.
 2. Creates (once) its own virtual environment with the peers `rosbag-doctor` and
    `clockdoctor`, never touching the project's environment.
-3. Warms the page cache by reading the file, then runs each contender once as a
-   subprocess and measures wall time, CPU time (user + sys, reaped children included, from
+3. Warms the page cache by reading the file, then runs each contender as a subprocess,
+   in `--repeat` interleaved rounds (each figure is the contender's median-wall run), and
+   measures wall time, CPU time (user + sys, reaped children included, from
    `os.wait4`) and the peak memory of the whole process tree (sampled from /proc every
    20 ms: the sum over processes of RSS and of PSS):
    the audit, the bare-mcap floor, the all-cores decompression limit and the peers; then
-   the audit again on the 2x log.
+   the audit and the floor again on the 2x log (their difference is the cost per GB).
 4. Prints a table, the ratios, the throughput and one verdict line per target. Nothing
    printed is hard-coded: every figure is measured in that run.
 
@@ -58,6 +59,7 @@ SIZE_MARGIN = 1.015
 TARGET_RSS_MB = 300.0
 TARGET_RSS_GROWTH = 0.10
 TARGET_LIMIT_RATIO = 1.5
+DEFAULT_REPEAT = 5
 MB = 1e6
 
 # The simulated rig: a VLS-128 on the roof and six cameras all around, 60 deg apart.
@@ -676,6 +678,33 @@ def audit_vs_truth(json_out: Path, log: Path) -> str:
     )
 
 
+def median_run(runs: list[Run]) -> Run:
+    """The run with the median wall time (the lower middle of an even count; a failed run,
+    if any, so that failures show)."""
+    failed = [run for run in runs if not run.ok]
+    if failed:
+        return failed[0]
+    return sorted(runs, key=lambda run: run.wall_s)[(len(runs) - 1) // 2]
+
+
+def marginal_cost(
+    audit: Run, audit2: Run, floor: Run, floor2: Run, one: LogFacts, two: LogFacts
+) -> str:
+    """Seconds per extra GB (2x minus 1x) and the fixed start-up/tail cost they imply:
+    what decides the wall time on the tens-of-GB logs a fleet records."""
+    if not all(run.ok for run in (audit, audit2, floor, floor2)):
+        return "marginal cost: no data (a run failed)"
+    extra_gb = (two.size_bytes - one.size_bytes) / 1e9
+    audit_rate = (audit2.wall_s - audit.wall_s) / extra_gb
+    floor_rate = (floor2.wall_s - floor.wall_s) / extra_gb
+    fixed = audit.wall_s - audit_rate * one.size_bytes / 1e9
+    return (
+        f"marginal cost per extra GB (2x - 1x): audit {audit_rate:.2f} s/GB, floor "
+        f"{floor_rate:.2f} s/GB (x{audit_rate / floor_rate:.2f}); audit fixed cost "
+        f"(start-up, pool, analysis, report) ~{fixed:.2f} s"
+    )
+
+
 def _fmt(value: float, digits: int = 1) -> str:
     return "-" if value != value else f"{value:,.{digits}f}"
 
@@ -786,6 +815,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--timeout-s", type=float, default=3_600.0, help="per contender (default 3600)"
     )
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=DEFAULT_REPEAT,
+        help=f"interleaved rounds; each figure is the median-wall run (default {DEFAULT_REPEAT})",
+    )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--duration-s", type=float, help=argparse.SUPPRESS)
     return parser.parse_args(argv)
@@ -834,20 +869,48 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
         f"syncaudit bytecode {bytecode}; each contender's log is read once right before it "
         "runs (page cache warm)"
     )
-    _log("running: audit, floor, limit" + (", peers" if bin_dir else "") + ", audit on 2x ...")
+    repeat = max(1, args.repeat)
+    _log(
+        f"running {repeat} interleaved round(s) of: audit, floor, limit"
+        + (", peers" if bin_dir else "")
+        + ", audit and floor on 2x ..."
+    )
     t_out = args.timeout_s
     json_1x, json_2x = scratch / "audit-1x.json", scratch / "audit-2x.json"
-    audit = measure("syncaudit audit", audit_argv(one.path, json_1x), scratch, t_out, warm=one.path)
     floor_argv = [sys.executable, "-c", FLOOR_CODE, str(one.path), *one.audit_topics]
-    floor = measure("floor: bare mcap iteration", floor_argv, scratch, t_out, warm=one.path)
+    floor2_argv = [sys.executable, "-c", FLOOR_CODE, str(two.path), *two.audit_topics]
     limit_argv = [sys.executable, "-c", LIMIT_CODE, str(one.path)]
     cores = f"limit: {os.cpu_count()}-core decompress"
-    limit = measure(cores, limit_argv, scratch, t_out, warm=one.path)
-    peers = peer_runs(bin_dir, one.path, scratch, t_out) if bin_dir else []
-    audit2_argv = audit_argv(two.path, json_2x)
-    audit2 = measure("syncaudit audit @2x log", audit2_argv, scratch, t_out, warm=two.path)
-    runs = [audit, floor, limit, *peers, audit2]
-    rows = [(run, two if run is audit2 else one) for run in runs]
+    rounds: dict[str, list[Run]] = {}
+    for _ in range(repeat):
+        round_runs = [
+            measure(
+                "syncaudit audit", audit_argv(one.path, json_1x), scratch, t_out, warm=one.path
+            ),
+            measure("floor: bare mcap iteration", floor_argv, scratch, t_out, warm=one.path),
+            measure(cores, limit_argv, scratch, t_out, warm=one.path),
+            *(peer_runs(bin_dir, one.path, scratch, t_out) if bin_dir else []),
+            measure(
+                "syncaudit audit @2x log",
+                audit_argv(two.path, json_2x),
+                scratch,
+                t_out,
+                warm=two.path,
+            ),
+            measure("floor @2x log", floor2_argv, scratch, t_out, warm=two.path),
+        ]
+        for run in round_runs:
+            rounds.setdefault(run.name, []).append(run)
+    median = {name: median_run(runs) for name, runs in rounds.items()}
+    audit, floor, limit = (
+        median["syncaudit audit"],
+        median["floor: bare mcap iteration"],
+        median[cores],
+    )
+    audit2, floor2 = median["syncaudit audit @2x log"], median["floor @2x log"]
+    peers = [median[name] for name in ("rosbag-doctor", "clockdoctor") if name in median]
+    runs = [audit, floor, limit, *peers, audit2, floor2]
+    rows = [(run, two if run in (audit2, floor2) else one) for run in runs]
 
     _log()
     _log(table(rows))
@@ -870,6 +933,16 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
         _log(audit_vs_truth(json_1x, one.path) + " (1x)")
     if audit2.ok:
         _log(audit_vs_truth(json_2x, two.path) + " (2x)")
+
+    if repeat > 1:
+        _log(
+            "wall s of every round (the table shows each contender's median run): "
+            + "; ".join(
+                f"{name.split(':')[0]} " + " ".join(f"{r.wall_s:.2f}" for r in rs)
+                for name, rs in rounds.items()
+            )
+        )
+    _log(marginal_cost(audit, audit2, floor, floor2, one, two))
 
     _log()
     ratios = []
