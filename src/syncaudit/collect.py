@@ -9,6 +9,7 @@ does), so the serial and parallel paths yield the same items in the same order.
 
 from __future__ import annotations
 
+import gc
 import heapq
 import multiprocessing
 import os
@@ -190,6 +191,12 @@ def _parallel_results(
         for encoding in _deserialised_encodings(log, plan):
             log.type_registry(encoding)
         _INHERITED_LOGS[path] = log
+    # Forked workers share the parent's heap copy-on-write; a frozen heap is never
+    # traversed (or written) by their garbage collector, which would copy it page by page.
+    # (A caller's own freeze is left as it is.)
+    freeze = gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
     try:
         with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
             window: list[Future[list[Keyed]]] = []
@@ -200,6 +207,8 @@ def _parallel_results(
                     submitted += 1
                 yield window.pop(0).result()
     finally:
+        if freeze:
+            gc.unfreeze()
         _INHERITED_LOGS.pop(path, None)
 
 
