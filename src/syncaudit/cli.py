@@ -391,8 +391,24 @@ def calib(
 
 
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point.
+
+    Exits without the interpreter's teardown (~60 ms with numpy and pandas loaded): by
+    then every output file is written and closed, and the streams are flushed here.
+    """
+    try:
+        app()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if exc.code is not None and not isinstance(exc.code, int):
+            print(exc.code, file=sys.stderr)
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (BrokenPipeError, OSError):  # a reader that went away (e.g. `| head`)
+        code = code or 1
+    os._exit(code)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,7 @@ from syncaudit.cli import app
 
 runner = CliRunner()
 VLP16 = Path("velodyne_vlp16") / "1673400471837873222"
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_info_json_on_real_velodyne(lidar_data: Path) -> None:
@@ -159,3 +162,35 @@ def test_simulate_calib_writes_session(tmp_path: Path) -> None:
     assert "n_stops" in _one_line_error(
         runner.invoke(app, ["simulate", str(tmp_path / "c2.mcap"), "--calib", "--stops", "1"]), 6
     )
+
+
+def test_console_script_exit_codes_and_flushed_output(tmp_path: Path) -> None:
+    """The entry point skips interpreter teardown: its exit code and output must survive."""
+    sample = REPO / "sample_logs" / "pandar40p_adaptive.mcap"
+    rig = sample.with_name(sample.name + ".rig.yaml")
+    command = [sys.executable, "-m", "syncaudit.cli"]
+    ok = subprocess.run(
+        [*command, "audit", str(sample), "--rig", str(rig), "--json"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert json.loads(ok.stdout)["cameras"]  # the whole JSON document arrived
+    gate = subprocess.run(
+        [*command, "audit", str(sample), "--rig", str(rig), "--gate"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert gate.returncode == (0 if json.loads(ok.stdout)["verdict"] == "pass" else 10)
+    missing = subprocess.run(
+        [*command, "audit", str(tmp_path / "none.mcap")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert missing.returncode == 2
+    assert missing.stderr.strip().startswith("error:") and missing.stderr.count("\n") == 1
+    usage = subprocess.run(command, capture_output=True, text=True, check=False)
+    assert usage.returncode == 2 and "audit" in usage.stdout
