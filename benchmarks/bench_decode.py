@@ -14,12 +14,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from syncaudit.errors import SyncauditError
 from syncaudit.lidar.samples import packet_samples
 from syncaudit.lidar.stream import PacketChunk, decode_scan
 from syncaudit.logs import RawMessage, open_log
 
 HERE = Path(__file__).resolve().parent
-DEFAULT_LOG = HERE / ".cache" / "bench_0.2gb_x1_6db29d6c06.mcap"
+DEFAULT_LOGS = "bench_0.2gb_x1_*.mcap"
+"""The quick log bench_audit.py caches (`python benchmarks/bench_audit.py --quick`)."""
 DEFAULT_TOPIC = "/velodyne_packets"
 
 
@@ -77,11 +79,22 @@ def main() -> None:
     parser.add_argument("log_topic", nargs="*", help="pairs of LOG TOPIC")
     parser.add_argument("--repeat", type=int, default=20)
     args = parser.parse_args()
-    pairs = args.log_topic or [str(DEFAULT_LOG), DEFAULT_TOPIC]
+    pairs = args.log_topic
+    if not pairs:
+        cached = sorted((HERE / ".cache").glob(DEFAULT_LOGS))
+        if not cached:
+            parser.error(
+                "no cached bench log: run `python benchmarks/bench_audit.py --quick` first, "
+                "or give LOG TOPIC"
+            )
+        pairs = [str(cached[-1]), DEFAULT_TOPIC]
     if len(pairs) % 2:
         parser.error("give LOG TOPIC pairs")
     for path, topic in zip(pairs[::2], pairs[1::2], strict=True):
-        bench(Path(path), topic, args.repeat)
+        try:
+            bench(Path(path), topic, args.repeat)
+        except SyncauditError as exc:
+            raise SystemExit(f"error: {exc}") from None
 
 
 if __name__ == "__main__":
