@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
+from syncaudit.camera.cdr_fast import has_fast_reader, read_fast
 from syncaudit.camera.extract import exposure_row, image_row, trigger_row
 from syncaudit.lidar import ouster
 from syncaudit.lidar.samples import packet_samples
@@ -84,7 +84,7 @@ def extract(plan: ExtractPlan, msg: RawMessage, log: LogReader) -> Item | None:
 
 def _fields(msg: RawMessage, log: LogReader) -> Any:
     """A message's fields: by struct for the known per-frame types, else through rosbags."""
-    fast = read_fast(msg.data, msg.msgtype, msg.encoding) if msg.msgtype in FAST_READERS else None
+    fast = read_fast(msg.data, msg.msgtype, msg.encoding)
     return fast if fast is not None else log.deserialize(msg)
 
 
@@ -214,13 +214,8 @@ def _parallel_results(
 
 def _deserialised_encodings(log: McapLog, plan: ExtractPlan) -> set[str]:
     """Encodings of the plan's messages that go through rosbags (no struct reader)."""
-    topics = [*plan.exposures, *plan.triggers]
-    return {
-        log.topics[t].encoding
-        for t in topics
-        if t in log.topics
-        and (log.topics[t].msgtype not in FAST_READERS or log.topics[t].encoding != "cdr")
-    }
+    infos = [log.topics[t] for t in (*plan.exposures, *plan.triggers) if t in log.topics]
+    return {i.encoding for i in infos if not has_fast_reader(i.msgtype, i.encoding)}
 
 
 def _merged(groups: list[list[ChunkRef]], results: Iterator[list[Keyed]]) -> Iterator[Item]:

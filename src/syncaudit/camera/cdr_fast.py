@@ -110,9 +110,13 @@ FAST_READERS = {
 }
 
 
+def has_fast_reader(msgtype: str, encoding: str) -> bool:
+    """True where `read_fast` reads this type and encoding (else rosbags must)."""
+    return encoding == "cdr" and msgtype in FAST_READERS
+
+
 def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNamespace | None:
     """The fields the audit needs, or None where this type/encoding has no fast reader."""
-    reader = FAST_READERS.get(msgtype)
-    if reader is None or encoding != "cdr":
+    if not has_fast_reader(msgtype, encoding):
         return None
-    return reader(_Cursor(data))
+    return FAST_READERS[msgtype](_Cursor(data))
