@@ -144,7 +144,8 @@ def audit_log(
     `jobs` worker processes extract an indexed MCAP's chunks in parallel (default: one
     per core); other containers, and `jobs=1`, read serially. The result is the same.
     `check_crc` verifies every MCAP chunk's CRC (as the mcap reader, off by default: a
-    damaged zstd/lz4 chunk fails to decompress anyway, and CRCs cost a third of the time).
+    damaged zstd/lz4 chunk fails to decompress anyway, and CRCs cost about as much CPU as
+    the decompression).
     """
     with open_log(path) as log:
         if log.summary.message_count == 0:

@@ -123,7 +123,7 @@ def audit(
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing --pairings log.")] = False,
     check_crc: Annotated[
-        bool, typer.Option(help="Verify every MCAP chunk's CRC (slower by about a third).")
+        bool, typer.Option(help="Verify every MCAP chunk's CRC (a quarter to a third slower).")
     ] = False,
 ) -> None:
     """Audit LiDAR-camera sync: Eq. 1-6 per camera, recommended delay, threshold verdict."""

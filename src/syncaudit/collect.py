@@ -46,7 +46,7 @@ class ExtractPlan:
     lidar_family: str
     ouster_meta: ouster.OusterMetadata | None = None
     check_crc: bool = False
-    """Verify each MCAP chunk's CRC (costs about a third of the reading time)."""
+    """Verify each MCAP chunk's CRC (about as much CPU as decompressing the chunk)."""
     images: dict[str, str] = field(default_factory=dict)
     """image topic -> camera."""
     exposures: dict[str, tuple[str, str]] = field(default_factory=dict)
