@@ -143,7 +143,7 @@ def _distinct(values: NDArray[np.uint8]) -> frozenset[int]:
 
 
 def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
-    """One chunk from consecutive ones (single-packet topics are fed in batches)."""
+    """One chunk from consecutive ones (LidarScanner gathers them before tracking)."""
     if len(parts) == 1:
         return parts[0]
     offsets = np.cumsum([0] + [p.n_packets for p in parts[:-1]])
