@@ -394,7 +394,8 @@ Corruption = Callable[[NDArray[np.uint8], NDArray[np.uint32]], object]
             lambda d, s: d.__setitem__((0, slice(1052 + 19, 1052 + 23)), [0x41, 0x42, 0x0F, 0]),
             "past 1 s",
         ),
-        (lambda d, s: d.__setitem__((slice(None), 10), 3), "return mode"),
+        (lambda d, s: d.__setitem__((slice(None), 1052 + 10), 0x3D), "cannot group 8 blocks"),
+        (lambda d, s: d.__setitem__((slice(None), 1052 + 10), 0x39), "not grouped by 2"),
         (lambda d, s: s.__setitem__(1, 1060), "needs"),
     ],
 )

@@ -740,18 +740,68 @@ def _tail_start(layout: HesaiLayout, data: NDArray[np.uint8]) -> NDArray[np.int6
 
 
 def _n_returns(
-    layout: HesaiLayout, data: NDArray[np.uint8], mode: NDArray[np.int64]
+    layout: HesaiLayout, mode: NDArray[np.int64], azimuth: NDArray[np.int64]
 ) -> NDArray[np.int64]:
-    """Returns per firing: header 'return number' in the general protocol, else from the mode."""
-    r = data[:, 10].astype(np.int64) if layout.header_bytes == 12 else _RETURNS_TABLE[mode]
-    bad = np.flatnonzero((r < 1) | (r > 3) | (layout.n_blocks % np.maximum(r, 1) != 0))
+    """Returns per firing, from the tail's return mode, checked against the block azimuths.
+
+    The manuals define the firing grouping by the tail's Return Mode field: in an r-return
+    mode one firing fills r adjacent blocks that share its azimuth. The 12-byte header's
+    "Return Number"/"Echo Num" byte is not the current mode: the PandarXT manual defines it
+    as the most returns a channel can produce (0x02 on XT16/32 in every mode) and an
+    XT32M2X writes 3 while in a dual mode (0x3c), so it is not used; tier4/nebula
+    (`get_n_returns(tail.return_mode)`) and HesaiLidar_SDK_2.0 (tail `IsDualReturn`) read
+    the tail too. An unknown mode code falls back to the azimuth pattern: the largest r
+    whose block groups all share one azimuth in every packet.
+    """
+    r = _RETURNS_TABLE[mode]
+    unknown = r == 0
+    if unknown.any():
+        r = np.where(unknown, _returns_from_azimuth(layout, azimuth), r)
+    bad = np.flatnonzero(layout.n_blocks % np.maximum(r, 1) != 0)
     if bad.size:
         i = int(bad[0])
         raise DecodeError(
-            f"{layout.model} packet #{i}: unsupported return mode {int(mode[i]):#04x} "
-            f"({int(r[i])} returns for {layout.n_blocks} blocks)"
+            f"{layout.model} packet #{i}: return mode {int(mode[i]):#04x} "
+            f"({int(r[i])} returns) cannot group {layout.n_blocks} blocks"
         )
+    multi = np.flatnonzero(r > 1)
+    if multi.size:
+        _check_shared_azimuth(layout, mode, azimuth, r, multi)
     return r
+
+
+def _returns_from_azimuth(layout: HesaiLayout, azimuth: NDArray[np.int64]) -> NDArray[np.int64]:
+    """(n,) the largest returns-per-firing whose block groups share one azimuth (at least 1)."""
+    n, b = azimuth.shape
+    best = np.ones(n, dtype=np.int64)
+    for r in range(2, b + 1):
+        if b % r:
+            continue
+        groups = azimuth.reshape(n, b // r, r)
+        shared = (groups == groups[:, :, :1]).all(axis=(1, 2))
+        best = np.where(shared, r, best)
+    return best
+
+
+def _check_shared_azimuth(
+    layout: HesaiLayout,
+    mode: NDArray[np.int64],
+    azimuth: NDArray[np.int64],
+    r: NDArray[np.int64],
+    rows: NDArray[np.intp],
+) -> None:
+    """DecodeError where a multi-return firing's blocks do not share one azimuth."""
+    for returns in np.unique(r[rows]).tolist():
+        sel = rows[r[rows] == returns]
+        groups = azimuth[sel].reshape(sel.size, layout.n_blocks // returns, returns)
+        split = np.flatnonzero(~(groups == groups[:, :, :1]).all(axis=(1, 2)))
+        if split.size:
+            i = int(sel[split[0]])
+            raise DecodeError(
+                f"{layout.model} packet #{i}: return mode {int(mode[i]):#04x} says "
+                f"{returns} returns per firing, but its blocks' azimuths "
+                f"{azimuth[i].tolist()} are not grouped by {returns}"
+            )
 
 
 def decode_hesai(
@@ -819,7 +869,8 @@ def decode_hesai(
         )
 
     mode = arr[np.arange(n), tail + layout.tail_return_mode].astype(np.int64)
-    n_ret = _n_returns(layout, arr, mode)
+    n_ret = _n_returns(layout, mode, azimuth)
+    motor_rpm = _le(_gather(arr, tail + layout.tail_motor_rpm, 2))
     us = _le(_gather(arr, tail + layout.tail_timestamp_us, 4))
     if int(us.max()) > 1_000_000:
         i = int(np.argmax(us))
@@ -840,6 +891,7 @@ def decode_hesai(
         block_time_ns=t0_ns[:, None] + layout.block_offset_ns(n_ret),
         return_mode=mode.astype(np.uint8),
         dual_return=n_ret >= 2,
+        motor_rpm=motor_rpm.astype(np.float64),
     )
 
 
