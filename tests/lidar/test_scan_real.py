@@ -122,7 +122,9 @@ def test_declared_rotation_rate_agrees(
     lidar_data: Path, folder: str, topic: str, declared: float | None
 ) -> None:
     """The packets' own motor-speed field (Hesai tail, Ouster lidar_mode) matches the decode."""
-    bag = next(p for p in sorted((lidar_data / folder).iterdir()) if p.is_dir() or p.suffix == ".bag")
+    bag = next(
+        p for p in sorted((lidar_data / folder).iterdir()) if p.is_dir() or p.suffix == ".bag"
+    )
     with open_log(bag) as log:
         scan = scan_lidar(log, topic)
     if declared is None:  # Velodyne data packets carry no motor speed
