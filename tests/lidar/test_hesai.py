@@ -20,17 +20,19 @@ from syncaudit.errors import DecodeError
 from syncaudit.lidar.hesai import (
     HESAI_LAYOUTS,
     RosHeader,
-    build_nebula_packets,
-    build_pandar_scan,
     decode_hesai,
     detect_hesai_model,
-    encode_hesai,
     hesai_returns,
-    hesai_revolution_schedule,
     nebula_packets,
     pandar_scan_packets,
     ros_header,
     stack_packets,
+)
+from syncaudit.lidar.hesai_encode import (
+    build_nebula_packets,
+    build_pandar_scan,
+    encode_hesai,
+    hesai_revolution_schedule,
 )
 
 NS = 1_000_000_000

@@ -44,13 +44,12 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
-from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, build_pandar_scan, encode_hesai
-from syncaudit.lidar.velodyne import (
-    HOUR_US,
-    RETURN_STRONGEST,
+from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader
+from syncaudit.lidar.hesai_encode import build_pandar_scan, encode_hesai
+from syncaudit.lidar.velodyne import HOUR_US, RETURN_STRONGEST, velodyne_firing_offsets_ns
+from syncaudit.lidar.velodyne_encode import (
     build_velodyne_scan,
     encode_velodyne,
-    velodyne_firing_offsets_ns,
     velodyne_revolution_schedule,
 )
 from syncaudit.simulate import LidarModel
