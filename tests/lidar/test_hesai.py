@@ -240,10 +240,13 @@ START_NS = 1_673_400_149_311_270_952  # the 40P recording's first driver stamp
         ("PandarXT32", 0x37, 1080, 250),
         ("PandarXT32", 0x3B, 1080, 500),
         ("PandarXT32M", 0x37, 820, 334),
+        ("PandarXT32M", 0x3C, 820, 667),
         ("PandarXT32M", 0x3D, 820, 1000),
         ("PandarQT128", 0x37, 1095, 450),
         ("PandarQT128", 0x39, 1095, 900),
         ("AT128", 0x37, 1086, 1200),
+        ("Pandar128E4X", 0x37, 861, 900),
+        ("Pandar128E4X", 0x39, 861, 1800),
     ],
 )
 def test_encode_decode_round_trip(model: str, return_mode: int, size: int, n_packets: int) -> None:

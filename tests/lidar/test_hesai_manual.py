@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from syncaudit.lidar.hesai import decode_hesai
+from syncaudit.lidar.hesai import decode_hesai, hesai_returns
 from syncaudit.lidar.samples import packet_samples
 from syncaudit.lidar.scan import LidarScan, LidarScanner
 
@@ -144,3 +144,102 @@ def test_motor_speed_disagreement_warns() -> None:
     assert scan.rpm_disagreement == pytest.approx(-0.5, abs=1e-3)
     (warning,) = scan.warnings
     assert "600.00 RPM" in warning and "1200 RPM" in warning and "-50.0%" in warning
+
+
+# ----------------------------------------------------------------------------- OT128
+# OT128 (Pandar128E4X) user manual, section 3.1.2, protocol 1.4: pre-header 0xEE 0xFF
+# 0x01 0x04 + 2 reserved; header Laser Num 0x80, Block Num 0x02, First Block Return,
+# Dis Unit 0x04, Return Number, Flags ([4] confidence, [3] digital signature, [2]
+# functional safety, [1] IMU, [0] UDP sequence); body 2 x (Azimuth uint16 0.01 deg +
+# 128 x (Distance uint16, Reflectivity)) + CRC 4; functional safety 17; tail: Reserved 9,
+# Azimuth State 2, Operational State, Return Mode, Motor Speed uint16, Date & Time (year -
+# 1900), Timestamp uint32 us, Factory Information; UDP Sequence 4, IMU 22, CRC 4: 861
+# bytes (the manual's revision O01-en-230920: "point cloud UDP data from 893 to 861",
+# the 893 including the 32-byte signature). Block timing as tier4/nebula's Pandar128E4X:
+# a round every 55.556 us, block start = t0 + 43.346 us + 2.378 us (earliest channel);
+# single return: block 1 one round before block 2; dual: both blocks one round.
+OT128_ROUND_NS = 55_556
+OT128_START_AFTER_T0_NS = 43_346 + 2_378
+
+
+def _ot128_packet(
+    azimuths: tuple[int, int], return_mode: int, t0_ns: int, *, flags: int = 0x07, seq: int = 1
+) -> bytes:
+    """One OT128 packet; 4-byte channel units (with confidence) when flag bit 4 is set."""
+    returns = 2 if return_mode in (0x39, 0x3B, 0x3C) else 1
+    out = bytearray(b"\xee\xff\x01\x04\x00\x00")
+    out += bytes([0x80, 0x02, 0x01 if returns == 2 else 0x00, 0x04, returns, flags])
+    for block, azimuth in enumerate(azimuths):
+        out += struct.pack("<H", azimuth)
+        unit = struct.pack("<HB", 1_000 + 10 * block, 50)
+        if flags & 0x10:
+            unit += b"\x03"  # confidence
+        out += unit * 128
+    out += struct.pack("<I", 0)  # body CRC (not checked)
+    if flags & 0x04:
+        out += bytes(17)  # functional safety
+    seconds, ns = divmod(t0_ns, 1_000_000_000)
+    t = datetime.fromtimestamp(seconds, tz=timezone.utc)
+    out += bytes(9) + struct.pack("<H", 0) + bytes([1, return_mode]) + struct.pack("<H", 600)
+    out += bytes([t.year - 1900, t.month, t.day, t.hour, t.minute, t.second])
+    out += struct.pack("<I", ns // 1000) + b"\x42"
+    if flags & 0x01:
+        out += struct.pack("<I", seq)
+    if flags & 0x02:
+        out += bytes(22)  # IMU
+    out += struct.pack("<I", 0)  # tail CRC
+    if flags & 0x08:
+        out += bytes(32)  # digital signature
+    return bytes(out)
+
+
+def _ot128_capture(
+    return_mode: int, turns: float, flags: int = 0x07
+) -> tuple[NDArray[np.uint8], NDArray[np.uint32], NDArray[np.int64], NDArray[np.int64]]:
+    returns = 2 if return_mode in (0x39, 0x3B, 0x3C) else 1
+    rounds = 2 // returns
+    step = round(600 * 6 * OT128_ROUND_NS / 1e9 * 100)  # azimuth units per round: 20
+    n = int(turns * 36_000 / (step * rounds))
+    packets, truth, t0s = [], [], []
+    base = START_NS + 1_000_000  # t0 on whole microseconds
+    for p in range(n):
+        first = p * rounds
+        t0 = base + (first + rounds - 1) * OT128_ROUND_NS // 1000 * 1000
+        starts = [
+            t0 + OT128_START_AFTER_T0_NS - OT128_ROUND_NS * (rounds - 1 - k) for k in range(rounds)
+        ]
+        az = [(FIRST_AZIMUTH + step * (first + k)) % 36_000 for k in range(rounds)]
+        if returns == 2:
+            az, starts = az * 2, starts * 2
+        packets.append(_ot128_packet((az[0], az[1]), return_mode, t0, flags=flags, seq=p))
+        truth.append(starts)
+        t0s.append(t0)
+    size = len(packets[0])
+    data = np.frombuffer(b"".join(packets), dtype=np.uint8).reshape(n, size)
+    host = np.array(t0s, dtype=np.int64) + 700_000
+    return data, np.full(n, size, dtype=np.uint32), host, np.array(truth, dtype=np.int64)
+
+
+@pytest.mark.parametrize(
+    ("return_mode", "flags", "size", "per_rev"),
+    [
+        (0x37, 0x07, 861, 900.0),  # single strongest, UDP sequence + IMU + functional safety
+        (0x39, 0x07, 861, 1800.0),  # dual last + strongest
+        (0x37, 0x0F, 893, 900.0),  # with the 32-byte digital signature
+        (0x3B, 0x11, 1078, 1800.0),  # confidence byte in every unit, no FS/IMU
+    ],
+)
+def test_ot128_manual_packets(return_mode: int, flags: int, size: int, per_rev: float) -> None:
+    data, sizes, host, truth = _ot128_capture(return_mode, 3.2, flags)
+    assert data.shape[1] == size
+    timing = decode_hesai(data, sizes, host)
+    assert timing.model == "Pandar128E4X"
+    np.testing.assert_array_equal(timing.block_time_ns, truth)
+    np.testing.assert_array_equal(timing.sensor_time_ns, host - 700_000)
+    scan = _scan(data, sizes, host)
+    assert scan.rpm == pytest.approx(600.0, rel=2e-3)
+    assert scan.packets_per_revolution == pytest.approx(per_rev, abs=1)
+    assert scan.dropped_packets == 0
+    assert scan.warnings == []
+    distance_m, _ = hesai_returns(data[:2], sizes[:2])
+    assert distance_m[0, 0, 0] == pytest.approx(4.0) and distance_m[0, 1, 5] == pytest.approx(4.04)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, NamedTuple
 
 import numpy as np
@@ -300,6 +300,11 @@ class HesaiLayout:
     anchored_last: bool
     valid_sizes: tuple[int, ...] = ()
     """Exact packet sizes accepted when the model has no self-describing header."""
+    unit_bytes_if_confidence: int = 0
+    """Protocol 1.4: channel unit size when header flag bit 4 (confidence) is set."""
+    header_max_returns: int = 0
+    """What the sensor writes in the 12-byte header's Return Number byte when it is the
+    model's maximum rather than the current mode (PandarXT: 2, XT32M2X: 3); 0: the mode's."""
 
     @property
     def block_bytes(self) -> int:
@@ -346,9 +351,11 @@ def _general(
         block_prefix_bytes=int(kw.pop("block_prefix_bytes", 2)),
         azimuth_offset=0,
         fine_azimuth=bool(kw.pop("fine_azimuth", False)),
-        unit_bytes=4,
+        unit_bytes=int(kw.pop("unit_bytes", 4)),
         body_trailer_bytes=int(kw.pop("body_trailer_bytes", 0)),
         fs_bytes_if_flagged=int(kw.pop("fs_bytes_if_flagged", 0)),
+        unit_bytes_if_confidence=int(kw.pop("unit_bytes_if_confidence", 0)),
+        header_max_returns=int(kw.pop("header_max_returns", 0)),
         tail_bytes=tail["len"],
         tail_return_mode=tail["return_mode"],
         tail_motor_rpm=tail["motor"],
@@ -454,13 +461,35 @@ HESAI_LAYOUTS: Final[dict[str, HesaiLayout]] = {
     # Protocol 6.1, 8 blocks; t0 triggers the last round, block start = t0 + 5.632 us
     # - 50 us per later round.
     "PandarXT16": _general(
-        "PandarXT16", (6, 1), 8, 16, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT16",
+        (6, 1),
+        8,
+        16,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=2,
     ),
     "PandarXT32": _general(
-        "PandarXT32", (6, 1), 8, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT32",
+        (6, 1),
+        8,
+        32,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=2,
     ),
+    # XT32M2X: 6 blocks; single (6 rounds), dual (3 x 2) or triple 0x3D (2 x 3) per packet.
     "PandarXT32M": _general(
-        "PandarXT32M", (6, 1), 6, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT32M",
+        (6, 1),
+        6,
+        32,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=3,
     ),
     # Protocol 3.2 (QT128C2X): body CRC, optional functional safety (17 B), tail with mode
     # flag; block start = t0 + 9 us - 111.11 us per later round (see decode_hesai notes).
@@ -484,6 +513,36 @@ HESAI_LAYOUTS: Final[dict[str, HesaiLayout]] = {
         header_flags=0x05,
         anchor_ns=9_000,
         period_num_ns=111_110,
+    ),
+    # OT128 (Pandar128E4X), protocol 1.4 (OT128 user manual, section 3.1.2; tier4/nebula
+    # Packet128E3X/Pandar128E4X): 2 blocks of azimuth + 128 x (distance, reflectivity)
+    # [+ confidence when flag bit 4], body CRC, functional safety (17 B, flag bit 2), tail
+    # (reserved 9, azimuth state 2, operational state, return mode, motor speed, date,
+    # timestamp, factory), then UDP sequence (bit 0), IMU (22 B, bit 1), tail CRC, digital
+    # signature (32 B, bit 3): 861 bytes with flags 0x07. Block start = t0 + 45.724 us
+    # (nebula: 43.346 us + the earliest channel's 2.378 us) - 55.556 us per later round.
+    "Pandar128E4X": _general(
+        "Pandar128E4X",
+        (1, 4),
+        2,
+        128,
+        {
+            "len": 26,
+            "mode_flag": 11,
+            "return_mode": 12,
+            "motor": 13,
+            "date": 15,
+            "us": 21,
+            "factory": 25,
+        },
+        unit_bytes=3,
+        unit_bytes_if_confidence=4,
+        body_trailer_bytes=4,
+        fs_bytes_if_flagged=17,
+        trailer_bytes=30,
+        header_flags=0x07,
+        anchor_ns=45_724,
+        period_num_ns=55_556,
     ),
     # Protocol 4.1/4.3: uint16 azimuth + uint8 fine azimuth (1/25600 deg), body CRC,
     # Unix-seconds date; block start = t0 - 9.249 us - 41.666 us per round from the last.
@@ -554,6 +613,7 @@ def _model_codes(data: NDArray[np.uint8], size: NDArray[np.int64]) -> NDArray[np
         "PandarQT64": general & (b2 == 3) & (b3 == 1),
         "PandarQT128": general & (b2 == 3) & (b3 == 2),
         "AT128": general & (b2 == 4) & ((b3 == 1) | (b3 == 3)),
+        "Pandar128E4X": general & (b2 == 1) & (b3 == 4) & (lasers == 128) & (blocks == 2),
         "PandarXT16": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 16),
         "PandarXT32": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 32),
         "PandarXT32M": general & (b2 == 6) & (b3 == 1) & (blocks == 6) & (lasers == 32),
@@ -569,7 +629,8 @@ def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> st
 
     Pandar40P: no pre-header, starts with block flag 0xFFEE, 1262/1266 bytes.
     Pandar64: 0xEEFF, 64 lasers, 6 blocks, 1194/1198 bytes (8-byte header, no version).
-    Others: 0xEEFF + protocol major.minor: 3.1 PandarQT64, 3.2 PandarQT128, 4.1/4.3 AT128,
+    Others: 0xEEFF + protocol major.minor: 1.4 Pandar128E4X (OT128; 128 lasers, 2 blocks),
+    3.1 PandarQT64, 3.2 PandarQT128, 4.1/4.3 AT128,
     6.1 PandarXT (8 blocks: 16 or 32 lasers -> XT16/XT32; 6 blocks -> XT32M).
     """
     arr, sz = _check_packets(data, size)
@@ -642,6 +703,23 @@ def _epoch_seconds(date: NDArray[np.int64]) -> NDArray[np.int64]:
         raise DecodeError(f"packet #{i} has an invalid date-time {date[i].tolist()}")
     cal = _days_from_civil(year, month, day) * 86_400 + hour * 3600 + minute * 60 + second
     return np.where(unix, np.where(unix_s == 0, -1, unix_s), cal)
+
+
+def _packet_layout(data: NDArray[np.uint8], size: NDArray[np.int64]) -> HesaiLayout:
+    """The layout of the packets' model, with 4-byte units where the confidence flag is set."""
+    layout = HESAI_LAYOUTS[detect_hesai_model(data, size)]
+    if not layout.unit_bytes_if_confidence:
+        return layout
+    confidence = (data[:, 11] & 0x10) != 0
+    if not confidence.any():
+        return layout
+    if not confidence.all():
+        i = int(np.argmin(confidence))
+        raise DecodeError(
+            f"{layout.model} packet #{i} lacks the confidence flag the others carry "
+            "(channel units of 3 and 4 bytes mixed)"
+        )
+    return replace(layout, unit_bytes=layout.unit_bytes_if_confidence)
 
 
 def _tail_start(layout: HesaiLayout, data: NDArray[np.uint8]) -> NDArray[np.int64]:
@@ -742,7 +820,7 @@ def decode_hesai(
     host = np.asarray(host_stamp_ns, dtype=np.int64)
     if host.shape != sz.shape:
         raise DecodeError(f"host_stamp_ns has shape {host.shape}, expected {sz.shape}")
-    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    layout = _packet_layout(arr, sz)
     n = arr.shape[0]
     if layout.header_bytes == 12:
         lasers, blocks = arr[:, 6], arr[:, 7]
@@ -817,7 +895,7 @@ def hesai_returns(
     Shapes (n, B, C); the distance unit is the header's (4 mm; Pandar40P: fixed 4 mm).
     """
     arr, sz = _check_packets(data, size)
-    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    layout = _packet_layout(arr, sz)
     n = arr.shape[0]
     body = arr[:, layout.header_bytes : layout.body_end].reshape(
         n, layout.n_blocks, layout.block_bytes

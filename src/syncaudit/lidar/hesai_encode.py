@@ -184,7 +184,8 @@ def encode_hesai(
         major, minor = layout.protocol or (0, 0)
         lead, flags = (1 if n_ret > 1 else 0), layout.header_flags  # dual: last return leads
         # 0xEEFF, version, reserved 2, lasers, blocks, first-block return, 4 mm, returns, flags
-        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, lead, 4, n_ret, flags)
+        returns_byte = layout.header_max_returns or n_ret
+        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, lead, 4, returns_byte, flags)
     elif layout.header_bytes == 8:
         out[:, :8] = (0xEE, 0xFF, c, b, 0, 4, 0, 0)  # 0xEEFF, lasers, blocks, -, 4 mm, -, -
 
