@@ -71,6 +71,8 @@ _VENDOR_OF: dict[str, str] = {
     "VLS-128": "velodyne",
     "Pandar40P": "hesai",
     "PandarXT32": "hesai",
+    "PandarXT32M": "hesai",
+    "Pandar128E4X": "hesai",
 }
 _VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-128": 4}
 """Consecutive blocks that carry one azimuth sample: the VLS-128's four banks (0xEEFF ..
