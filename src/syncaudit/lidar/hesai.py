@@ -652,6 +652,9 @@ def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> st
 
 def _gather(data: NDArray[np.uint8], start: NDArray[np.int64], count: int) -> NDArray[np.int64]:
     """(n, count) bytes starting at a per-packet column, as int64."""
+    first = int(start[0])
+    if (start == first).all():  # one tail position (every model but QT128/OT128 mixes)
+        return data[:, first : first + count].astype(np.int64)
     cols = start[:, None] + np.arange(count, dtype=np.int64)[None, :]
     return np.take_along_axis(data, cols, axis=1).astype(np.int64)
 
@@ -745,10 +748,15 @@ def _n_returns(
     the tail too. An unknown mode code falls back to the azimuth pattern: the largest r
     whose block groups all share one azimuth in every packet.
     """
-    r = _RETURNS_TABLE[mode]
-    unknown = r == 0
-    if unknown.any():
-        r = np.where(unknown, _returns_from_azimuth(layout, azimuth), r)
+    first = int(mode[0])
+    if (mode == first).all() and _RETURNS_TABLE[first]:  # one known mode: the usual case
+        returns = int(_RETURNS_TABLE[first])
+        r = np.full(mode.shape, returns, dtype=np.int64)
+    else:
+        r = _RETURNS_TABLE[mode]
+        unknown = r == 0
+        if unknown.any():
+            r = np.where(unknown, _returns_from_azimuth(layout, azimuth), r)
     bad = np.flatnonzero(layout.n_blocks % np.maximum(r, 1) != 0)
     if bad.size:
         i = int(bad[0])
@@ -783,9 +791,12 @@ def _check_shared_azimuth(
     rows: NDArray[np.intp],
 ) -> None:
     """DecodeError where a multi-return firing's blocks do not share one azimuth."""
-    for returns in np.unique(r[rows]).tolist():
-        sel = rows[r[rows] == returns]
-        groups = azimuth[sel].reshape(sel.size, layout.n_blocks // returns, returns)
+    n = azimuth.shape[0]
+    uniform = rows.size == n and (r == r[0]).all()
+    for returns in [int(r[0])] if uniform else np.unique(r[rows]).tolist():
+        sel = rows if uniform else rows[r[rows] == returns]
+        picked = azimuth if uniform else azimuth[sel]
+        groups = picked.reshape(sel.size, layout.n_blocks // returns, returns)
         split = np.flatnonzero(~(groups == groups[:, :, :1]).all(axis=(1, 2)))
         if split.size:
             i = int(sel[split[0]])
@@ -860,7 +871,7 @@ def decode_hesai(
             f"{layout.model} packet #{i}: azimuth {int(azimuth[i].max())} is past 360 deg"
         )
 
-    mode = arr[np.arange(n), tail + layout.tail_return_mode].astype(np.int64)
+    mode = _gather(arr, tail + layout.tail_return_mode, 1)[:, 0]
     n_ret = _n_returns(layout, mode, azimuth)
     motor_rpm = _le(_gather(arr, tail + layout.tail_motor_rpm, 2))
     us = _le(_gather(arr, tail + layout.tail_timestamp_us, 4))
