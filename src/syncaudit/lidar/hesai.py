@@ -823,7 +823,12 @@ def decode_hesai(
     (QT64 t0 + 25.71 us + 166.67 us * k; XT t0 + 5.632 us - 50 us * later rounds; QT128
     t0 + 9 us - 111.11 us * later rounds, the ordering monotone in azimuth, whereas nebula
     adds 111.11 us to block 1 - unverified without a QT128 recording; AT128 t0 - 50.915 us
-    - 41.666 us * later rounds). In multi-return modes the blocks of one firing share a time.
+    - 41.666 us * later rounds; OT128 t0 + 45.724 us - 55.556 us * later rounds, nebula's
+    numbers). In an r-return mode (r from the tail's return mode, see `_n_returns`) r
+    adjacent blocks hold one firing and share its time: XT32M's 6 blocks are 6 rounds
+    (single), 3 x 2 (dual) or 2 x 3 (triple 0x3D). For the XT32M in a dual mode nebula
+    computes the rounds as if the packet had 8 blocks (last round t0 - 44.4 us); the PandarXT
+    manual's rule (t0 triggers the round in the last blocks) is followed here.
     `block_azimuth_deg` is the packet's azimuth field: 0.01 deg; AT128 adds a fine byte
     (1/25600 deg) and reports the raw mirror-encoder angle, not the corrected field angle.
     """
