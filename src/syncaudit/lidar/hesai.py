@@ -37,6 +37,7 @@ __all__ = [
     "hesai_returns",
     "nebula_packets",
     "pandar_scan_packets",
+    "returns_per_firing",
     "ros_header",
     "stack_packets",
 ]
@@ -577,6 +578,13 @@ _RETURNS_OF_MODE: Final = {
     0x3E: 2,  # strongest + second strongest
     0x3D: 3,  # first + last + strongest (XT32M)
 }
+
+
+def returns_per_firing(return_mode: int) -> int:
+    """Returns per firing of a Hesai tail Return Mode code (0 for a code the manuals lack)."""
+    return _RETURNS_OF_MODE.get(return_mode, 0)
+
+
 _RETURNS_TABLE: Final = np.zeros(256, dtype=np.int64)
 for _code, _r in _RETURNS_OF_MODE.items():
     _RETURNS_TABLE[_code] = _r
