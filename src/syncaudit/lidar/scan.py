@@ -49,9 +49,10 @@ class LidarScan:
         off = self.rpm_disagreement
         if not abs(off) > RPM_TOLERANCE:
             return []
+        source = _DECLARED_BY.get(self.vendor, "the packets")
         return [
             f"{self.topic}: decoded rotation {self.rpm:.2f} RPM disagrees with the "
-            f"{self.declared_rpm:.0f} RPM the packets declare ({off:+.1%}): revolutions, "
+            f"{self.declared_rpm:.0f} RPM of {source} ({off:+.1%}): revolutions, "
             "packets/rev and drops are suspect (wrong return-mode grouping or packet clock?)"
         ]
 
@@ -78,6 +79,9 @@ RPM_TOLERANCE = 0.03
 """Relative disagreement between the decoded and the declared rotation rate that warns:
 motor-speed fields hold whole RPM and the motor hunts by well under 1 %, while a wrong
 block grouping or packet clock is off by tens of percent."""
+
+_DECLARED_BY = {"hesai": "the packets' motor-speed field", "ouster": "the metadata's lidar_mode"}
+"""Where each vendor's declared rotation rate comes from, for the warning."""
 
 FEED_PACKETS = 4096
 """Packets gathered before the tracker and clock run: their numpy work per call is then
