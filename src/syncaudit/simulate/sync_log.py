@@ -58,6 +58,14 @@ from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
+TriggerPacket = Literal["containing", "first_after"]
+"""Which packet a trigger fires from (and names in `TriggerEvent.lidar_packet_time`).
+
+'containing': the packet that holds the zero crossing (its first block at or past zero
+with a block before it, or the first block exactly at zero): what a driver tracking the
+azimuth block by block sees first. 'first_after': the first packet whose first block is
+at or past zero, what a driver that cuts revolutions packet by packet sees first (the next
+packet in most revolutions). `trigger_packet_offset` moves either by whole packets."""
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
 
 NS_PER_S = 1_000_000_000
@@ -210,6 +218,11 @@ class SyncSimConfig(_Strict):
     frames (250-400 KB for 1080p). None: a tiny PNG of the simulated scene."""
     exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
     trigger_messages: bool = True
+    trigger_packet: TriggerPacket = "containing"
+    """The packet convention of the triggers (see `TriggerPacket`)."""
+    trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
+    """Triggers fire from the packet this many delivered packets after (negative: before)
+    the one `trigger_packet` picks: a driver that waits for, or predicts, the crossing."""
     controller: ControllerConfig | None = None
     """None: constant delays; else the self-adaptive controller runs live per camera."""
 
@@ -521,6 +534,33 @@ class _Simulation:
         n_blocks = pk.azimuth_q.shape[1]
         return turns, idx_delivered[at // n_blocks]
 
+    def trigger_packets(
+        self, pk: _Packets, zero_packet: NDArray[np.int64], zero_angles: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """Index of the packet each revolution's triggers fire from (the configured convention).
+
+        Only delivered packets count: the LiDAR driver never saw a lost one. Raises
+        ValueError when an offset reaches before the first or past the last packet.
+        """
+        cfg = self.cfg
+        delivered = np.flatnonzero(pk.delivered)
+        pos = np.searchsorted(delivered, zero_packet)
+        if cfg.trigger_packet == "first_after":
+            zero_q = self.zero_deg * self.clock.azimuth_units_per_deg + (
+                360 * self.clock.azimuth_units_per_deg
+            ) * np.rint((zero_angles - self.zero_deg) / 360.0)
+            # The containing packet qualifies when its first block is at or past zero;
+            # otherwise the next delivered one does (its first block is past zero).
+            first_block = pk.azimuth_q[delivered[pos], 0]
+            pos = pos + (first_block < zero_q).astype(np.int64)
+        pos = pos + cfg.trigger_packet_offset
+        if pos.size and (int(pos.min()) < 0 or int(pos.max()) >= delivered.size):
+            raise ValueError(
+                f"trigger_packet_offset {cfg.trigger_packet_offset} reaches outside the "
+                "simulated packets; lengthen the log or move start_azimuth_deg"
+            )
+        return delivered[pos]
+
     # -- cameras --------------------------------------------------------------------------
 
     def run(self, out: Path) -> dict[str, Any]:
@@ -596,6 +636,10 @@ class _Simulation:
                 "the exact azimuth model, so interpolating packets differs by ~1 us",
                 "packet_phase_ns": "zero_crossing_ns - lidar_packet_ns: when the beam "
                 "crossed the zero azimuth, relative to the trigger packet's capture",
+                "t_rotate_ns": "per frame: t_estimated_ns - zero_crossing_ns",
+                "trigger_packet": f"{cfg.trigger_packet} packet "
+                f"{cfg.trigger_packet_offset:+d} delivered packets: the packet the trigger "
+                "fires from and names in lidar_packet_time",
             },
             "lidar": lidar_truth,
             "cameras": {c["name"]: c for c in cams},
@@ -621,9 +665,9 @@ class _Simulation:
         theta = (self.camera_azimuth_deg[index] - self.zero_deg) % 360.0
         t_est_rel = self.rotation.time_at_ns(zero_angles[:n] + theta)
         t_est = cfg.start_time_ns + np.rint(t_est_rel).astype(np.int64)
-        zp = zero_packet[:n]
-        packet_ns = pk.capture_ns[zp]
-        t1 = pk.t1_ns[zp]
+        trigger = self.trigger_packets(pk, zero_packet[:n], zero_angles[:n])
+        packet_ns = pk.capture_ns[trigger]
+        t1 = pk.t1_ns[trigger]
         t2 = cfg.t2.draw_ns(rng, n)
         t3 = cfg.t3.draw_ns(rng, n)
         t4 = cfg.t4.draw_ns(rng, n)
@@ -683,6 +727,7 @@ class _Simulation:
                 "ideal_delay_ns": int(ideal[i]),
                 "zero_crossing_ns": int(zero_ns[i]),
                 "packet_phase_ns": int(zero_ns[i] - packet_ns[i]),
+                "t_rotate_ns": int(t_est[i] - zero_ns[i]),
                 "image_stamp_ns": int(stamp[i]),
                 "image_log_time_ns": int(image_log[i]),
             }
