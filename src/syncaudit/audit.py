@@ -34,6 +34,15 @@ if TYPE_CHECKING:
     from syncaudit.camera.extract import CameraTables
 
 SCHEMA_VERSION = 1
+MIN_ZERO_CROSSINGS = 2
+"""A LiDAR is judged only with a whole revolution: two zero crossings."""
+
+
+def _no_revolution(lidar: LidarRow) -> str:
+    return (
+        f"{lidar.revolutions} zero crossing(s) in {lidar.packets} packets: "
+        "no complete revolution to measure"
+    )
 
 
 @dataclass(slots=True)
@@ -89,8 +98,8 @@ class AuditResult:
             for c in self.cameras
             if not c.sync.judged and not c.sync.optional
         ]
-        if self.lidar.revolutions == 0:
-            reasons.insert(0, f"LiDAR topic {self.lidar.topic}: no zero crossing (no revolution)")
+        if self.lidar.revolutions < MIN_ZERO_CROSSINGS:
+            reasons.insert(0, f"LiDAR topic {self.lidar.topic}: {_no_revolution(self.lidar)}")
         return reasons
 
     @property
@@ -322,8 +331,8 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc)
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
-    if scan.revolutions.count == 0:
-        missing.append(f"LiDAR topic {rig.lidar.topic}: no revolution (no zero crossing seen)")
+    if scan.revolutions.count < MIN_ZERO_CROSSINGS:
+        missing.append(f"LiDAR topic {rig.lidar.topic}: {_no_revolution(lidar_row(scan))}")
     offset = _clock_offset(scan, all_tables, warnings)
     controller = ControllerConfig(
         window_frames=rig.analysis.window_frames,
