@@ -12,18 +12,17 @@ import numpy as np
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.topics import detect_cameras
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
 from syncaudit.lidar.scan import LidarScan, LidarScanner
 from syncaudit.lidar.stream import (
     find_ouster_metadata_topic,
-    is_packet_topic,
     read_ouster_metadata,
 )
 from syncaudit.logs import LogReader, open_log
-from syncaudit.rig import CameraConfig, LidarConfig, Rig
+from syncaudit.rig import CameraConfig, Rig
+from syncaudit.rig_guess import guess_rig
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
@@ -150,22 +149,6 @@ def _row(row: Any) -> dict[str, Any]:
     return {name: getattr(row, name) for name in row.__slots__}
 
 
-def _default_rig(log: LogReader) -> tuple[Rig, list[str]]:
-    """A rig guessed from the log: the first packet topic and the cameras by type and name."""
-    packet_topics = sorted(t.name for t in log.topics.values() if is_packet_topic(t.msgtype))
-    if not packet_topics:
-        raise NoDataError(
-            f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
-        )
-    cameras = detect_cameras(log.topics)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)"]
-    if cameras:
-        guessed.append(
-            "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
-        )
-    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
-
-
 def audit_log(
     path: str | Path, rig: Rig | None = None, *, jobs: int | None = None, check_crc: bool = False
 ) -> AuditResult:
@@ -186,7 +169,7 @@ def audit_log(
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
         guessed: list[str] = []
         if rig is None:
-            rig, guessed = _default_rig(log)
+            rig, guessed = guess_rig(log)
         elif rig.lidar.topic not in log.topics:
             raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
         jobs = default_jobs() if jobs is None else max(1, jobs)
