@@ -45,13 +45,21 @@ def test_vendor_x_axis_defaults() -> None:
     # The simulator places /tf_static by the same driver conventions (its own constants).
     for vendor, azimuth in SIMULATED_X_AXIS.items():
         assert X_AXIS_AZIMUTH_DEG[vendor] == azimuth
-    assert x_axis_azimuth_deg(LidarConfig(topic="/p"), "ouster") == (180.0, "ouster ROS driver default")
-    assert x_axis_azimuth_deg(LidarConfig(topic="/p", azimuth_of_x_axis_deg=12.0), "hesai")[0] == 12.0
+    assert x_axis_azimuth_deg(LidarConfig(topic="/p"), "ouster") == (
+        180.0,
+        "ouster ROS driver default",
+    )
+    assert (
+        x_axis_azimuth_deg(LidarConfig(topic="/p", azimuth_of_x_axis_deg=12.0), "hesai")[0] == 12.0
+    )
     assert x_axis_azimuth_deg(LidarConfig(topic="/p"), None) == (None, "unknown vendor")
 
 
 def _topics(**types: str) -> dict[str, TopicInfo]:
-    return {name: TopicInfo(name=name, msgtype=msgtype, encoding="cdr", count=10, has_definition=True) for name, msgtype in types.items()}
+    return {
+        name: TopicInfo(name=name, msgtype=msgtype, encoding="cdr", count=10, has_definition=True)
+        for name, msgtype in types.items()
+    }
 
 
 def test_trigger_event_topic_is_not_a_phantom_camera() -> None:
@@ -91,7 +99,9 @@ def test_starter_rig_is_a_valid_rig_one_edit_away(tmp_path: Path) -> None:
     out.write_text(text)
     assert yaml.safe_load(text)["lidar"]["azimuth_of_x_axis_deg"] == 0
     rig = load_rig(out)
-    assert [c.frame_id for c in rig.cameras] == [f"{n}_optical_frame" for n in sorted(_truth(THREE))]
+    assert [c.frame_id for c in rig.cameras] == [
+        f"{n}_optical_frame" for n in sorted(_truth(THREE))
+    ]
     result = audit_log(THREE, rig, jobs=1)
     for cam in result.cameras:
         ideal = _truth(THREE)[cam.sync.camera]["ideal_delay_mean_ns"]

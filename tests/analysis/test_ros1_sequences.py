@@ -61,7 +61,11 @@ def test_converted_bag_with_zero_seq_gives_the_ros2_results(tmp_path: Path) -> N
     results = {p: audit_log(tmp_path / p, rig, jobs=1) for p in ("log.mcap", "db3", bag.name)}
     converted = results[bag.name]
     for cam in converted.cameras:
-        assert cam.sync.frames_paired == cam.sync.frames_total == len(truth["cameras"]["front"]["frames"])
+        assert (
+            cam.sync.frames_paired
+            == cam.sync.frames_total
+            == len(truth["cameras"]["front"]["frames"])
+        )
         assert any("by time, not sequence number" in w for w in cam.sync.warnings)
         assert any("repeat" in w for w in cam.sync.warnings)
     assert _numbers(results["log.mcap"]) == _numbers(results["db3"]) == _numbers(converted)

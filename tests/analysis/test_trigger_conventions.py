@@ -47,7 +47,9 @@ def _check(result: AuditResult, truth: dict[str, Any]) -> None:
         frames = sync.frames
         assert sync.frames_paired == sync.frames_total == len(t["frames"])
         assert sync.packet_phase_source == "trigger packet"
-        assert sync.delay_recommended_ns == pytest.approx(t["ideal_delay_mean_ns"], abs=TOLERANCE_NS)
+        assert sync.delay_recommended_ns == pytest.approx(
+            t["ideal_delay_mean_ns"], abs=TOLERANCE_NS
+        )
         assert sync.packet_phase_ns == pytest.approx(t["packet_phase_mean_ns"], abs=PER_FRAME_NS)
         seqs = frames["frame_sequence"].to_numpy()
         for column in ("t_rotate_ns", "packet_phase_ns", "error_signed_ns"):

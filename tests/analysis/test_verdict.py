@@ -103,7 +103,14 @@ def test_a_lidar_with_too_few_messages_fails_the_gate(
 
 @pytest.mark.parametrize(
     ("paired", "total", "judged"),
-    [(0, 99, False), (1, 1, False), (19, 19, False), (20, 20, True), (20, 41, False), (21, 41, True)],
+    [
+        (0, 99, False),
+        (1, 1, False),
+        (19, 19, False),
+        (20, 20, True),
+        (20, 41, False),
+        (21, 41, True),
+    ],
 )
 def test_judgement_needs_count_and_fraction(paired: int, total: int, judged: bool) -> None:
     reason = _judgement(paired, total, Thresholds())

@@ -120,9 +120,7 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.Data
         .assign(_t=trig_when)[present(trig_when)]
         .sort_values("_t", kind="stable")
     )
-    merged = pd.merge_asof(
-        timed, right, on="_t", direction="backward", tolerance=PAIR_TOLERANCE_NS
-    )
+    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=PAIR_TOLERANCE_NS)
     untimed = left[~present(when)]
     if not untimed.empty:
         merged = pd.concat([merged, untimed], ignore_index=True)

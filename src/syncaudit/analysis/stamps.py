@@ -28,7 +28,8 @@ def stamps_ns(df: pd.DataFrame, name: str) -> NDArray[np.int64]:
 
 def present(stamps: NDArray[np.int64]) -> NDArray[np.bool_]:
     """Which stamps are there."""
-    return stamps != MISSING_NS
+    there: NDArray[np.bool_] = np.not_equal(stamps, MISSING_NS)
+    return there
 
 
 def delta_ns(later: NDArray[np.int64], earlier: NDArray[np.int64]) -> NDArray[np.float64]:

@@ -342,7 +342,12 @@ def _frame_table(
     """The per-frame table (what --csv writes): stamps Int64, differences float64."""
     t_error = np.abs(errors.signed_ns)
     masked = np.where(errors.paired, t_error, np.nan)
-    source = np.where(revolutions.phase_from_trigger, PHASE_FROM_TRIGGER, PHASE_FROM_TRACKER)
+    source = [
+        (PHASE_FROM_TRIGGER if trig else PHASE_FROM_TRACKER) if rev >= 0 else None
+        for rev, trig in zip(
+            revolutions.revolution.tolist(), revolutions.phase_from_trigger.tolist(), strict=True
+        )
+    ]
     return pd.DataFrame(
         {
             "camera": pd.array([camera] * len(frames), dtype="string"),
@@ -364,9 +369,7 @@ def _frame_table(
             "t5_avg_ns": delay.t5_avg_ns,
             "t_rotate_ns": revolutions.t_rotate_ns,
             "packet_phase_ns": revolutions.packet_phase_ns,
-            "packet_phase_source": pd.array(
-                np.where(revolutions.revolution >= 0, source, None), dtype="string"
-            ),
+            "packet_phase_source": pd.array(source, dtype="string"),
             "t_sleep_ns": delay.t_sleep_ns,
             "applied_delay_ns": applied_ns,
             "rolling_error_mean_ns": rolling_mean(masked, window_frames),

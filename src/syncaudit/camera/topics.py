@@ -119,9 +119,7 @@ def detect_cameras(
         for info in topics.values()
         if (role := topic_role(info.msgtype)) is not None
     }
-    image_cameras = {
-        camera_name(t) for t, r in roles.items() if r in ("image_topic", "info_topic")
-    }
+    image_cameras = {camera_name(t) for t, r in roles.items() if r in ("image_topic", "info_topic")}
     found: dict[str, dict[str, str]] = defaultdict(dict)
     for name in sorted(roles):
         info, role = topics[name], roles[name]
