@@ -97,7 +97,9 @@ def render_starter_rig(log: LogReader) -> str:
         "lidar:",
         f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)",
         f"  vendor: {_value(vendor)}  # from the packet message type",
-        "  zero_azimuth_deg: 0.0  # TODO packet azimuth at which the trigger chain fires",
+        "  # zero_azimuth_deg: TODO packet azimuth at which the trigger chain fires; while",
+        "  #   it is not set, the audit starts revolutions where the triggers fire and says",
+        "  #   which azimuth that is in a warning",
         "  azimuth_increases: true  # packet azimuth grows with rotation (all supported vendors)",
     ]
     if x_axis is None:

@@ -16,7 +16,9 @@ from syncaudit.cli import app
 from syncaudit.logs import TopicInfo, open_log
 from syncaudit.rig import LidarConfig, load_rig
 from syncaudit.rig_guess import starter_rig_yaml
+from syncaudit.simulate import LidarModel
 from syncaudit.simulate.sync_log import _X_AXIS_AZIMUTH_DEG as SIMULATED_X_AXIS
+from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
 THREE = SAMPLES / "vlp16_three_cameras.mcap"
@@ -39,6 +41,30 @@ def test_audit_without_a_rig_judges_the_cameras_from_tf_static() -> None:
         assert cam.azimuth_deg == pytest.approx(truth[cam.sync.camera]["azimuth_deg"], abs=1e-6)
         ideal = truth[cam.sync.camera]["ideal_delay_mean_ns"]
         assert cam.sync.delay_recommended_ns == pytest.approx(ideal, abs=20_000)
+
+
+@pytest.mark.parametrize(("model", "zero_deg"), [("VLP-32C", 180.0), ("PandarXT32", 95.0)])
+def test_audit_without_a_rig_finds_where_the_triggers_fire(
+    tmp_path: Path, model: LidarModel, zero_deg: float
+) -> None:
+    """No rig, so no zero azimuth: revolutions start at the triggers' packet azimuth."""
+    out = tmp_path / "log.mcap"
+    cameras = [CameraSim(name=f"cam{i}", yaw_deg=yaw) for i, yaw in enumerate((10, 100, 200, 300))]
+    config = SyncSimConfig(
+        duration_s=1.5, seed=71, lidar_model=model, zero_azimuth_deg=zero_deg, cameras=cameras
+    )
+    truth = simulate_sync_log(out, config)
+    result = audit_log(out, jobs=1)
+    assert len(result.cameras) == len(cameras)
+    for cam in result.cameras:
+        t = truth["cameras"][cam.sync.camera]
+        # The tracker keys camera crossings to the rig's zero crossings: a camera crossing
+        # before the log's first one is unknown, so the first frame may stay unpaired.
+        assert cam.sync.frames_paired >= len(t["frames"]) - 1, cam.sync.unpaired
+        assert cam.sync.delay_recommended_ns == pytest.approx(t["ideal_delay_mean_ns"], abs=20_000)
+        said = [w for w in cam.sync.warnings if "near packet azimuth" in w]
+        fired = float(said[0].split("near packet azimuth ")[1].split(" deg")[0])
+        assert abs((fired - zero_deg + 180.0) % 360.0 - 180.0) < 5.0  # within a packet or so
 
 
 def test_vendor_x_axis_defaults() -> None:

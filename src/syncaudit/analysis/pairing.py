@@ -142,6 +142,9 @@ class RevolutionPairing:
     """Zero crossing minus the stamp of the packet the trigger fired from."""
     phase_from_trigger: NDArray[np.bool_]
     """True where the phase is from the trigger's own packet, False from the tracker's."""
+    trigger_turn_fraction: float | None = None
+    """Where in the revolution the triggers fire (0..1 after the rig's zero crossing), when
+    it was estimated because the rig does not state the zero azimuth."""
 
     @property
     def t_rotate_ns(self) -> NDArray[np.float64]:
@@ -170,6 +173,7 @@ def pair_revolutions(
     target_index: int,
     offset_ns: int,
     max_gap_ns: float,
+    zero_from_triggers: bool = False,
 ) -> RevolutionPairing:
     """The revolution of each frame (see the module docstring); `offset_ns` is host - sensor.
 
@@ -177,6 +181,10 @@ def pair_revolutions(
     revolution) away; its packet phase is measured from that packet's recorded stamp. A
     frame without one pairs with the nearest crossing of the camera centre to its
     mid-exposure `t_l_ns`, and takes the phase of the tracker's zero packet.
+
+    `zero_from_triggers` (the rig does not state the zero azimuth): revolutions start
+    where the triggers fire instead, `trigger_turn_fraction` of a turn after the tracker's
+    crossings; each frame's camera crossing is the first one after that virtual start.
     """
     n = len(frames)
     rev = np.full(n, -1, dtype=np.int64)
@@ -190,10 +198,15 @@ def pair_revolutions(
     cross_host = np.where(cross >= 0, cross + offset_ns, MISSING_NS)
     pkt = stamps_ns(frames, "trig_lidar_packet_ns")
     has_pkt = present(pkt)
+    fraction = None
     if has_pkt.any():
         query = pkt[has_pkt]
         idx = nearest_index(zero_host, query)
         close = np.abs(zero_host[idx] - query) <= max_gap_ns
+        if zero_from_triggers:
+            fraction = trigger_turn_fraction(zero_host, query)
+            if fraction is not None:
+                idx, close = _after_virtual_zero(zero_host, cross_host, query, fraction)
         rows = np.flatnonzero(has_pkt)[close]
         rev[rows] = idx[close]
         from_trigger[rows] = True
@@ -211,4 +224,52 @@ def pair_revolutions(
     has = rev >= 0
     start = np.where(has, zero_host[np.maximum(rev, 0)], MISSING_NS)
     t_est = np.where(has, cross_host[np.maximum(rev, 0)], MISSING_NS)
-    return RevolutionPairing(rev, start, t_est, phase, from_trigger)
+    return RevolutionPairing(rev, start, t_est, phase, from_trigger, fraction)
+
+
+def trigger_turn_fraction(zero_ns: NDArray[np.int64], packet_ns: NDArray[np.int64]) -> float | None:
+    """Circular mean of where trigger packets fall in their revolution (0..1 of a turn).
+
+    None when no packet lies inside a whole revolution.
+    """
+    if zero_ns.size < 2:
+        return None
+    r = np.searchsorted(zero_ns, packet_ns, side="right") - 1
+    inside = (r >= 0) & (r < zero_ns.size - 1)
+    if not inside.any():
+        return None
+    r = r[inside]
+    period = (zero_ns[r + 1] - zero_ns[r]).astype(np.float64)
+    angle = 2.0 * np.pi * (packet_ns[inside] - zero_ns[r]).astype(np.float64) / period
+    mean = float(np.arctan2(np.sin(angle).mean(), np.cos(angle).mean()))
+    return (mean / (2.0 * np.pi)) % 1.0
+
+
+def _after_virtual_zero(
+    zero_ns: NDArray[np.int64],
+    cross_ns: NDArray[np.int64],
+    packet_ns: NDArray[np.int64],
+    fraction: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """Per packet, the revolution whose camera crossing first follows the virtual zero.
+
+    The virtual zero of revolution r is `fraction` of its turn after its zero crossing
+    (interpolated: the rate changes little within a turn; the turns before the first and
+    after the last crossing take their neighbour's period). The packet pairs with the
+    nearest virtual zero, and the camera crossing is the first at or after it.
+    """
+    count = zero_ns.size
+    period = np.diff(zero_ns).astype(np.float64)
+    turn = np.concatenate(([period[0]], period, [period[-1]]))  # revolutions -1 .. count-1
+    start = np.concatenate(([zero_ns[0] - round(period[0])], zero_ns))
+    virtual = start + np.rint(fraction * turn).astype(np.int64)
+    near = nearest_index(virtual, packet_ns)
+    r = near - 1
+    close = np.abs(virtual[near] - packet_ns) <= 0.5 * turn[near]
+    cross_r = np.where(r >= 0, cross_ns[np.maximum(r, 0)], MISSING_NS)
+    after = present(cross_r) & (cross_r >= virtual[near])
+    idx = np.where(after, r, r + 1)
+    # Before the first crossing, revolution 0's camera crossing must be within one turn.
+    first = (r < 0) & ~(present(cross_ns[0:1]) & (cross_ns[0] - virtual[near] < turn[near]))
+    close &= (idx >= 0) & (idx < count) & ~first
+    return np.clip(idx, 0, count - 1), close

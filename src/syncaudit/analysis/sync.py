@@ -422,6 +422,7 @@ def analyze_camera(
         target_index=target_index,
         offset_ns=offset_ns,
         max_gap_ns=0.5 * period if math.isfinite(period) else PAIR_TOLERANCE_NS,
+        zero_from_triggers="zero_azimuth_deg" not in lidar.model_fields_set,
     )
     errors = _errors(t_l, revolutions.t_estimated_ns, period_ns=period)
     lat, stats = _latencies(frames, scan.clock, analysis)
@@ -442,6 +443,13 @@ def analyze_camera(
         window_frames=analysis.window_frames,
     )
     warnings = _camera_warnings(frames, stats)
+    if revolutions.trigger_turn_fraction is not None:
+        step = FULL_TURN_DEG * revolutions.trigger_turn_fraction
+        fired = (lidar.zero_azimuth_deg + (step if lidar.azimuth_increases else -step)) % 360
+        warnings.append(
+            "lidar.zero_azimuth_deg not in the rig: revolutions start where the triggers "
+            f"fire, near packet azimuth {fired:.1f} deg (estimated; set it in the rig)"
+        )
     if pairing_warning:
         warnings.insert(0, pairing_warning)
     return _camera_sync(
