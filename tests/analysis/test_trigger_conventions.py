@@ -31,7 +31,8 @@ CAMERAS = [CameraSim(name="front", yaw_deg=0.0), CameraSim(name="left", yaw_deg=
 def _run(tmp_path: Path, **config: Any) -> tuple[AuditResult, dict[str, Any]]:
     out = tmp_path / "log.mcap"
     config.setdefault("cameras", CAMERAS)
-    truth = simulate_sync_log(out, SyncSimConfig(duration_s=1.0, **config))
+    config.setdefault("duration_s", 1.0)
+    truth = simulate_sync_log(out, SyncSimConfig(**config))
     return audit_log(out, rig_from_truth(truth), jobs=1), truth
 
 
@@ -131,3 +132,22 @@ def test_offset_outside_the_log_is_refused(tmp_path: Path) -> None:
     cfg = cfg.model_copy(update={"zero_azimuth_deg": 0.5, "trigger_packet_offset": -32})
     with pytest.raises(ValueError, match="trigger_packet_offset"):
         simulate_sync_log(tmp_path / "log.mcap", cfg)
+
+
+def test_self_consistency_with_the_controller_changing_the_delay(tmp_path: Path) -> None:
+    """Applied delays that change frame by frame (the live controller) change nothing."""
+    from syncaudit.analysis.controller import ControllerConfig
+
+    result, truth = _run(
+        tmp_path,
+        seed=12,
+        duration_s=2.0,
+        lidar_model="VLP-32C",
+        trigger_packet="first_after",
+        controller=ControllerConfig(window_frames=5, min_frames=5),
+        cameras=[c.model_copy(update={"delay_error_us": 1500.0}) for c in CAMERAS],
+    )
+    for cam in result.cameras:
+        applied = truth["cameras"][cam.sync.camera]["applied_delay"]
+        assert applied["adjustments"], "the controller should have moved the delay"
+    _check(result, truth)
