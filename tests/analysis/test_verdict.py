@@ -6,9 +6,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from typer.testing import CliRunner
 
 from syncaudit.analysis.sync import _judgement
 from syncaudit.audit import audit_log
+from syncaudit.cli import app
 from syncaudit.logs import open_log
 from syncaudit.rig import Rig, Thresholds
 from syncaudit.simulate.rig_file import rig_from_truth
@@ -72,18 +74,46 @@ def test_no_exposure_metadata_is_not_judged(tmp_path: Path) -> None:
         assert not cam.sync.needs_correction and not cam.sync.judged
 
 
-def _keep_lidar_messages(src: Path, out: Path, keep: int) -> None:
-    """A copy of `src` with only its first `keep` LiDAR messages (everything else kept)."""
+def _copy_keeping(src: Path, out: Path, prefix: str, keep: int) -> None:
+    """A copy of `src` with only the first `keep` messages of each topic under `prefix`."""
     with open_log(src) as log, open_writer(out, "mcap") as writer:
         for topic in log.topics.values():
             writer.add_topic(topic.name, topic.msgtype, latched=topic.name == "/tf_static")
-        seen = 0
+        seen: dict[str, int] = {}
         for msg in log.messages(sorted(log.topics)):
-            if msg.topic.endswith("_packets"):
-                seen += 1
-                if seen > keep:
+            if msg.topic.startswith(prefix):
+                seen[msg.topic] = seen.get(msg.topic, 0) + 1
+                if seen[msg.topic] > keep:
                     continue
             writer.write(msg.topic, msg.log_time_ns, msg.data)
+
+
+def _keep_lidar_messages(src: Path, out: Path, keep: int) -> None:
+    """A copy of `src` with only its first `keep` LiDAR messages (everything else kept)."""
+    _copy_keeping(src, out, "/velodyne_packets", keep)
+
+
+def test_a_camera_with_one_frame_fails_the_gate_unless_optional(
+    short_log: tuple[Path, dict[str, Any]], tmp_path: Path
+) -> None:
+    src, truth = short_log
+    out = tmp_path / "one_frame.mcap"
+    _copy_keeping(src, out, "/cameras/front/", 1)
+    result = audit_log(out, _rig(truth), jobs=1)
+    by_name = {c.sync.camera: c.sync for c in result.cameras}
+    assert by_name["front"].frames_total == by_name["front"].frames_paired == 1
+    assert not by_name["front"].judged and by_name["rear_left"].judged
+    assert result.verdict == "not judged"
+    rig_file = tmp_path / "rig.json"
+    runner = CliRunner()
+    for optional, code in ((False, 10), (True, 0)):
+        rig = _rig(truth)
+        cameras = [
+            c.model_copy(update={"optional": optional and c.name == "front"}) for c in rig.cameras
+        ]
+        rig_file.write_text(rig.model_copy(update={"cameras": cameras}).model_dump_json())
+        run = runner.invoke(app, ["audit", str(out), "--rig", str(rig_file), "--gate", "--json"])
+        assert run.exit_code == code, run.output
 
 
 @pytest.mark.parametrize("keep", [1, 3])
