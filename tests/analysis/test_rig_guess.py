@@ -13,7 +13,7 @@ from syncaudit.audit import audit_log
 from syncaudit.camera.azimuth import X_AXIS_AZIMUTH_DEG, x_axis_azimuth_deg
 from syncaudit.camera.topics import detect_cameras, header_frame_id
 from syncaudit.cli import app
-from syncaudit.logs import TopicInfo, open_log
+from syncaudit.logs import RawMessage, TopicInfo, open_log
 from syncaudit.rig import LidarConfig, load_rig
 from syncaudit.rig_guess import starter_rig_yaml
 from syncaudit.simulate import LidarModel
@@ -116,6 +116,11 @@ def test_header_frame_id_from_raw_bytes(name: str) -> None:
     with open_log(SAMPLES / name) as log:
         msg = next(iter(log.messages(["/cameras/front/image_raw"])))
         assert header_frame_id(msg) == str(log.deserialize(msg).header.frame_id)  # type: ignore[attr-defined]
+
+
+def test_header_frame_id_of_cut_bytes_is_empty() -> None:
+    msg = RawMessage("/c/image_raw", "sensor_msgs/msg/Image", 0, b"\x00\x01\x00\x00\x01", "cdr")
+    assert header_frame_id(msg) == ""
 
 
 def test_starter_rig_is_a_valid_rig_one_edit_away(tmp_path: Path) -> None:

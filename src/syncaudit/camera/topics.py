@@ -148,42 +148,54 @@ _U32_BE = struct.Struct(">I")
 
 
 def header_frame_id(msg: RawMessage) -> str:
-    """`header.frame_id` of a message whose first field is a std_msgs/Header (raw bytes)."""
+    """`header.frame_id` of a message whose first field is a std_msgs/Header (raw bytes).
+
+    "" where the bytes are too short to hold one (a guess, never an error).
+    """
     data = bytes(msg.data[:4096])
     if msg.encoding == "ros1":
         offset, unpack = 12, _U32.unpack_from  # seq, stamp
     else:
         little = data[1:2] in (b"\x01", b"\x03")
         offset, unpack = 12, (_U32 if little else _U32_BE).unpack_from  # encapsulation, stamp
-    (length,) = unpack(data, offset)
+    try:
+        (length,) = unpack(data, offset)
+    except struct.error:
+        return ""
     text = data[offset + 4 : offset + 4 + length]
     return text.rstrip(b"\x00").decode("utf-8", errors="replace")
+
+
+PROBE_WINDOW_NS = 60_000_000_000
+"""Only the log's first minute is searched for each camera topic's first message."""
 
 
 def probe_camera_topics(
     log: LogReader, topics: Iterable[str]
 ) -> tuple[dict[str, str], dict[str, str]]:
-    """From the first message of each camera topic: `camera` fields and image frame ids."""
-    wanted = {
+    """From the first message of each camera topic: `camera` fields and image frame ids.
+
+    Reads only until every topic has shown one message, and at most the log's first
+    minute (topics without messages, or starting later, are left out).
+    """
+    probed = CAMERA_FIELD_TYPES | IMAGE_TYPES | INFO_TYPES
+    pending = {
         t
         for t in topics
-        if t in log.topics
-        and (
-            log.topics[t].msgtype in CAMERA_FIELD_TYPES
-            or log.topics[t].msgtype in IMAGE_TYPES | INFO_TYPES
-        )
+        if t in log.topics and log.topics[t].msgtype in probed and log.topics[t].count != 0
     }
     camera_fields: dict[str, str] = {}
     frame_ids: dict[str, str] = {}
-    pending = set(wanted)
     if not pending:
         return camera_fields, frame_ids
-    for msg in log.messages(sorted(wanted)):
+    start = log.summary.start_ns
+    stop = None if start is None else start + PROBE_WINDOW_NS
+    for msg in log.messages(sorted(pending), stop_ns=stop):
         if msg.topic not in pending:
             continue
         pending.discard(msg.topic)
         if msg.msgtype in CAMERA_FIELD_TYPES:
-            camera_fields[msg.topic] = str(log.deserialize(msg).camera)  # type: ignore[attr-defined]
+            camera_fields[msg.topic] = str(getattr(log.deserialize(msg), "camera", ""))
         else:
             frame_ids[msg.topic] = header_frame_id(msg)
         if not pending:
