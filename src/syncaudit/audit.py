@@ -278,6 +278,7 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
     packet, driver = [], []
     for t in tables:
         both = t.triggers.dropna(subset=["lidar_packet_ns"])
+        both = both[both["lidar_packet_ns"] > 0]  # 0: the driver left it unset
         packet.append(both["lidar_packet_ns"].to_numpy(np.int64))
         if both["lidar_driver_ns"].notna().all():
             driver.append(both["lidar_driver_ns"].to_numpy(np.int64))

@@ -116,6 +116,13 @@ def test_sequence_problem(
     assert (found is None) if problem is None else (problem in str(found))
 
 
+def test_unset_trigger_stamps_are_missing() -> None:
+    triggers = _triggers(list(range(5)), STARTS)
+    triggers.loc[1, "lidar_packet_ns"] = 0
+    paired, _ = pair_triggers(_frames(list(range(5)), STARTS), triggers)
+    assert paired["trig_lidar_packet_ns"].isna().tolist() == [False, True, False, False, False]
+
+
 def test_time_pairing_keeps_exact_stamps() -> None:
     paired, warning = pair_triggers(_frames([0] * 5, STARTS), _triggers(list(range(5)), STARTS))
     assert warning is not None and "repeat" in warning

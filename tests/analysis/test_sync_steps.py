@@ -66,6 +66,16 @@ def test_frame_without_trigger_packet_pairs_with_the_nearest_crossing() -> None:
     assert pairing.phase_source() == PHASE_FROM_TRACKER
 
 
+def test_unset_trigger_packet_time_falls_back_to_the_tracker() -> None:
+    frames, t_l = _frames([0, T0 + PERIOD], [T0 + 2 * PERIOD + 31_000_000, T0 + PERIOD + 3e7])
+    pairing = pair_revolutions(
+        frames, _revolutions(), t_l, target_index=0, offset_ns=0, max_gap_ns=5e7
+    )
+    assert pairing.revolution.tolist() == [2, 1]
+    assert pairing.phase_from_trigger.tolist() == [False, True]
+    assert pairing.packet_phase_ns.tolist() == [400_000, 0]
+
+
 def test_mixed_phase_sources_are_counted() -> None:
     frames, t_l = _frames([T0 + PERIOD, None], [T0 + PERIOD + 3e7, T0 + 2 * PERIOD + 3e7])
     pairing = pair_revolutions(

@@ -88,6 +88,22 @@ def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None
     return None
 
 
+def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
+    """Checkpoint stamps of 0 (a `builtin_interfaces/Time` the driver never set) as <NA>."""
+    stamps = [
+        c
+        for c in triggers.columns
+        if c.endswith("_ns") and c not in ("log_time_ns", "applied_delay_ns")
+    ]
+    unset = {c: triggers[c].eq(0).fillna(False) for c in stamps}
+    if not any(bool(m.any()) for m in unset.values()):
+        return triggers
+    out = triggers.copy()
+    for c, mask in unset.items():
+        out[c] = out[c].mask(mask)
+    return out
+
+
 def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.DataFrame, str | None]:
     """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
 
@@ -96,6 +112,7 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.Data
     where it has no exposure metadata).
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
+    triggers = _unset_as_missing(triggers)
     if triggers.empty:
         out = frames.copy()
         for col in checkpoint_cols:
@@ -179,8 +196,9 @@ def pair_revolutions(
 
     A trigger packet pairs with the nearest zero crossing no more than `max_gap_ns` (half a
     revolution) away; its packet phase is measured from that packet's recorded stamp. A
-    frame without one pairs with the nearest crossing of the camera centre to its
-    mid-exposure `t_l_ns`, and takes the phase of the tracker's zero packet.
+    frame without one (or whose packet time is near no crossing) pairs with the nearest
+    crossing of the camera centre to its mid-exposure `t_l_ns`, and takes the phase of the
+    tracker's zero packet.
 
     `zero_from_triggers` (the rig does not state the zero azimuth): revolutions start
     where the triggers fire instead, `trigger_turn_fraction` of a turn after the tracker's
@@ -211,7 +229,9 @@ def pair_revolutions(
         rev[rows] = idx[close]
         from_trigger[rows] = True
         phase[rows] = (zero_host[idx[close]] - query[close]).astype(np.float64)
-    no_pkt = ~has_pkt & present(t_l_ns)
+    # A packet time far from every crossing (0 from a driver that leaves it unset, or
+    # outside the LiDAR's span) says nothing: such frames pair like those without one.
+    no_pkt = ~from_trigger & present(t_l_ns)
     valid = np.flatnonzero(present(cross_host))
     if no_pkt.any() and valid.size:
         query = t_l_ns[no_pkt]
