@@ -71,6 +71,21 @@ def test_converted_bag_with_zero_seq_gives_the_ros2_results(tmp_path: Path) -> N
     assert _numbers(results["log.mcap"]) == _numbers(results["db3"]) == _numbers(converted)
 
 
+def test_bag_whose_driver_leaves_seq_at_zero(tmp_path: Path) -> None:
+    cfg = SyncSimConfig(duration_s=1.5, seed=6, exposure_messages=("flir_meta",))
+    truth = simulate_sync_log(tmp_path / "log.mcap", cfg)
+    bag = cfg.model_copy(update={"log_format": "bag", "ros1_header_seq": False})
+    simulate_sync_log(tmp_path / "log.bag", bag)
+    with open_log(tmp_path / "log.bag") as log:
+        metas = list(log.messages(["/cameras/front/meta"]))
+        assert {log.deserialize(m).header.seq for m in metas} == {0}  # type: ignore[attr-defined]
+    rig = rig_from_truth(truth)
+    reference = audit_log(tmp_path / "log.mcap", rig, jobs=1)
+    zero_seq = audit_log(tmp_path / "log.bag", rig, jobs=1)
+    assert all(c.sync.frames_paired == c.sync.frames_total > 0 for c in zero_seq.cameras)
+    assert _numbers(reference) == _numbers(zero_seq)
+
+
 def _frames(seq: list[int | None], start_ns: list[int]) -> pd.DataFrame:
     return pd.DataFrame(
         {

@@ -218,6 +218,9 @@ class SyncSimConfig(_Strict):
     frames (250-400 KB for 1080p). None: a tiny PNG of the simulated scene."""
     exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
     trigger_messages: bool = True
+    ros1_header_seq: bool = True
+    """ROS 1 logs: number each camera's header `seq` by frame; False writes 0 everywhere,
+    as drivers that leave it alone and bags converted from ROS 2 do."""
     trigger_packet: TriggerPacket = "containing"
     """The packet convention of the triggers (see `TriggerPacket`)."""
     trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
@@ -956,7 +959,7 @@ class _Simulation:
             """Header of this camera; ROS 1 publishers number messages in `seq`."""
             fields: dict[str, Any] = {"stamp": writer.time(stamp_ns), "frame_id": frame_id}
             if ros1:
-                fields["seq"] = seq
+                fields["seq"] = seq if cfg.ros1_header_seq else 0
             return writer.new_msg("std_msgs/msg/Header", **fields)
 
         for i, frame in enumerate(cam["frames"]):
