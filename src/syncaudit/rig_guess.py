@@ -31,7 +31,11 @@ __all__ = ["guess_rig", "render_starter_rig", "starter_rig_yaml"]
 
 def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
     """A rig from the log alone, and what was guessed (raises NoDataError without LiDAR)."""
-    packet_topics = sorted(t.name for t in log.topics.values() if is_packet_topic(t.msgtype))
+    # Ouster drivers publish IMU packets with the same message type: those go last.
+    packet_topics = sorted(
+        (t.name for t in log.topics.values() if is_packet_topic(t.msgtype)),
+        key=lambda name: ("imu" in name.lower(), name),
+    )
     if not packet_topics:
         raise NoDataError(
             f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
