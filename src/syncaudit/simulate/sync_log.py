@@ -356,6 +356,13 @@ def _eq5_eq6(abs_error_ns: NDArray[np.int64]) -> tuple[float, float]:
     return mean, var
 
 
+def _rows(columns: dict[str, NDArray[np.int64]]) -> list[dict[str, int]]:
+    """Per-frame truth records (plain ints) from equal-length integer columns."""
+    lists = {name: values.tolist() for name, values in columns.items()}
+    n = len(next(iter(lists.values()))) if lists else 0
+    return [{name: int(values[i]) for name, values in lists.items()} for i in range(n)]
+
+
 def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
 
@@ -702,40 +709,28 @@ class _Simulation:
             "trigger": packet_ns + t1 + t2 + applied + t3,
         }[cam.stamp_semantics]
         pattern_seed = int(rng.integers(0, 2**31))
-        prefix = f"/cameras/{cam.name}"
-        image_topic = (
-            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
-        )
-        topics: dict[str, str] = {"image": image_topic}
-        if "camera_exposure" in cfg.exposure_messages:
-            topics["exposure"] = f"{prefix}/exposure"
-        if "flir_meta" in cfg.exposure_messages:
-            topics["meta"] = f"{prefix}/meta"
-        if cfg.trigger_messages:
-            topics["trigger"] = f"{prefix}/trigger"
-        frames = [
+        frames = _rows(
             {
-                "frame_sequence": i,
-                "lidar_packet_ns": int(packet_ns[i]),
-                "t1_ns": int(t1[i]),
-                "t2_ns": int(t2[i]),
-                "t3_ns": int(t3[i]),
-                "t4_ns": int(t4[i]),
-                "applied_delay_ns": int(applied[i]),
-                "exposure_start_ns": int(exposure_start[i]),
-                "exposure_duration_ns": int(t5[i]),
-                "t_l_ns": int(t_l[i]),
-                "t_estimated_ns": int(t_est[i]),
-                "error_ns": int(error[i]),
-                "ideal_delay_ns": int(ideal[i]),
-                "zero_crossing_ns": int(zero_ns[i]),
-                "packet_phase_ns": int(zero_ns[i] - packet_ns[i]),
-                "t_rotate_ns": int(t_est[i] - zero_ns[i]),
-                "image_stamp_ns": int(stamp[i]),
-                "image_log_time_ns": int(image_log[i]),
+                "frame_sequence": np.arange(n),
+                "lidar_packet_ns": packet_ns,
+                "t1_ns": t1,
+                "t2_ns": t2,
+                "t3_ns": t3,
+                "t4_ns": t4,
+                "applied_delay_ns": applied,
+                "exposure_start_ns": exposure_start,
+                "exposure_duration_ns": t5,
+                "t_l_ns": t_l,
+                "t_estimated_ns": t_est,
+                "error_ns": error,
+                "ideal_delay_ns": ideal,
+                "zero_crossing_ns": zero_ns,
+                "packet_phase_ns": zero_ns - packet_ns,
+                "t_rotate_ns": t_est - zero_ns,
+                "image_stamp_ns": stamp,
+                "image_log_time_ns": image_log,
             }
-            for i in range(n)
-        ]
+        )
         return {
             "name": cam.name,
             "frame_id": f"{cam.name}_optical_frame",
@@ -744,7 +739,7 @@ class _Simulation:
             "theta_deg": theta,
             "hfov_deg": cam.hfov_deg,
             "stamp_semantics": cam.stamp_semantics,
-            "topics": topics,
+            "topics": self._camera_topics(cam),
             "frames_count": n,
             "t_rotate_ns": t_rotate_ns,
             "t1_mean_ns": float(t1.mean()),
@@ -781,6 +776,22 @@ class _Simulation:
                 "image_log": image_log,
             },
         }
+
+    def _camera_topics(self, cam: CameraSim) -> dict[str, str]:
+        """The topics one camera's messages go to, by kind."""
+        cfg = self.cfg
+        prefix = f"/cameras/{cam.name}"
+        image_topic = (
+            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
+        )
+        topics: dict[str, str] = {"image": image_topic}
+        if "camera_exposure" in cfg.exposure_messages:
+            topics["exposure"] = f"{prefix}/exposure"
+        if "flir_meta" in cfg.exposure_messages:
+            topics["meta"] = f"{prefix}/meta"
+        if cfg.trigger_messages:
+            topics["trigger"] = f"{prefix}/trigger"
+        return topics
 
     def _run_controller(
         self,
