@@ -390,6 +390,32 @@ def calib(
     _run(job)
 
 
+@app.command("rig")
+def rig_command(
+    log: Annotated[
+        Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")
+    ],
+    out: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the rig here (default: stdout).")
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing output file.")] = False,
+) -> None:
+    """Write a starter rig guessed from the log: every guess and TODO commented."""
+    from syncaudit.rig_guess import starter_rig_yaml
+    from syncaudit.writers.atomic import write_text_atomic
+
+    def job() -> None:
+        if out is not None and out.exists() and not overwrite:
+            raise OutputError(f"{out} exists (pass --overwrite to replace it)")
+        text = starter_rig_yaml(log)
+        if out is None:
+            sys.stdout.write(text)
+        else:
+            write_text_atomic(out, text)
+
+    _run(job)
+
+
 def main() -> None:
     """Console-script entry point.
 

@@ -6,6 +6,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from syncaudit.audit import AuditResult
 from syncaudit.writers.log_writer import infer_format, open_writer
 
@@ -18,17 +20,22 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    return 0 if value is None or not math.isfinite(float(value)) else round(float(value))
+    """An Int64 stamp as an exact int (0 where missing: builtin Time has no null)."""
+    return 0 if value is None or value is pd.NA else int(value)
 
 
-def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> int:
+def write_pairings(result: AuditResult, out: Path, *, overwrite: bool = False) -> int:
     """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); returns the count."""
     count = 0
     with open_writer(out, infer_format(out), overwrite=overwrite) as writer:
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
-            rows: Any = cam.sync.frames.itertuples(index=False)  # pandas rows are untyped
+            frames = cam.sync.frames
+            # Stamps stay exact int64 (object Ints, <NA> for missing), never float64.
+            rows: Any = frames.astype(
+                {c: "object" for c in frames.columns if str(frames[c].dtype) == "Int64"}
+            ).itertuples(index=False)  # pandas rows are untyped
             for row in rows:
                 t_l = _ns(row.t_l_ns)
                 stamp = t_l or _ns(row.header_stamp_ns)
