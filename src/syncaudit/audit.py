@@ -13,6 +13,7 @@ from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
+from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
 from syncaudit.lidar.scan import LidarScan, LidarScanner
@@ -88,6 +89,10 @@ class AuditResult:
     missing: list[str] = field(default_factory=list)
     guessed: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    start_ns: int | None = None
+    """Log start (host clock), the origin of the report's time axes."""
+    revolutions: RevolutionColumns | None = field(default=None, repr=False)
+    """The LiDAR's per-revolution timing (RPM, drops, clock offset over time)."""
 
     @property
     def not_judged(self) -> list[str]:
@@ -355,4 +360,6 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         missing=missing,
         guessed=guessed,
         warnings=warnings,
+        start_ns=log.summary.start_ns,
+        revolutions=scan.revolutions,
     )

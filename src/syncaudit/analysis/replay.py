@@ -35,11 +35,26 @@ class ReplayResult:
     """Per paired frame, corrected signed error."""
     delays_ns: NDArray[np.int64]
     """Per paired frame, the delay the controller would have used."""
+    frame_rows: NDArray[np.int64]
+    """Per entry of `errors_ns`/`delays_ns`, its row position in the camera's frame table."""
+    adjustment_rows: NDArray[np.int64]
+    """Row position (frame table) of each frame after which the controller changed the delay."""
+    adjustment_delays_ns: NDArray[np.int64]
+    """The delay each adjustment set."""
+
+    def per_frame(self, rows: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(corrected signed error, replayed delay) per row of the frame table, NaN elsewhere."""
+        errors = np.full(rows, np.nan)
+        delays = np.full(rows, np.nan)
+        errors[self.frame_rows] = self.errors_ns
+        delays[self.frame_rows] = self.delays_ns
+        return errors, delays
 
 
 def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayResult | None:
     """Run the controller over the paired frames of one camera (None without applied delays)."""
-    rows = frames[frames["paired"]]
+    paired = frames["paired"].to_numpy(dtype=bool)
+    rows = frames[paired]
     cols = [
         "t1_ns",
         "t2_ns",
@@ -56,6 +71,7 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
     ).to_numpy()
     ok = np.isfinite(values).all(axis=1) & np.isfinite(rotate)
     values, rotate = values[ok], rotate[ok]
+    frame_rows = np.flatnonzero(paired)[ok].astype(np.int64)
     if not values.shape[0]:
         return None
     controller = DelayController(config, initial_delay_ns=int(values[0, 6]))
@@ -91,4 +107,11 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
         settled_error_var_ns2=error_variance(settled),
         errors_ns=errors,
         delays_ns=delays,
+        frame_rows=frame_rows,
+        adjustment_rows=frame_rows[
+            np.array([a.frame_index for a in controller.adjustments], dtype=np.int64)
+        ],
+        adjustment_delays_ns=np.array(
+            [a.new_delay_ns for a in controller.adjustments], dtype=np.int64
+        ),
     )
