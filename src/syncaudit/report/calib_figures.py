@@ -1,0 +1,209 @@
+"""Figures of a calibration result: mounts (recorded vs estimated), residuals, degeneracy.
+
+Drawn from `syncaudit.calib.result` data only: the top view of every LiDAR's recorded and
+estimated mount in the reference frame, the estimate's difference against the limits,
+each cross-scan pair's residual after alignment, and for each refused alignment its
+weakest (degenerate) translation direction and rotation axis.
+"""
+
+from __future__ import annotations
+
+import math
+
+from syncaudit.calib.result import AlignmentOut, CalibrationResult, TransformOut
+from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
+
+SIZE = 420
+MARGIN = 40
+
+
+def _arrow(x: float, y: float, dx: float, dy: float, colour: str, cls: str) -> str:
+    """A line with a head, screen units."""
+    end_x, end_y = x + dx, y + dy
+    length = math.hypot(dx, dy) or 1.0
+    ux, uy = dx / length, dy / length
+    left = (end_x - 8 * ux + 4 * uy, end_y - 8 * uy - 4 * ux)
+    right = (end_x - 8 * ux - 4 * uy, end_y - 8 * uy + 4 * ux)
+    return (
+        f'<g class="{cls}"><line x1="{x:.1f}" y1="{y:.1f}" x2="{end_x:.1f}" y2="{end_y:.1f}" '
+        f'stroke="{colour}" stroke-width="2"/><polygon points="{end_x:.1f},{end_y:.1f} '
+        f'{left[0]:.1f},{left[1]:.1f} {right[0]:.1f},{right[1]:.1f}" fill="{colour}"/></g>'
+    )
+
+
+def mounts_svg(result: CalibrationResult) -> str:
+    """Top view (x forward, y left) of every LiDAR's mount: recorded and estimated."""
+    mounts: list[tuple[str, TransformOut, TransformOut | None]] = [
+        (e.frame_id, e.recorded, e.result) for e in result.extrinsics
+    ]
+    xs = [0.0] + [t.translation_m[0] for _, r, e in mounts for t in (r, e) if t is not None]
+    ys = [0.0] + [t.translation_m[1] for _, r, e in mounts for t in (r, e) if t is not None]
+    span = max(max(map(abs, xs)), max(map(abs, ys)), 0.5) * 1.25
+    scale = (SIZE / 2 - MARGIN) / span
+    cx = cy = SIZE / 2
+
+    def pos(x: float, y: float) -> tuple[float, float]:
+        # x forward is up, y left is left on the screen.
+        return cx - y * scale, cy - x * scale
+
+    out = [
+        f'<figure class="xy" data-kind="mounts" data-n="{len(mounts)}">'
+        "<figcaption>Mounts in the reference LiDAR's frame, top view "
+        '<span class="unit">[m; x forward up, y left; arrow = yaw]</span></figcaption>'
+        f'<svg class="plot" width="{SIZE}" height="{SIZE}" viewBox="0 0 {SIZE} {SIZE}" role="img" '
+        'aria-label="mounts top view">',
+        f'<rect x="0" y="0" width="{SIZE}" height="{SIZE}" fill="#fff" stroke="#bbb"/>',
+        f'<line x1="{cx}" y1="0" x2="{cx}" y2="{SIZE}" class="grid"/>'
+        f'<line x1="0" y1="{cy}" x2="{SIZE}" y2="{cy}" class="grid"/>',
+        f'<text x="{SIZE - 4}" y="{SIZE - 6}" class="yt">±{span:.2f} m</text>',
+        _arrow(cx, cy, 0, -24, "#444", "reference"),
+        f'<text x="{cx + 6}" y="{cy + 14}" class="legend">{esc(result.reference_frame_id)} (reference)</text>',
+    ]
+    for name, recorded, estimated in mounts:
+        for transform, colour, cls in (
+            (recorded, COLOURS[0], "recorded"),
+            (estimated, COLOURS[1], "estimated"),
+        ):
+            if transform is None:
+                continue
+            x, y = pos(transform.translation_m[0], transform.translation_m[1])
+            yaw = math.radians(transform.rpy_deg[2])
+            out.append(
+                f'<circle cx="{x:.1f}" cy="{y:.1f}" r="4" fill="{colour}"><title>{esc(name)} {cls}: '
+                f"xyz {', '.join(f'{v:.3f}' for v in transform.translation_m)} m, rpy "
+                f"{', '.join(f'{v:.2f}' for v in transform.rpy_deg)} deg</title></circle>"
+                + _arrow(x, y, -30 * math.sin(yaw), -30 * math.cos(yaw), colour, cls)
+            )
+        x, y = pos(recorded.translation_m[0], recorded.translation_m[1])
+        out.append(f'<text x="{x + 8:.1f}" y="{y + 16:.1f}" class="legend">{esc(name)}</text>')
+    out.append(
+        f'<rect x="8" y="8" width="10" height="3" fill="{COLOURS[0]}"/>'
+        '<text x="22" y="13" class="legend">recorded</text>'
+        f'<rect x="8" y="22" width="10" height="3" fill="{COLOURS[1]}"/>'
+        '<text x="22" y="27" class="legend">estimated</text></svg></figure>'
+    )
+    return "".join(out)
+
+
+def degenerate_svg(label: str, alignment: AlignmentOut) -> str:
+    """A refused alignment's weakest translation direction (top view, z as text) and axis."""
+    c = alignment.conditioning
+    size, mid = 200, 100
+    tx, ty, tz = c.weakest_translation
+    rx, ry, rz = c.weakest_rotation_axis
+    reason = alignment.reason or "refused"
+    return (
+        f'<figure class="xy" data-kind="degenerate"><figcaption>{esc(label)}: '
+        f'<span class="fail">{esc(reason)}</span> <span class="unit">[weakest directions, '
+        "top view; x forward up, y left]</span></figcaption>"
+        f'<svg class="plot" width="{size}" height="{size}" viewBox="0 0 {size} {size}" role="img" '
+        f'aria-label="degenerate direction">'
+        f'<rect x="0" y="0" width="{size}" height="{size}" fill="#fff" stroke="#bbb"/>'
+        f'<circle cx="{mid}" cy="{mid}" r="80" fill="none" class="grid" stroke="#ececec"/>'
+        + _arrow(mid, mid, -80 * ty, -80 * tx, "#b00020", "weak-translation")
+        + _arrow(mid, mid, 80 * ty, 80 * tx, "#b00020", "weak-translation")
+        + _arrow(mid, mid, -60 * ry, -60 * rx, "#9c3fbf", "weak-rotation")
+        + f'<text x="6" y="{size - 22}" class="legend" fill="#b00020">translation '
+        f"({tx:+.2f}, {ty:+.2f}, {tz:+.2f}) info {c.translation_information:.2g}</text>"
+        f'<text x="6" y="{size - 8}" class="legend">rotation axis ({rx:+.2f}, {ry:+.2f}, '
+        f"{rz:+.2f}) info {c.rotation_information:.2g}</text></svg></figure>"
+    )
+
+
+def calibration_figures(result: CalibrationResult) -> str:
+    """The calibration's figures as an HTML fragment (inline SVG)."""
+    parts = [mounts_svg(result)]
+    limits = result.limits
+    rot = [
+        Bar(e.frame_id, e.rotation_diff_deg if e.rotation_diff_deg is not None else math.nan)
+        for e in result.extrinsics
+    ]
+    trans = [
+        Bar(
+            e.frame_id,
+            e.translation_diff_cm if e.translation_diff_cm is not None else math.nan,
+            COLOURS[1],
+        )
+        for e in result.extrinsics
+    ]
+    if result.extrinsics:
+        parts.append(
+            bar_chart_svg(
+                rot,
+                title="Estimated vs recorded: rotation",
+                unit="deg",
+                limit=limits.max_rotation_deg,
+                limit_label="limit",
+                kind="diff-rotation",
+            )
+            + bar_chart_svg(
+                trans,
+                title="Estimated vs recorded: translation",
+                unit="cm",
+                limit=limits.max_translation_cm,
+                limit_label="limit",
+                kind="diff-translation",
+            )
+        )
+    for lidar in result.lidars:
+        if not lidar.pairs:
+            continue
+        bars = [
+            Bar(
+                f"stops {p.first_stop}-{p.second_stop}",
+                p.alignment.after.rmse_cm if p.alignment.after.rmse_cm is not None else math.nan,
+                COLOURS[0] if p.alignment.accepted else COLOURS[4],
+            )
+            for p in lidar.pairs
+        ]
+        parts.append(
+            bar_chart_svg(
+                bars,
+                title=f"{lidar.frame_id}: point-to-plane RMS after each pair's "
+                "alignment (red: refused)",
+                unit="cm",
+                kind="pair-residuals",
+            )
+        )
+        graph = [
+            Bar(f"stops {p.first_stop}-{p.second_stop}", p.graph_residual_rotation_deg, COLOURS[2])
+            for p in lidar.pairs
+            if p.graph_residual_rotation_deg is not None
+        ]
+        if graph:
+            parts.append(
+                bar_chart_svg(
+                    graph,
+                    title=f"{lidar.frame_id}: pose-graph residual per pair",
+                    unit="deg",
+                    kind="graph-residuals",
+                )
+            )
+    refused = [
+        (f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
+        for e in result.extrinsics
+        for m in e.map_pairs
+        if not m.alignment.accepted
+    ]
+    refused += [
+        (f"{lidar.frame_id} stops {p.first_stop}-{p.second_stop}", p.alignment)
+        for lidar in result.lidars
+        for p in lidar.pairs
+        if not p.alignment.accepted
+    ]
+    if refused:
+        parts.append("<h3>Refused alignments: the directions the scene did not constrain</h3>")
+        parts.append("".join(degenerate_svg(label, a) for label, a in refused[:12]))
+        if len(refused) > 12:
+            parts.append(f"<p>… and {len(refused) - 12} more refused alignments.</p>")
+    return '<div class="row calib-figures">' + "".join(parts) + "</div>"
+
+
+def calibration_section(result: CalibrationResult) -> str:
+    """The calibration's part of a report page: its tables and figures."""
+    from syncaudit.calib.report import html_section
+
+    section = html_section(result)
+    if 'class="row calib-figures"' not in section:
+        section += calibration_figures(result)
+    return section
