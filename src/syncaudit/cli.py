@@ -64,6 +64,23 @@ def _run(job: Callable[[], T]) -> T:
         raise typer.Exit(EXIT_INTERNAL) from None
 
 
+def _load_calibration(path: Path) -> Any:
+    """A saved calibration result (`calib --json-out`), for the combined report."""
+    from pydantic import ValidationError
+
+    from syncaudit.calib.result import CalibrationResult
+    from syncaudit.errors import ConfigError
+
+    try:
+        return CalibrationResult.model_validate_json(path.read_bytes())
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "document"
+        raise ConfigError(f"{path}: not a calibration result ({where}: {first['msg']})") from exc
+
+
 def _print_json(data: Any) -> None:
     sys.stdout.write(json.dumps(data, indent=2, allow_nan=False) + "\n")
 
@@ -114,6 +131,21 @@ def audit(
     csv_out: Annotated[
         Path | None, typer.Option("--csv", help="Write the per-frame table as CSV here.")
     ] = None,
+    parquet_out: Annotated[
+        Path | None,
+        typer.Option(
+            "--parquet",
+            help="Write the per-frame table here as Parquet, and the per-camera summary "
+            "beside it (F.cameras.parquet); needs syncaudit[parquet].",
+        ),
+    ] = None,
+    calibration_json: Annotated[
+        Path | None,
+        typer.Option(
+            "--calibration",
+            help="A `calib --json-out` result of the same log to add to the --html report.",
+        ),
+    ] = None,
     gate: Annotated[
         bool, typer.Option("--gate", help="Exit 10 when a camera crosses a threshold (CI gate).")
     ] = False,
@@ -134,6 +166,11 @@ def audit(
     from syncaudit.writers.atomic import write_atomic, write_text_atomic
 
     def job() -> None:
+        calibration = _load_calibration(calibration_json) if calibration_json else None
+        if parquet_out:
+            from syncaudit.writers.parquet import require_pyarrow
+
+            require_pyarrow()
         result = audit_log(log, load_rig(rig) if rig else None, jobs=jobs, check_crc=check_crc)
         data = result.to_dict()
         if json_out:
@@ -145,9 +182,13 @@ def audit(
                 raise OutputError(f"{pairings_out} exists (pass --overwrite to replace it)")
             write_pairings(result, pairings_out, overwrite=overwrite)
         if html_out:
-            from syncaudit.report.html import render_audit_html
+            from syncaudit.report.html import render_report_html
 
-            write_text_atomic(html_out, render_audit_html(result))
+            write_text_atomic(html_out, render_report_html(result, calibration))
+        if parquet_out:
+            from syncaudit.writers.parquet import write_parquet
+
+            write_parquet(result, parquet_out)
         if csv_out:
             frames = result.frames()
             write_atomic(csv_out, lambda handle: frames.to_csv(handle, index=False))
