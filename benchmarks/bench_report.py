@@ -26,17 +26,16 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from browser import CHROMIUM, CHROMIUM_FLAGS  # noqa: E402
-
-from syncaudit.audit import AuditResult, audit_log  # noqa: E402
-from syncaudit.report.html import (  # noqa: E402
+from browser import CHROMIUM, CHROMIUM_FLAGS
+from syncaudit.audit import AuditResult, audit_log
+from syncaudit.report.html import (
     camera_plots,
     latency_plots,
     render_audit_html,
     time_origin_ns,
 )
-from syncaudit.report.plot import _series_points  # noqa: E402
-from syncaudit.rig import load_rig  # noqa: E402
+from syncaudit.report.plot import _series_points
+from syncaudit.rig import load_rig
 
 
 def _chromium_s(page: Path) -> float:

@@ -9,6 +9,8 @@ weakest (degenerate) translation direction and rotation axis.
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 
 from syncaudit.calib.result import AlignmentOut, CalibrationResult, TransformOut
 from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
@@ -85,13 +87,53 @@ def mounts_svg(result: CalibrationResult) -> str:
     return "".join(out)
 
 
-def degenerate_svg(label: str, alignment: AlignmentOut) -> str:
+_DEGENERATE = re.compile(
+    r"translation along \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+); "
+    r"rotation about \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+)"
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Weakest:
+    """The least constrained translation direction and rotation axis of an alignment."""
+
+    label: str
+    reason: str
+    translation: tuple[float, float, float]
+    translation_information: float
+    rotation_axis: tuple[float, float, float]
+    rotation_information: float
+
+    @classmethod
+    def of(cls, label: str, alignment: AlignmentOut) -> Weakest:
+        """From a refused alignment's conditioning."""
+        c = alignment.conditioning
+        return cls(
+            label,
+            alignment.reason or "refused",
+            c.weakest_translation,
+            c.translation_information,
+            c.weakest_rotation_axis,
+            c.rotation_information,
+        )
+
+
+def weakest_from_reason(label: str, reason: str) -> Weakest | None:
+    """The directions a 'degenerate view (translation along (..): i; rotation about (..): i)'
+    reason names (stops refused before any pair alignment keep only that text)."""
+    match = _DEGENERATE.search(reason)
+    if match is None:
+        return None
+    v = [float(g) for g in match.groups()]
+    return Weakest(label, reason, (v[0], v[1], v[2]), v[3], (v[4], v[5], v[6]), v[7])
+
+
+def degenerate_svg(w: Weakest) -> str:
     """A refused alignment's weakest translation direction (top view, z as text) and axis."""
-    c = alignment.conditioning
-    size, mid = 200, 100
-    tx, ty, tz = c.weakest_translation
-    rx, ry, rz = c.weakest_rotation_axis
-    reason = alignment.reason or "refused"
+    size, mid = 220, 110
+    label, reason = w.label, w.reason
+    tx, ty, tz = w.translation
+    rx, ry, rz = w.rotation_axis
     return (
         f'<figure class="xy" data-kind="degenerate"><figcaption>{esc(label)}: '
         f'<span class="fail">{esc(reason)}</span> <span class="unit">[weakest directions, '
@@ -104,9 +146,9 @@ def degenerate_svg(label: str, alignment: AlignmentOut) -> str:
         + _arrow(mid, mid, 80 * ty, 80 * tx, "#b00020", "weak-translation")
         + _arrow(mid, mid, -60 * ry, -60 * rx, "#9c3fbf", "weak-rotation")
         + f'<text x="6" y="{size - 22}" class="legend" fill="#b00020">translation '
-        f"({tx:+.2f}, {ty:+.2f}, {tz:+.2f}) info {c.translation_information:.2g}</text>"
+        f"({tx:+.2f}, {ty:+.2f}, {tz:+.2f}) info {w.translation_information:.2g}</text>"
         f'<text x="6" y="{size - 8}" class="legend">rotation axis ({rx:+.2f}, {ry:+.2f}, '
-        f"{rz:+.2f}) info {c.rotation_information:.2g}</text></svg></figure>"
+        f"{rz:+.2f}) info {w.rotation_information:.2g}</text></svg></figure>"
     )
 
 
@@ -180,20 +222,30 @@ def calibration_figures(result: CalibrationResult) -> str:
                 )
             )
     refused = [
-        (f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
+        Weakest.of(f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
         for e in result.extrinsics
         for m in e.map_pairs
         if not m.alignment.accepted
     ]
     refused += [
-        (f"{lidar.frame_id} stops {p.first_stop}-{p.second_stop}", p.alignment)
+        Weakest.of(f"{lidar.frame_id} stops {p.first_stop}-{p.second_stop}", p.alignment)
         for lidar in result.lidars
         for p in lidar.pairs
         if not p.alignment.accepted
     ]
+    # Refused before any pair alignment: only the reasons name the directions. One per
+    # LiDAR (its own reason), else one per stop.
+    for lidar in result.lidars:
+        texts = [(lidar.frame_id, lidar.reason or "")]
+        texts += [(f"{lidar.frame_id} stop {st.stop}", st.reason or "") for st in lidar.stops]
+        for label, reason in texts:
+            weak = weakest_from_reason(label, reason)
+            if weak is not None:
+                refused.append(weak)
+                break
     if refused:
         parts.append("<h3>Refused alignments: the directions the scene did not constrain</h3>")
-        parts.append("".join(degenerate_svg(label, a) for label, a in refused[:12]))
+        parts.append("".join(degenerate_svg(w) for w in refused[:12]))
         if len(refused) > 12:
             parts.append(f"<p>… and {len(refused) - 12} more refused alignments.</p>")
     return '<div class="row calib-figures">' + "".join(parts) + "</div>"

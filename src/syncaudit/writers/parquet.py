@@ -42,7 +42,7 @@ def require_pyarrow() -> None:
 def _pyarrow() -> Any:
     try:
         import pyarrow as pa
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow.parquet
     except ImportError as exc:
         raise OutputError(INSTALL_HINT) from exc
     return pa
