@@ -152,6 +152,11 @@ def degenerate_svg(w: Weakest) -> str:
     )
 
 
+def _degenerate(alignment: AlignmentOut) -> bool:
+    """Refused because the scene left a direction unconstrained (not for overlap or fit)."""
+    return not alignment.accepted and "degenerate" in (alignment.reason or "")
+
+
 def calibration_figures(result: CalibrationResult) -> str:
     """The calibration's figures as an HTML fragment (inline SVG)."""
     parts = [mounts_svg(result)]
@@ -225,13 +230,13 @@ def calibration_figures(result: CalibrationResult) -> str:
         Weakest.of(f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
         for e in result.extrinsics
         for m in e.map_pairs
-        if not m.alignment.accepted
+        if _degenerate(m.alignment)
     ]
     refused += [
         Weakest.of(f"{lidar.frame_id} stops {p.first_stop}-{p.second_stop}", p.alignment)
         for lidar in result.lidars
         for p in lidar.pairs
-        if not p.alignment.accepted
+        if _degenerate(p.alignment)
     ]
     # Refused before any pair alignment: only the reasons name the directions. One per
     # LiDAR (its own reason), else one per stop.
@@ -244,7 +249,7 @@ def calibration_figures(result: CalibrationResult) -> str:
                 refused.append(weak)
                 break
     if refused:
-        parts.append("<h3>Refused alignments: the directions the scene did not constrain</h3>")
+        parts.append("<h3>Alignments refused as degenerate: the directions the scene did not constrain</h3>")
         parts.append("".join(degenerate_svg(w) for w in refused[:12]))
         if len(refused) > 12:
             parts.append(f"<p>… and {len(refused) - 12} more refused alignments.</p>")

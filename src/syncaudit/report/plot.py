@@ -132,11 +132,17 @@ def fmt_tick(value: float) -> str:
     return f"{value:,.6g}"
 
 
-def _digits(span: float) -> int:
-    """Decimals that resolve 1/5000 of a span."""
+X_RESOLUTION = 1e-6
+"""Time is written to a millionth of the axis (1 ms on a 10-minute log)."""
+Y_RESOLUTION = 2e-5
+"""Values to 1/50,000 of their axis (0.1 us on a +-2.5 ms error axis): hover reads them."""
+
+
+def _digits(span: float, resolution: float) -> int:
+    """Decimals that resolve `resolution` of a span."""
     if not (span > 0 and math.isfinite(span)):
         return 3
-    return max(0, min(9, -math.floor(math.log10(span / 5000))))
+    return max(0, min(9, -math.floor(math.log10(span * resolution))))
 
 
 def _path(x: NDArray[np.float64], y: NDArray[np.float64], xd: int, yd: int) -> str:
@@ -198,8 +204,8 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
         x0, x1 = x_range
     w, h = plot.width, plot.height
     pw, ph = w - LEFT - RIGHT, h - TOP - BOTTOM
-    xd = _digits(x1 - x0)
-    yd = _digits(y1 - y0)
+    xd = _digits(x1 - x0, X_RESOLUTION)
+    yd = _digits(y1 - y0, Y_RESOLUTION)
 
     def py(v: float) -> float:
         return TOP + ph * (y1 - v) / (y1 - y0)
