@@ -72,7 +72,7 @@ def render(page: Path) -> Rendered:
 
 def screenshot(page: Path, name: str, *, width: int = 1100, height: int = 2400) -> Path:
     """A PNG of the page kept under the artifacts folder; returns its path."""
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
     shot = ARTIFACTS / name
+    shot.parent.mkdir(parents=True, exist_ok=True)
     _run([f"--screenshot={shot}", f"--window-size={width},{height}", page.resolve().as_uri()])
     return shot

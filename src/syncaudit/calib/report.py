@@ -160,6 +160,13 @@ def _lidar_block(lidar: LidarOut) -> str:
     )
 
 
+def _figures(result: CalibrationResult) -> str:
+    """Mounts, residuals and degenerate directions drawn (syncaudit.report.calib_figures)."""
+    from syncaudit.report.calib_figures import calibration_figures
+
+    return calibration_figures(result)
+
+
 def html_section(result: CalibrationResult) -> str:
     """A self-contained HTML fragment (inline style, no scripts) for the report."""
     css, label = _verdict(result)
@@ -192,6 +199,7 @@ def html_section(result: CalibrationResult) -> str:
         + _map_pair_rows(result)
         + "</table></details>"
         + "".join(_lidar_block(lidar) for lidar in result.lidars)
+        + _figures(result)
         + (f"<ul>{notes}</ul>" if notes else "")
         + f'<p class="muted">{escape(timings)}; {libs}</p>'
         "</section>"

@@ -249,7 +249,9 @@ def calibration_figures(result: CalibrationResult) -> str:
                 refused.append(weak)
                 break
     if refused:
-        parts.append("<h3>Alignments refused as degenerate: the directions the scene did not constrain</h3>")
+        parts.append(
+            "<h3>Alignments refused as degenerate: the directions the scene did not constrain</h3>"
+        )
         parts.append("".join(degenerate_svg(w) for w in refused[:12]))
         if len(refused) > 12:
             parts.append(f"<p>… and {len(refused) - 12} more refused alignments.</p>")

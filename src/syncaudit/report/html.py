@@ -50,10 +50,8 @@ def _floats(values: object) -> NDArray[np.float64]:
     """A pandas column (nullable ints included) as float64 with NaN for missing."""
     import pandas as pd
 
-    out: NDArray[np.float64] = (
-        pd.Series(values).astype("Float64").to_numpy(np.float64, na_value=np.nan)
-    )
-    return out
+    out = pd.Series(values).astype("Float64").to_numpy(np.float64, na_value=np.nan)
+    return np.asarray(out, dtype=np.float64)
 
 
 def frame_time_ns(cam: CameraAudit) -> NDArray[np.float64]:

@@ -260,18 +260,18 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
             f'<line class="limit" x1="{x0 - (x1 - x0) * 10:.6g}" x2="{x1 + (x1 - x0) * 10:.6g}" '
             f'y1="{-value:.6g}" y2="{-value:.6g}"><title>{esc(label)}</title></line>'
         )
-    for s, (x, y) in zip(plot.series, drawn, strict=True):
+    for s, (sx, sy) in zip(plot.series, drawn, strict=True):
         attrs = (
-            f'data-label="{esc(s.label)}" data-n="{x.size}" stroke="{esc(s.colour)}" '
+            f'data-label="{esc(s.label)}" data-n="{sx.size}" stroke="{esc(s.colour)}" '
             f'vector-effect="non-scaling-stroke"'
         )
         if s.dots:
-            out.append(f'<path class="dots" {attrs} d="{_dots(x, y, xd, yd)}"/>')
+            out.append(f'<path class="dots" {attrs} d="{_dots(sx, sy, xd, yd)}"/>')
         else:
-            out.append(f'<path class="line" {attrs} fill="none" d="{_path(x, y, xd, yd)}"/>')
+            out.append(f'<path class="line" {attrs} fill="none" d="{_path(sx, sy, xd, yd)}"/>')
     out.append("</svg>")
     # legend
-    lx = LEFT + 6
+    lx: float = LEFT + 6
     for s in plot.series:
         label = s.label + (" (dots)" if s.dots else "")
         out.append(

@@ -1,0 +1,80 @@
+"""`audit --parquet`: the per-frame table and per-camera summary, read back by three readers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import duckdb
+import numpy as np
+import pandas as pd
+import polars as pl
+import pyarrow.parquet as pq
+
+from syncaudit.audit import AuditResult
+from syncaudit.writers.parquet import cameras_path, write_parquet
+
+STAMPS = (
+    "exposure_start_ns",
+    "exposure_duration_ns",
+    "t_l_ns",
+    "t_estimated_ns",
+    "revolution_start_ns",
+    "header_stamp_ns",
+)
+
+
+def test_cameras_path() -> None:
+    assert cameras_path("out/run.parquet") == Path("out/run.cameras.parquet")
+    assert cameras_path("frames") == Path("frames.cameras.parquet")
+
+
+def test_frames_round_trip_typed(audit: AuditResult, tmp_path: Path) -> None:
+    frames_file, _ = write_parquet(audit, tmp_path / "a.parquet")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.cameras.parquet", "a.parquet"]
+    expected = audit.frames()
+    schema = pq.read_schema(frames_file)
+    assert schema.names == list(expected.columns)
+    for name in STAMPS:
+        assert str(schema.field(name).type) == "int64", name
+    assert str(schema.field("paired").type) == "bool"
+    assert str(schema.field("camera").type) in ("string", "large_string")
+    meta = json.loads(schema.metadata[b"syncaudit"])
+    assert meta["table"] == "frames" and meta["log"] == audit.path
+    assert meta["thresholds"]["error_mean_us"] == audit.rig.thresholds.error_mean_us
+    # pandas: identical frame (nullable Int64 stamps, missing stay missing)
+    back = pd.read_parquet(frames_file)
+    pd.testing.assert_frame_equal(back, expected, check_dtype=False)
+    for name in STAMPS:
+        assert back[name].dtype == "Int64"
+        assert back[name].isna().sum() == expected[name].isna().sum()
+    # polars and DuckDB: same rows, same exact integers
+    polar = pl.read_parquet(frames_file)
+    assert polar.height == len(expected) and polar.schema["t_l_ns"] == pl.Int64
+    first = expected["t_l_ns"].dropna().iloc[0]
+    assert polar["t_l_ns"].drop_nulls()[0] == first
+    rows = duckdb.sql(
+        f"SELECT camera, count(*) AS n, sum(paired::INT) AS p, max(t_l_ns) AS last "
+        f"FROM '{frames_file}' GROUP BY camera ORDER BY camera"
+    ).fetchall()
+    for camera, n, p, last in rows:
+        own = expected[expected["camera"] == camera]
+        assert n == len(own) and p == own["paired"].sum() and last == own["t_l_ns"].max()
+
+
+def test_camera_summary(audit: AuditResult, tmp_path: Path) -> None:
+    _, cameras_file = write_parquet(audit, tmp_path / "a.parquet")
+    table = pd.read_parquet(cameras_file)
+    assert list(table["camera"]) == [c.sync.camera for c in audit.cameras]
+    for row, cam in zip(table.itertuples(), audit.cameras, strict=True):
+        d = cam.to_dict()
+        assert row.verdict == d["verdict"] and bool(row.needs_correction) is d["needs_correction"]
+        assert np.isclose(row.error_mean_us, d["error_mean_us"])
+        assert np.isclose(row.delay_recommended_us, d["delay_recommended_us"])
+        assert np.isclose(row.t1_p99_us, d["latencies"]["t1"]["p99_us"])
+        assert row.frames_paired == d["frames_paired"]
+        assert row.corrected_adjustments == d["corrected"]["adjustments"]
+    counts = duckdb.execute(
+        f"SELECT count(*) FROM '{cameras_file}' WHERE verdict = 'fail'"
+    ).fetchone()
+    assert counts == (sum(c.sync.verdict == "fail" for c in audit.cameras),)

@@ -1,0 +1,56 @@
+"""The plot primitives: envelopes keep every extreme, steps lose nothing, ticks are round."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from syncaudit.report.plot import (
+    MAX_POINTS,
+    Series,
+    TimePlot,
+    envelope,
+    nice_ticks,
+    steps_only,
+    time_plot_svg,
+)
+
+
+def test_envelope_keeps_each_buckets_extremes() -> None:
+    rng = np.random.default_rng(0)
+    x = np.arange(60_000, dtype=float) / 100.0  # ten minutes at 100 Hz
+    y = rng.normal(0, 100, x.size)
+    y[12_345] = 9_999.0  # one spike
+    y[50_000] = -7_777.0
+    y[7] = np.nan
+    ex, ey = envelope(x, y)
+    assert ex.size <= MAX_POINTS and np.all(np.diff(ex) > 0)
+    assert 9_999.0 in ey and -7_777.0 in ey
+    assert ey.max() == np.nanmax(y) and ey.min() == np.nanmin(y)
+    bucket = np.linspace(0, x.size, MAX_POINTS // 2 + 1).astype(int)
+    lo, hi = bucket[3], bucket[4]
+    inside = (ex >= x[lo]) & (ex < x[hi])
+    assert set(ey[inside]) == {np.nanmin(y[lo:hi]), np.nanmax(y[lo:hi])}
+    small_x, _ = envelope(x[:100], y[:100])
+    assert small_x.size == 99  # under the cap: every finite point
+
+
+def test_steps_only_is_lossless() -> None:
+    x = np.arange(10, dtype=float)
+    y = np.array([1, 1, 1, 2, 2, 3, 3, 3, 3, 1], dtype=float)
+    sx, sy = steps_only(x, y)
+    assert list(sx) == [0, 2, 3, 4, 5, 8, 9]
+    assert np.array_equal(np.interp(x, sx, sy), y)  # the held value at every frame
+
+
+def test_nice_ticks() -> None:
+    assert nice_ticks(0, 600, 10) == [0, 100, 200, 300, 400, 500, 600]
+    assert nice_ticks(-5411, 5411, 6) == [-4000, -2000, 0, 2000, 4000]
+    assert nice_ticks(0.1, 0.1) == [0.1]
+
+
+def test_a_long_series_is_capped_per_series() -> None:
+    x = np.arange(6_000, dtype=float) / 10
+    plot = TimePlot("t", "µs", [Series("a", x, np.sin(x)), Series("b", x, np.cos(x))])
+    svg = time_plot_svg(plot)
+    counts = [int(n) for n in __import__("re").findall(r'data-n="(\d+)"', svg)]
+    assert len(counts) == 2 and all(n <= MAX_POINTS for n in counts)
