@@ -80,17 +80,24 @@ def _series(result: AuditResult) -> list[tuple[str, list[tuple[str, Any, Any]]]]
 
 
 def _plotly_page(plots: list[tuple[str, list[tuple[str, Any, Any]]]], path: Path) -> bool:
+    """One Plotly figure per plot (its own div), plotly.min.js inlined once."""
     try:
+        import plotly
         import plotly.graph_objects as go
-        from plotly.subplots import make_subplots
+        from plotly.offline import get_plotlyjs
     except ImportError:
         return False
-    fig = make_subplots(rows=len(plots), cols=1, subplot_titles=[t for t, _ in plots])
-    for row, (_, lines) in enumerate(plots, start=1):
-        for label, x, y in lines:
-            fig.add_trace(go.Scatter(x=x, y=y, name=label, mode="lines"), row=row, col=1)
-    fig.update_layout(height=230 * len(plots), width=1000, showlegend=False)
-    fig.write_html(path, include_plotlyjs=True, full_html=True)
+    divs = []
+    for title, lines in plots:
+        fig = go.Figure(
+            [go.Scatter(x=x, y=y, name=label, mode="lines") for label, x, y in lines],
+            layout={"title": title, "height": 230, "width": 1000},
+        )
+        divs.append(plotly.io.to_html(fig, include_plotlyjs=False, full_html=False))
+    path.write_text(
+        "<!doctype html><html><head><meta charset=utf-8>"
+        f"<script>{get_plotlyjs()}</script></head><body>{''.join(divs)}</body></html>"
+    )
     return True
 
 

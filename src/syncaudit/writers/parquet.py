@@ -6,7 +6,8 @@ DuckDB `FROM 'F'`) opens one file as one table: `F` holds every column of
 booleans and strings typed), `cameras_path(F)` (`F` with `.cameras.parquet`) one row per
 camera with its verdict and statistics (microseconds, as the JSON). Both carry the log,
 the schema version and the thresholds as file metadata (`syncaudit` key, JSON).
-pyarrow is an optional extra (`syncaudit[parquet]`): a 40 MB wheel most users never need.
+pyarrow is an optional extra (`syncaudit[parquet]`): about 170 MB installed, which most
+users, who read the JSON or the CSV, never need.
 """
 
 from __future__ import annotations
