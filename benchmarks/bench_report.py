@@ -74,7 +74,7 @@ def _series(result: AuditResult) -> list[tuple[str, list[tuple[str, Any, Any]]]]
     out = []
     for cam in result.cameras:
         for plot in camera_plots(cam, result, origin) + latency_plots(cam, origin):
-            lines = [(s.label, *_series_points(s)) for s in plot.series]
+            lines = [(s.label, *_series_points(s)[:2]) for s in plot.series]
             out.append((f"{cam.sync.camera}: {plot.title}", lines))
     return out
 

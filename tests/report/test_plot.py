@@ -54,3 +54,10 @@ def test_a_long_series_is_capped_per_series() -> None:
     svg = time_plot_svg(plot)
     counts = [int(n) for n in __import__("re").findall(r'data-n="(\d+)"', svg)]
     assert len(counts) == 2 and all(n <= MAX_POINTS for n in counts)
+
+
+def test_a_line_breaks_across_missing_frames() -> None:
+    x = np.r_[np.arange(10.0), np.arange(30.0, 40.0)] / 10  # 2 s of frames missing
+    svg = time_plot_svg(TimePlot("t", "µs", [Series("a", x, np.ones_like(x))]))
+    d = __import__("re").search(r' d="([^"]*)"', svg)
+    assert d is not None and d.group(1).count("M") == 2

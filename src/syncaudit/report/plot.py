@@ -40,7 +40,7 @@ class Series:
     y: NDArray[np.float64]
     colour: str = COLOURS[0]
     step: bool = False
-    """Drawn as steps (held values, e.g. a delay): runs of equal values keep two points."""
+    """Held values (e.g. a delay): runs of equal values keep their ends, no gap breaks."""
     dots: bool = False
     """Drawn as dots (events, e.g. the controller's adjustments), never decimated."""
 
@@ -145,13 +145,22 @@ def _digits(span: float, resolution: float) -> int:
     return max(0, min(9, -math.floor(math.log10(span * resolution))))
 
 
-def _path(x: NDArray[np.float64], y: NDArray[np.float64], xd: int, yd: int) -> str:
-    """SVG path data in data units (y negated), a new subpath after each gap."""
+GAP_FACTOR = 5.0
+"""A line breaks where consecutive points are this many median spacings apart (frames or
+revolutions missing), instead of bridging the gap."""
+
+
+def _path(
+    x: NDArray[np.float64], y: NDArray[np.float64], xd: int, yd: int, gap: float = math.inf
+) -> str:
+    """SVG path data in data units (y negated), a new subpath where points are `gap` apart."""
     if x.size == 0:
         return ""
     xs = np.round(x, xd)
     ys = np.round(-y, yd) + 0.0
     text = [f"{a:.{xd}f},{b:.{yd}f}" for a, b in zip(xs.tolist(), ys.tolist(), strict=True)]
+    for i in np.flatnonzero(np.diff(x) > gap).tolist():
+        text[i + 1] = "M" + text[i + 1]
     return "M" + " ".join(text)
 
 
@@ -165,19 +174,25 @@ def _dots(x: NDArray[np.float64], y: NDArray[np.float64], xd: int, yd: int) -> s
     )
 
 
-def _series_points(s: Series) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _series_points(s: Series) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """The points to draw and the spacing beyond which the line breaks (a gap in the data)."""
     x, y = s.x_s, s.y
     ok = np.isfinite(x) & np.isfinite(y)
     x, y = x[ok], y[ok]
     if s.dots:
-        return x, y
+        return x, y, math.inf
+    gap = GAP_FACTOR * float(np.median(np.diff(x))) if x.size > 2 else math.inf
     if s.step:
-        x, y = steps_only(x, y)
-    return envelope(x, y)
+        sx, sy = envelope(*steps_only(x, y))
+        return sx, sy, math.inf
+    ex, ey = envelope(x, y)
+    # An envelope's min and max of neighbouring buckets can be two buckets apart.
+    gap *= max(1.0, 2.0 * x.size / max(ex.size, 1))
+    return ex, ey, gap if gap > 0 else math.inf
 
 
 def _extent(
-    plot: TimePlot, drawn: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
+    plot: TimePlot, drawn: list[tuple[NDArray[np.float64], NDArray[np.float64], float]]
 ) -> tuple[float, float, float, float]:
     xs = [d[0] for d in drawn if d[0].size]
     ys = [d[1] for d in drawn if d[1].size]
@@ -260,7 +275,7 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
             f'<line class="limit" x1="{x0 - (x1 - x0) * 10:.6g}" x2="{x1 + (x1 - x0) * 10:.6g}" '
             f'y1="{-value:.6g}" y2="{-value:.6g}"><title>{esc(label)}</title></line>'
         )
-    for s, (sx, sy) in zip(plot.series, drawn, strict=True):
+    for s, (sx, sy, gap) in zip(plot.series, drawn, strict=True):
         attrs = (
             f'data-label="{esc(s.label)}" data-n="{sx.size}" stroke="{esc(s.colour)}" '
             f'vector-effect="non-scaling-stroke"'
@@ -268,7 +283,7 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
         if s.dots:
             out.append(f'<path class="dots" {attrs} d="{_dots(sx, sy, xd, yd)}"/>')
         else:
-            out.append(f'<path class="line" {attrs} fill="none" d="{_path(sx, sy, xd, yd)}"/>')
+            out.append(f'<path class="line" {attrs} fill="none" d="{_path(sx, sy, xd, yd, gap)}"/>')
     out.append("</svg>")
     # legend
     lx: float = LEFT + 6
