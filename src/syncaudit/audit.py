@@ -16,10 +16,7 @@ from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_famil
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
 from syncaudit.lidar.scan import LidarScan, LidarScanner
-from syncaudit.lidar.stream import (
-    find_ouster_metadata_topic,
-    read_ouster_metadata,
-)
+from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.rig_guess import guess_rig
@@ -313,6 +310,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     missing: list[str] = []
     located = _locate_cameras(log, rig, warnings)
     scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc)
+    warnings.extend(scan.warnings)
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     if scan.revolutions.count < MIN_ZERO_CROSSINGS:
