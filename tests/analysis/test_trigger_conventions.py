@@ -31,7 +31,7 @@ CAMERAS = [CameraSim(name="front", yaw_deg=0.0), CameraSim(name="left", yaw_deg=
 def _run(tmp_path: Path, **config: Any) -> tuple[AuditResult, dict[str, Any]]:
     out = tmp_path / "log.mcap"
     config.setdefault("cameras", CAMERAS)
-    config.setdefault("duration_s", 1.0)
+    config.setdefault("duration_s", 0.6)
     truth = simulate_sync_log(out, SyncSimConfig(**config))
     return audit_log(out, rig_from_truth(truth), jobs=1), truth
 
