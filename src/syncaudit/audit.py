@@ -17,10 +17,7 @@ from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
 from syncaudit.lidar.scan import LidarScan, LidarScanner
-from syncaudit.lidar.stream import (
-    find_ouster_metadata_topic,
-    read_ouster_metadata,
-)
+from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.rig_guess import guess_rig

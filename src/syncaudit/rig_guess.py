@@ -22,7 +22,7 @@ from syncaudit.camera.azimuth import (
 from syncaudit.camera.topics import detect_cameras, probe_camera_topics, topic_role
 from syncaudit.collect import lidar_family
 from syncaudit.errors import NoDataError
-from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 
@@ -31,11 +31,9 @@ __all__ = ["guess_rig", "render_starter_rig", "starter_rig_yaml"]
 
 def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
     """A rig from the log alone, and what was guessed (raises NoDataError without LiDAR)."""
-    # Ouster drivers publish IMU packets with the same message type: those go last.
-    packet_topics = sorted(
-        (t.name for t in log.topics.values() if is_packet_topic(t.msgtype)),
-        key=lambda name: ("imu" in name.lower(), name),
-    )
+    # The guess `info` shares: IMU packet topics of the same type are set aside.
+    lidar_guess = guess_lidar_topics(log)
+    packet_topics = lidar_guess.topics
     if not packet_topics:
         raise NoDataError(
             f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
@@ -43,7 +41,7 @@ def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
     camera_topics = [t for t, info in log.topics.items() if topic_role(info.msgtype)]
     camera_fields, frame_ids = probe_camera_topics(log, camera_topics)
     cameras = detect_cameras(log.topics, camera_fields, frame_ids)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)"]
+    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes]
     if cameras:
         guessed.append(
             "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"

@@ -17,6 +17,7 @@ from syncaudit.logs import RawMessage, TopicInfo, open_log
 from syncaudit.rig import LidarConfig, load_rig
 from syncaudit.rig_guess import starter_rig_yaml
 from syncaudit.simulate import LidarModel
+from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import _X_AXIS_AZIMUTH_DEG as SIMULATED_X_AXIS
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
@@ -65,6 +66,19 @@ def test_audit_without_a_rig_finds_where_the_triggers_fire(
         said = [w for w in cam.sync.warnings if "near packet azimuth" in w]
         fired = float(said[0].split("near packet azimuth ")[1].split(" deg")[0])
         assert abs((fired - zero_deg + 180.0) % 360.0 - 180.0) < 5.0  # within a packet or so
+
+
+def test_rig_zero_far_from_the_triggers_is_warned(tmp_path: Path) -> None:
+    out = tmp_path / "log.mcap"
+    truth = simulate_sync_log(out, SyncSimConfig(duration_s=1.0, seed=72, zero_azimuth_deg=200.0))
+    rig = rig_from_truth(truth)
+    wrong = rig.model_copy(
+        update={"lidar": rig.lidar.model_copy(update={"zero_azimuth_deg": 20.0})}
+    )
+    warned = audit_log(out, wrong, jobs=1).cameras[0].sync.warnings
+    assert any("from the rig's zero_azimuth_deg 20" in w for w in warned)
+    right = audit_log(out, rig, jobs=1).cameras[0].sync.warnings
+    assert not any("zero_azimuth_deg" in w for w in right)
 
 
 def test_vendor_x_axis_defaults() -> None:

@@ -10,7 +10,7 @@ for every simulated LiDAR model, with synchronised and with offset sensor clocks
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ from syncaudit.simulate import LidarModel
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
-MODELS: tuple[LidarModel, ...] = ("VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32")
+MODELS: tuple[LidarModel, ...] = get_args(LidarModel)
 CONVENTIONS = [("containing", 0), ("first_after", 0), ("containing", 3), ("containing", -3)]
 TOLERANCE_NS = 20_000
 PER_FRAME_NS = 5_000
@@ -31,7 +31,7 @@ CAMERAS = [CameraSim(name="front", yaw_deg=0.0), CameraSim(name="left", yaw_deg=
 def _run(tmp_path: Path, **config: Any) -> tuple[AuditResult, dict[str, Any]]:
     out = tmp_path / "log.mcap"
     config.setdefault("cameras", CAMERAS)
-    config.setdefault("duration_s", 1.0)
+    config.setdefault("duration_s", 0.6)
     truth = simulate_sync_log(out, SyncSimConfig(**config))
     return audit_log(out, rig_from_truth(truth), jobs=1), truth
 

@@ -160,8 +160,10 @@ class RevolutionPairing:
     phase_from_trigger: NDArray[np.bool_]
     """True where the phase is from the trigger's own packet, False from the tracker's."""
     trigger_turn_fraction: float | None = None
-    """Where in the revolution the triggers fire (0..1 after the rig's zero crossing), when
-    it was estimated because the rig does not state the zero azimuth."""
+    """Where in the revolution the trigger packets lie (0..1 of a turn after the rig's zero
+    crossing; near 0 or 1 when the rig's zero azimuth is where the triggers fire)."""
+    zero_from_triggers: bool = False
+    """Revolutions started at the triggers' azimuth (the rig states no zero azimuth)."""
 
     @property
     def t_rotate_ns(self) -> NDArray[np.float64]:
@@ -221,10 +223,9 @@ def pair_revolutions(
         query = pkt[has_pkt]
         idx = nearest_index(zero_host, query)
         close = np.abs(zero_host[idx] - query) <= max_gap_ns
-        if zero_from_triggers:
-            fraction = trigger_turn_fraction(zero_host, query)
-            if fraction is not None:
-                idx, close = _after_virtual_zero(zero_host, cross_host, query, fraction)
+        fraction = trigger_turn_fraction(zero_host, query)
+        if zero_from_triggers and fraction is not None:
+            idx, close = _after_virtual_zero(zero_host, cross_host, query, fraction)
         rows = np.flatnonzero(has_pkt)[close]
         rev[rows] = idx[close]
         from_trigger[rows] = True
@@ -244,7 +245,8 @@ def pair_revolutions(
     has = rev >= 0
     start = np.where(has, zero_host[np.maximum(rev, 0)], MISSING_NS)
     t_est = np.where(has, cross_host[np.maximum(rev, 0)], MISSING_NS)
-    return RevolutionPairing(rev, start, t_est, phase, from_trigger, fraction)
+    virtual = zero_from_triggers and fraction is not None
+    return RevolutionPairing(rev, start, t_est, phase, from_trigger, fraction, virtual)
 
 
 def trigger_turn_fraction(zero_ns: NDArray[np.int64], packet_ns: NDArray[np.int64]) -> float | None:

@@ -131,6 +131,10 @@ def render_audit(result: AuditResult, console: Console) -> None:
             )
         table.add_row("t5 mean exposure (Eq. 3)", f"{_us(d['t5_mean_us'])} us")
         table.add_row(
+            "packet phase (zero crossing - packet)",
+            f"{_us(d['packet_phase_us'])} us  (measured from: {d['packet_phase_source']})",
+        )
+        table.add_row(
             "t_sleep applied -> recommended (Eq. 2)",
             f"{_us(d['delay_applied_us'])} -> [bold]{_us(d['delay_recommended_us'])}[/] us "
             f"(from error: {_us(d['delay_from_error_us'])} us)",
