@@ -61,10 +61,11 @@ def _run(args: list[str]) -> subprocess.CompletedProcess[str]:
         )
 
 
-def render(page: Path) -> Rendered:
-    """Load a local page; its DOM after scripts and its console messages."""
+def render(page: Path, *, fragment: str = "") -> Rendered:
+    """Load a local page (with `#fragment`); its DOM after scripts and its console messages."""
     start = time.perf_counter()
-    done = _run(["--enable-logging=stderr", "--v=0", "--dump-dom", page.resolve().as_uri()])
+    url = page.resolve().as_uri() + (f"#{fragment}" if fragment else "")
+    done = _run(["--enable-logging=stderr", "--v=0", "--dump-dom", url])
     seconds = time.perf_counter() - start
     console = [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
     return Rendered(done.stdout, console, seconds)

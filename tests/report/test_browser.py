@@ -25,7 +25,7 @@ def _figures(dom: str) -> list[dict[str, str]]:
 def test_audit_report_renders_with_every_plot_and_point(audit: AuditResult, tmp_path: Path) -> None:
     page = tmp_path / "audit.html"
     page.write_text(render_audit_html(audit))
-    shown = render(page)
+    shown = render(page, fragment="t=2-4.5")  # a link to a time window (one browser run)
     assert shown.console == [], shown.console
     assert 'data-ready="yes"' in shown.dom  # the inline script ran to its end
     figures = _figures(shown.dom)
@@ -46,6 +46,17 @@ def test_audit_report_renders_with_every_plot_and_point(audit: AuditResult, tmp_
     assert [int(f["data-rendered-points"]) for f in errors] == [
         p + r for p, r in zip(paired, replayed, strict=True)
     ]
+    # The link zoomed every time plot to 2 s .. 4.5 s and redrew the time ticks.
+    boxes = re.findall(r'<svg class="area"[^>]*viewBox="([^"]+)"', shown.dom)
+    assert len(boxes) == len(time_plots)
+    for box in boxes:
+        x, _, width, _ = (float(v) for v in box.split())
+        assert (x, width) == (2.0, 2.5)
+    first = re.search(r'<g class="xt"[^>]*>(.*?)</g>', shown.dom, re.S)
+    assert first is not None
+    ticks = [float(t) for t in re.findall(r'class="xtick"[^>]*>([^<]+)<', first.group(1))]
+    assert ticks[0] >= 2.0 and ticks[-1] <= 4.5 and len(ticks) >= 5
+    assert re.search(r'<body[^>]*data-t0-ms="1700000000000.000"', shown.dom)  # wall clock
     shot = screenshot(page, "report/audit.png", height=2600)
     assert shot.stat().st_size > 20_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

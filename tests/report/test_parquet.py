@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import duckdb
@@ -10,8 +11,11 @@ import numpy as np
 import pandas as pd
 import polars as pl
 import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
 
 from syncaudit.audit import AuditResult
+from syncaudit.cli import app
 from syncaudit.writers.parquet import cameras_path, write_parquet
 
 STAMPS = (
@@ -78,3 +82,25 @@ def test_camera_summary(audit: AuditResult, tmp_path: Path) -> None:
         f"SELECT count(*) FROM '{cameras_file}' WHERE verdict = 'fail'"
     ).fetchone()
     assert counts == (sum(c.sync.verdict == "fail" for c in audit.cameras),)
+
+
+def test_without_pyarrow_parquet_stops_before_any_work(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # import fails as if not installed
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    log = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"
+    result = CliRunner().invoke(
+        app,
+        [
+            "audit",
+            str(log),
+            "--html",
+            str(tmp_path / "r.html"),
+            "--parquet",
+            str(tmp_path / "f.parquet"),
+        ],
+    )
+    assert result.exit_code == 8, result.output
+    assert "pip install 'syncaudit[parquet]'" in result.output
+    assert list(tmp_path.iterdir()) == []

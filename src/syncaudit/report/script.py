@@ -35,6 +35,7 @@ padding:.25rem .45rem;font-size:12px;white-space:pre;box-shadow:0 1px 4px #0003;
 SCRIPT = r"""
 (function () {
   'use strict';
+  var started = performance.now();
   var NS = 'http://www.w3.org/2000/svg';
   var t0ms = Number(document.body.getAttribute('data-t0-ms'));
   var tip = document.createElement('div');
@@ -145,7 +146,10 @@ SCRIPT = r"""
       sel.style.display = 'none';
       if ((b - a) / vb.width * w > 3) zoom(a, b);
     });
-    hit.addEventListener('dblclick', function () { plots.forEach(function (q) { setRange(q, q.home[0], q.home[1]); }); });
+    hit.addEventListener('dblclick', function () {
+      plots.forEach(function (q) { setRange(q, q.home[0], q.home[1]); });
+      try { history.replaceState(null, '', location.pathname); } catch (e) { /* no history */ }
+    });
   });
   function setRange(p, a, b) {
     var vb = p.area.viewBox.baseVal;
@@ -166,8 +170,15 @@ SCRIPT = r"""
       g.appendChild(line); g.appendChild(text);
     });
   }
-  function zoom(a, b) { plots.forEach(function (p) { setRange(p, a, b); }); }
+  function zoom(a, b) {
+    plots.forEach(function (p) { setRange(p, a, b); });
+    try { history.replaceState(null, '', '#t=' + a.toFixed(3) + '-' + b.toFixed(3)); } catch (e) { /* no history */ }
+  }
+  // A link to a time window: report.html#t=12.5-14 opens zoomed to 12.5 s .. 14 s.
+  var linked = /^#t=(-?[\d.]+)-(-?[\d.]+)$/.exec(location.hash);
+  if (linked && Number(linked[2]) > Number(linked[1])) zoom(Number(linked[1]), Number(linked[2]));
   document.body.setAttribute('data-points', String(total));
+  document.body.setAttribute('data-script-ms', (performance.now() - started).toFixed(1));
   document.body.setAttribute('data-ready', 'yes');
 })();
 """
