@@ -265,13 +265,18 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         )
     result_cams: list[CameraAudit] = []
     for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
+        image_missing = (
+            f"image topic {cam.image_topic} is not in the log"
+            if cam.image_topic
+            else "no image topic (set image_topic in the rig)"
+        )
         for what, present in (
-            ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
+            (image_missing, cam.image_topic in log.topics if cam.image_topic else False),
             ("exposure metadata", tables.exposure_source is not None),
             ("trigger records", tables.trigger_source is not None),
         ):
             if not present:
-                missing.append(f"camera {cam.name}: no {what}")
+                missing.append(f"camera {cam.name}: {what if what is image_missing else 'no ' + what}")
         sync = analyze_camera(
             scan,
             index,

@@ -9,6 +9,7 @@ every format: a size cap, UTF-8 (or UTF-16/32 with a byte-order mark), bounded n
 
 from __future__ import annotations
 
+import contextvars
 import difflib
 import json
 import tomllib
@@ -39,6 +40,11 @@ _BOMS: tuple[tuple[bytes, str], ...] = (
 
 M = TypeVar("M", bound="ConfigModel")
 
+_DEPTH: contextvars.ContextVar[int] = contextvars.ContextVar("config_depth", default=0)
+"""How many ConfigModel validations are running: pydantic calls a custom `__init__` for
+nested models too, and only the outermost turns the error into a ConfigError (with the
+whole key path)."""
+
 
 class ConfigModel(BaseModel):
     """Frozen, strict-keys, finite-floats base; validation failures become `ConfigError`."""
@@ -46,20 +52,32 @@ class ConfigModel(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     def __init__(self, /, **data: Any) -> None:
+        nested = _DEPTH.get() > 0
+        token = _DEPTH.set(_DEPTH.get() + 1)
         try:
             super().__init__(**data)
         except ValidationError as exc:
+            if nested:  # inside another model's validation: let that one add the key path
+                raise
             raise ConfigError(
                 f"invalid {type(self).__name__}: {validation_summary(exc, type(self))}"
             ) from None
+        finally:
+            _DEPTH.reset(token)
 
     @classmethod
     def model_validate(cls, *args: Any, **kwargs: Any) -> Self:
         """pydantic's model_validate, with failures as one-line `ConfigError`s."""
+        nested = _DEPTH.get() > 0
+        token = _DEPTH.set(_DEPTH.get() + 1)
         try:
             return super().model_validate(*args, **kwargs)
         except ValidationError as exc:
+            if nested:
+                raise
             raise ConfigError(f"invalid {cls.__name__}: {validation_summary(exc, cls)}") from None
+        finally:
+            _DEPTH.reset(token)
 
     @classmethod
     def from_mapping(cls, data: Any) -> Self:
@@ -161,6 +179,15 @@ def _depth(value: Any) -> int:
     return deepest
 
 
+def _parse_error(exc: Exception) -> str:
+    """A parser's error on one line, with the line and column where it has them."""
+    if isinstance(exc, yaml.MarkedYAMLError) and exc.problem_mark is not None:
+        mark = exc.problem_mark
+        return f"line {mark.line + 1} column {mark.column + 1}: {exc.problem}"
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
 def load_mapping(path: str | Path, *, what: str = "config file") -> dict[str, Any]:
     """Parse a YAML (.yaml/.yml/other), TOML (.toml) or JSON (.json) file into a dict.
 
@@ -182,8 +209,7 @@ def load_mapping(path: str | Path, *, what: str = "config file") -> dict[str, An
     except RecursionError:
         raise ConfigError(f"{path}: {what} nested too deeply to be a config") from None
     except (yaml.YAMLError, tomllib.TOMLDecodeError, ValueError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ConfigError(f"{path}: not valid {kind}: {first}") from None
+        raise ConfigError(f"{path}: not valid {kind}: {_parse_error(exc)}") from None
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):

@@ -226,9 +226,15 @@ def stdout_console() -> Console:
     """A rich console on stdout: styled on a terminal; plain, unwrapped, full width otherwise."""
     from rich.console import Console
 
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            """A reader that went away: stop printing (rich's own exits 1)."""
+            self.quiet = True
+            raise BrokenPipeError
+
     if sys.stdout.isatty():
-        return Console(highlight=False)
-    return Console(width=PIPE_WIDTH, soft_wrap=True, highlight=False, no_color=True)
+        return _Console(highlight=False)
+    return _Console(width=PIPE_WIDTH, soft_wrap=True, highlight=False, no_color=True)
 
 
 def print_json(data: Any) -> None:
