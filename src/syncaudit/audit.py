@@ -276,7 +276,9 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
             ("trigger records", tables.trigger_source is not None),
         ):
             if not present:
-                missing.append(f"camera {cam.name}: {what if what is image_missing else 'no ' + what}")
+                missing.append(
+                    f"camera {cam.name}: {what if what is image_missing else 'no ' + what}"
+                )
         sync = analyze_camera(
             scan,
             index,

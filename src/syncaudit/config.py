@@ -16,11 +16,10 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
-from typing_extensions import Self
 
 from syncaudit.errors import ConfigError
 

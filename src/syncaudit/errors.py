@@ -87,14 +87,32 @@ class Interrupted(BaseException):
 
 EXIT_CODES: tuple[tuple[int, str], ...] = (
     (EXIT_OK, "done"),
-    (LogOpenError.exit_code, "the log cannot be opened (missing, empty, unknown format, directory without metadata)"),
-    (LogReadError.exit_code, "the log is damaged beyond reading (in `gate`: some log could not be read)"),
-    (UnknownTypeError.exit_code, "a needed message type or encoding has no definition or cannot be read"),
+    (
+        LogOpenError.exit_code,
+        "the log cannot be opened (missing, empty, unknown format, directory without metadata)",
+    ),
+    (
+        LogReadError.exit_code,
+        "the log is damaged beyond reading (in `gate`: some log could not be read)",
+    ),
+    (
+        UnknownTypeError.exit_code,
+        "a needed message type or encoding has no definition or cannot be read",
+    ),
     (DecodeError.exit_code, "vendor packet bytes do not match their layout"),
-    (ConfigError.exit_code, "a config file (rig, calib config, policy) is malformed or nonsensical"),
+    (
+        ConfigError.exit_code,
+        "a config file (rig, calib config, policy) is malformed or nonsensical",
+    ),
     (NoDataError.exit_code, "the log holds nothing to audit (empty, missing topics)"),
-    (OutputError.exit_code, "an output cannot be written (exists without `--overwrite`, no permission, disk full, is a directory)"),
-    (GateFailedError.exit_code, "`--gate`: a threshold or policy check failed, or something required was not judged"),
+    (
+        OutputError.exit_code,
+        "an output cannot be written (exists without `--overwrite`, no permission, disk full, is a directory)",
+    ),
+    (
+        GateFailedError.exit_code,
+        "`--gate`: a threshold or policy check failed, or something required was not judged",
+    ),
     (EXIT_USAGE, "usage error: unknown option, bad option value, conflicting options"),
     (EXIT_INTERNAL, "internal error (a bug; `SYNCAUDIT_DEBUG=1` shows the traceback)"),
     (EXIT_INTERRUPTED, "interrupted (SIGINT or SIGTERM); no partial output is left"),

@@ -13,8 +13,8 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from syncaudit.config import ConfigModel, load_model
-
+from syncaudit.config import ConfigModel as ConfigModel
+from syncaudit.config import load_model
 
 # --------------------------------------------------------------------------- simulation
 

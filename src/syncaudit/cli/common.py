@@ -6,6 +6,7 @@ Kept free of heavy imports (no numpy, pandas, pydantic, rich, the simulator): `s
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -22,7 +23,8 @@ from typer.core import TyperGroup
 try:  # typer >= 0.22 vendors click
     from typer._click import exceptions as click_errors
 except ImportError:  # pragma: no cover - older typer on the click package
-    from click import exceptions as click_errors  # type: ignore[no-redef]
+    from click import exceptions as click_errors  # type: ignore[no-redef,import-not-found,unused-ignore]
+
 
 from syncaudit import __version__
 from syncaudit.errors import (
@@ -239,7 +241,12 @@ def stdout_console() -> Console:
 
 def print_json(data: Any) -> None:
     """The result as indented JSON on stdout."""
-    emit(lambda: sys.stdout.write(json.dumps(data, indent=2, allow_nan=False) + "\n"))
+    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+
+    def show() -> None:
+        sys.stdout.write(text)
+
+    emit(show)
 
 
 def json_text(data: Any) -> str:
@@ -277,12 +284,9 @@ def main() -> None:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
         if exc.code is not None and not isinstance(exc.code, int):
             print(exc.code, file=sys.stderr)
-    try:
+    # A reader that went away (e.g. `| head`) is not an error.
+    with contextlib.suppress(OSError):
         sys.stdout.flush()
-    except (BrokenPipeError, OSError):  # a reader that went away (e.g. `| head`): not an error
-        pass
-    try:
+    with contextlib.suppress(OSError):
         sys.stderr.flush()
-    except OSError:
-        pass
     os._exit(code)

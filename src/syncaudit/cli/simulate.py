@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, get_args
+from typing import TYPE_CHECKING, Annotated, get_args
 
 import typer
 
 from syncaudit.cli.common import OverwriteFlag, SyncauditGroup, app, emit, output_set, run
 from syncaudit.errors import ConfigError, UsageError
 from syncaudit.simulate import LidarModel
+
+if TYPE_CHECKING:
+    from syncaudit.writers.log_writer import LogFormat
 
 simulate_app = typer.Typer(
     cls=SyncauditGroup,
@@ -78,9 +81,7 @@ def simulate_sync(
     ] = 0.0,
     drop_fraction: Annotated[
         float,
-        typer.Option(
-            "--drop-fraction", min=0.0, max=0.5, help="Fraction of packets dropped."
-        ),
+        typer.Option("--drop-fraction", min=0.0, max=0.5, help="Fraction of packets dropped."),
     ] = 0.001,
     controller: Annotated[
         bool,
@@ -147,7 +148,7 @@ def simulate_sync(
     run(job)
 
 
-def _format(out: Path, fmt: str | None) -> str:
+def _format(out: Path, fmt: str | None) -> LogFormat:
     """The log format for OUT: `--format` if given (it must fit OUT's suffix), else the suffix."""
     from syncaudit.writers.log_writer import infer_format
 
@@ -194,7 +195,9 @@ def simulate_calib(
     ] = 0.3,
     degenerate: Annotated[
         bool,
-        typer.Option("--degenerate", help="A scene of ground and one wall only (not calibratable)."),
+        typer.Option(
+            "--degenerate", help="A scene of ground and one wall only (not calibratable)."
+        ),
     ] = False,
     seed: SeedOption = 0,
     fmt: FormatOption = None,
@@ -208,7 +211,7 @@ def simulate_calib(
         from syncaudit.writers.log_writer import log_target
 
         log_format = _format(out, fmt)
-        target = log_target(out, log_format)  # type: ignore[arg-type]
+        target = log_target(out, log_format)
         try:
             config = CalibSceneConfig(
                 seed=seed,
@@ -224,11 +227,13 @@ def simulate_calib(
             raise UsageError(f"simulate calib: {exc}") from None
         with output_set(overwrite=overwrite) as outputs:
             simulate_calib_session(
-                target, config, fmt=log_format, overwrite=overwrite, outputs=outputs  # type: ignore[arg-type]
+                target,
+                config,
+                fmt=log_format,
+                overwrite=overwrite,
+                outputs=outputs,
             )
-        line = (
-            f"wrote {target} ({stops} stops, {beams}-beam LiDARs), truth {truth_path(target)}"
-        )
+        line = f"wrote {target} ({stops} stops, {beams}-beam LiDARs), truth {truth_path(target)}"
         emit(lambda: print(line))
 
     run(job)

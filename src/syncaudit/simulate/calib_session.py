@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from syncaudit.calib import se3
 from syncaudit.calib.config import CalibSceneConfig, LidarSimConfig
 from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_scan
-from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, log_target, open_writer
+from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
 from syncaudit.writers.outputs import OutputSet
 
 __all__ = ["CalibSceneConfig", "simulate_calib_session", "truth_path"]
@@ -201,11 +201,13 @@ def simulate_calib_session(
     Raises:
         OutputError: an output exists without `overwrite`, or cannot be written.
     """
-    fmt = infer_format(Path(out), fmt)
-    out = log_target(Path(out), fmt)
+    out = Path(out)
+    fmt = infer_format(out, fmt)
     own = outputs is None
-    outputs = outputs if outputs is not None else OutputSet(
-        overwrite=overwrite, overwrite_hint="pass overwrite=True to replace it"
+    outputs = (
+        outputs
+        if outputs is not None
+        else OutputSet(overwrite=overwrite, overwrite_hint="pass overwrite=True to replace it")
     )
     try:
         outputs.add(truth_path(out))

@@ -45,6 +45,8 @@ from numpy.typing import NDArray
 from pydantic import Field, model_validator
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.config import ConfigModel
+from syncaudit.errors import ConfigError
 from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, build_pandar_scan, encode_hesai
 from syncaudit.lidar.velodyne import (
     HOUR_US,
@@ -54,10 +56,8 @@ from syncaudit.lidar.velodyne import (
     velodyne_firing_offsets_ns,
     velodyne_revolution_schedule,
 )
-from syncaudit.config import ConfigModel
-from syncaudit.errors import ConfigError
 from syncaudit.simulate import LidarModel
-from syncaudit.writers.log_writer import LogFormat, LogWriter, log_target, open_writer
+from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
@@ -1047,10 +1047,14 @@ def simulate_sync_log(
     Raises:
         OutputError: an output exists without `config.overwrite`, or cannot be written.
     """
-    out = log_target(Path(out), config.log_format)
+    out = Path(out)
     own = outputs is None
-    outputs = outputs if outputs is not None else OutputSet(
-        overwrite=config.overwrite, overwrite_hint="set overwrite=True to replace it"
+    outputs = (
+        outputs
+        if outputs is not None
+        else OutputSet(
+            overwrite=config.overwrite, overwrite_hint="set overwrite=True to replace it"
+        )
     )
     try:
         truth_file = truth_path(out)
@@ -1072,7 +1076,11 @@ def simulate_sync_log(
 _LIDAR_ALIASES: dict[str, LidarModel] = {
     alias: model
     for model in typing.get_args(LidarModel)
-    for alias in (model.lower(), model.lower().replace("-", ""), model.lower().removeprefix("pandar"))
+    for alias in (
+        model.lower(),
+        model.lower().replace("-", ""),
+        model.lower().removeprefix("pandar"),
+    )
 }
 
 

@@ -402,7 +402,8 @@ def open_writer(
 ) -> LogWriter:
     """Start writing a log at `path` in `fmt` (None: infer from the suffix).
 
-    For 'db3' `path` is the bag directory to create (see `log_target`). With `outputs`
+    For 'db3' `path` is the bag directory to create, exactly as given (the CLI names it
+    with `log_target`). With `outputs`
     the log is written into that OutputSet's temporary and committed with the set's other
     outputs; without, `close()` publishes it on its own.
 
@@ -410,8 +411,8 @@ def open_writer(
         OutputError: `path` exists and `overwrite` is False, or it is a folder that is not
             a bag this tool writes, or its folder is missing.
     """
-    fmt = infer_format(Path(path), fmt)
-    path = log_target(Path(path), fmt)
+    path = Path(path)
+    fmt = infer_format(path, fmt)
     if fmt == "mcap":
         return McapLogWriter(path, overwrite, False, mcap_chunk_bytes, outputs)
     if fmt == "mcap-ros1":

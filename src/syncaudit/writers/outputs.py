@@ -5,7 +5,7 @@ One rule for every output of every command (`--json-out`, `--csv`, `--html`,
 
 1. Every target is checked before any work (`OutputSet.add`): an existing target needs
    `overwrite`; an existing directory is replaced only when it is a log this tool writes
-   as a directory (a ROS 2 bag folder: `metadata.yaml` and `.db3` files, nothing else);
+   as a folder (a ROS 2 bag: `metadata.yaml` and `.db3` files, nothing else);
    any other directory is refused, never deleted; an input of the run is never a target.
 2. Everything is written to temporaries in a hidden folder beside each target (same file
    system, so the final step is a rename).
@@ -126,12 +126,11 @@ class OutputSet:
     def _check_existing(self, target: Path, kind: OutputKind) -> None:
         if _is_device(target):
             return  # written through at commit, never replaced
-        if target.is_dir() and not target.is_symlink():
-            if kind != "dir" or not _is_tool_bag_dir(target):
-                raise OutputError(
-                    f"{target}: is an existing folder that is not a log this tool wrote; "
-                    "not replacing it (choose another name)"
-                )
+        if target.is_dir() and not target.is_symlink() and not _is_tool_bag_dir(target):
+            raise OutputError(
+                f"{target}: is an existing folder that is not a log this tool wrote; "
+                "not replacing it (choose another name)"
+            )
         if not self.overwrite:
             raise OutputError(f"{target}: exists ({self._hint})")
 
@@ -163,7 +162,7 @@ class OutputSet:
         Catches what a full disk or a lost permission raises on the way: OSError and
         sqlite3's OperationalError (ROS 2 bags).
         """
-        tmp = self.add(target)  if Path(target) not in self._targets else self.temporary(target)
+        tmp = self.temporary(target) if Path(target) in self._targets else self.add(target)
         try:
             yield tmp
         except (OSError, sqlite3.Error) as exc:
@@ -207,6 +206,9 @@ class OutputSet:
         for target, (tmp, _) in self._targets.items():
             if not (tmp.exists() or tmp.is_symlink()):
                 raise OutputError(f"{target}: was not written (nothing committed)")
+            appeared = (target.exists() or target.is_symlink()) and not _is_device(target)
+            if appeared and not self.overwrite:
+                raise OutputError(f"{target}: appeared while writing; not replacing it")
         replaced: list[tuple[Path, Path | None]] = []  # (target, where its old content went)
         try:
             for target, (tmp, _) in self._targets.items():
