@@ -15,7 +15,7 @@ from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.topics import detect_cameras
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
-from syncaudit.inspect_log import LidarRow, lidar_row
+from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
 from syncaudit.lidar.scan import LidarScanner
 from syncaudit.lidar.stream import (
     find_ouster_metadata_topic,
@@ -294,6 +294,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         result_cams.append(
             CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))
         )
+    warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in log.warnings)
     return AuditResult(
         path=log.summary.path,

@@ -51,8 +51,12 @@ class DecodeError(SyncauditError):
     exit_code = 5
 
 
-class ConfigError(SyncauditError):
-    """A rig or analysis configuration is malformed or nonsensical."""
+class ConfigError(SyncauditError, ValueError):
+    """A rig or analysis configuration is malformed or nonsensical.
+
+    Also a ValueError, as pydantic's ValidationError is: code that validated a config and
+    caught ValueError keeps working now that every config model raises ConfigError.
+    """
 
     exit_code = 6
 

@@ -427,3 +427,23 @@ def test_sigterm_leaves_no_partial_output(tmp_path: Path) -> None:
     assert "interrupted" in stderr and "Traceback" not in stderr
     assert out.read_text() == "previous"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["long.mcap"]
+
+
+def test_audit_keeps_lidar_warnings_and_the_clock_offset_sign(
+    lidar_data: Path, tmp_path: Path
+) -> None:
+    """The VLP-32 recording is FOV-cropped: info and audit (JSON, HTML) both say so."""
+    log = lidar_data / "velodyne_vlp32" / "1713492677464078412"
+    if not log.exists():
+        pytest.skip("velodyne_vlp32 recording absent")
+    info = runner.invoke(app, ["info", str(log), "--json"])
+    assert info.exit_code == 0, info.output
+    crop = [w for w in json.loads(info.stdout)["warnings"] if "FOV-cropped" in w]
+    assert crop
+    out, html = tmp_path / "a.json", tmp_path / "a.html"
+    audited = runner.invoke(app, ["audit", str(log), "--json-out", str(out), "--html", str(html)])
+    assert audited.exit_code == 0, audited.output
+    assert crop[0] in json.loads(out.read_text())["warnings"]
+    page = html.read_text()
+    assert "FOV-cropped" in page
+    assert "host - sensor +51.6" in page
