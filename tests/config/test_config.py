@@ -34,7 +34,10 @@ def _rig(tmp_path: Path, text: str, name: str = "rig.yaml") -> Path:
         ("cameras:\n  - name: a\n    yaw_deg: .inf\n", "cameras.0.yaw_deg"),
         ("cameras:\n  - name: a\n    yaw_deg: 1e308\n", "cameras.0.yaw_deg"),
         ("cameras:\n  - name: a\n    azimuth_deg: 360\n", "cameras.0.azimuth_deg"),
-        ("cameras:\n  - name: a\n    assumed_exposure_us: 1e308\n", "cameras.0.assumed_exposure_us"),
+        (
+            "cameras:\n  - name: a\n    assumed_exposure_us: 1e308\n",
+            "cameras.0.assumed_exposure_us",
+        ),
     ],
 )
 def test_rig_numbers_are_finite_and_ranged(tmp_path: Path, body: str, key: str) -> None:
@@ -45,13 +48,15 @@ def test_rig_numbers_are_finite_and_ranged(tmp_path: Path, body: str, key: str) 
 def test_lidar_azimuths_are_ranged(tmp_path: Path) -> None:
     for value in (".nan", "360", "-1"):
         text = f"lidar:\n  topic: /v\n  azimuth_of_x_axis_deg: {value}\n"
-        with pytest.raises(ConfigError, match="lidar.azimuth_of_x_axis_deg"):
+        with pytest.raises(ConfigError, match=r"lidar\.azimuth_of_x_axis_deg"):
             load_rig(_rig(tmp_path, text))
 
 
 def test_typo_names_the_nearest_key(tmp_path: Path) -> None:
     text = RIG + "cameras:\n  - name: a\n    imag_topic: /a\n"
-    with pytest.raises(ConfigError, match=r"imag_topic: unknown key \(did you mean 'image_topic'\?\)"):
+    with pytest.raises(
+        ConfigError, match=r"imag_topic: unknown key \(did you mean 'image_topic'\?\)"
+    ):
         load_rig(_rig(tmp_path, text))
     with pytest.raises(ConfigError, match=r"thresholds.error_mean: unknown key \(did you mean"):
         load_rig(_rig(tmp_path, RIG + "thresholds:\n  error_mean: 3\n"))
