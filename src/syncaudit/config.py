@@ -156,8 +156,7 @@ def read_text(path: Path, *, what: str = "config file") -> str:
     encoding = next((name for bom, name in _BOMS if data.startswith(bom)), "utf-8")
     if encoding == "utf-8" and b"\x00" in data:
         raise ConfigError(
-            f"{path}: {what} holds NUL bytes (UTF-16 without a byte-order mark?); "
-            "save it as UTF-8"
+            f"{path}: {what} holds NUL bytes (UTF-16 without a byte-order mark?); save it as UTF-8"
         )
     try:
         return data.decode(encoding)

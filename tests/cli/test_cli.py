@@ -412,7 +412,17 @@ def test_sigterm_leaves_no_partial_output(tmp_path: Path) -> None:
     out = tmp_path / "long.mcap"
     out.write_text("previous")
     process = subprocess.Popen(
-        [sys.executable, "-m", "syncaudit", "simulate", "sync", str(out), "--duration", "120", "--overwrite"],
+        [
+            sys.executable,
+            "-m",
+            "syncaudit",
+            "simulate",
+            "sync",
+            str(out),
+            "--duration",
+            "120",
+            "--overwrite",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
