@@ -206,6 +206,8 @@ class LogWriter(ABC):
             with self._outputs.writing(self.path):
                 self._finish()
         except BaseException:
+            with contextlib.suppress(Exception):
+                self._discard()  # close what _finish left open (a full disk stops it midway)
             self._remove_temporary()
             raise
         if self._own_outputs:
@@ -342,7 +344,11 @@ class Rosbag2LogWriter(LogWriter):
         super().__init__(path, overwrite, writer_registry(ros1=False), outputs)
         # Built as <tmp>/<name>/<name>.db3 so that the bag keeps its final file names.
         self._bag = Rosbag2Writer(self._tmp_path, version=Rosbag2Writer.VERSION_LATEST)
-        self._bag.open()
+        try:
+            self._bag.open()
+        except BaseException:
+            self.abort()  # a full disk while creating the database: close it, drop it
+            raise
         self._connections: dict[str, Any] = {}
 
     def _add_topic(self, topic: str, msgtype: str, latched: bool) -> None:
@@ -359,7 +365,8 @@ class Rosbag2LogWriter(LogWriter):
 
     def _discard(self) -> None:
         # rosbags has no abort for sqlite3 storage: close its connection, the file goes.
-        conn = getattr(self._bag.storage, "conn", None)
+        storage = getattr(self._bag, "storage", None)
+        conn = getattr(storage, "conn", None)
         if conn is not None:
             conn.close()
 
@@ -373,7 +380,11 @@ class Rosbag1LogWriter(LogWriter):
     def __init__(self, path: Path, overwrite: bool, outputs: OutputSet | None = None) -> None:
         super().__init__(path, overwrite, writer_registry(ros1=True), outputs)
         self._bag = Rosbag1Writer(self._tmp_path)
-        self._bag.open()
+        try:
+            self._bag.open()
+        except BaseException:
+            self.abort()
+            raise
         self._connections: dict[str, Any] = {}
 
     def _add_topic(self, topic: str, msgtype: str, latched: bool) -> None:
