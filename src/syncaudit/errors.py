@@ -132,10 +132,7 @@ def exit_code_table() -> str:
 
 
 def validation_summary(exc: ValidationError) -> str:
-    """A pydantic ValidationError on one line: `field.path: message (+N more)`."""
-    errors = exc.errors()
-    first = errors[0]
-    where = ".".join(str(part) for part in first["loc"]) or "(top level)"
-    message = " ".join(str(first["msg"]).split())
-    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
-    return f"{where}: {message}{more}"
+    """A pydantic ValidationError on one line (see `syncaudit.config.validation_summary`)."""
+    from syncaudit.config import validation_summary as one_line
+
+    return one_line(exc)
