@@ -155,6 +155,7 @@ def test_help_lists_the_verbs_and_version() -> None:
         (["audit", "x.mcap", "--jobs", "0"], "--jobs"),
         (["audit", "x.mcap", "--jobs", "-1"], "--jobs"),
         (["audit", "x.mcap", "--jobs", "two"], "--jobs"),
+        (["audit", "x.mcap", "--pairings", "o.txt"], "--pairings"),
         (["simulate", "sync", "o.mcap", "--lidar", "HDL-99"], "--lidar"),
         (["simulate", "sync", "o.mcap", "--format", "zip"], "--format"),
         (["simulate", "sync", "o.mcap", "--format", "db3"], "--format"),
@@ -457,3 +458,13 @@ def test_audit_keeps_lidar_warnings_and_the_clock_offset_sign(
     page = html.read_text()
     assert "FOV-cropped" in page
     assert "host - sensor +51.6" in page
+
+
+def test_csv_header_is_the_frame_tables_columns(tmp_path: Path) -> None:
+    """The header written without cameras is the analysis' own frame table columns."""
+    from syncaudit.writers.frames_csv import FRAME_TABLE_COLUMNS
+
+    csv = tmp_path / "f.csv"
+    result = runner.invoke(app, ["audit", str(BAG), "--rig", str(BAG_RIG), "--csv", str(csv)])
+    assert result.exit_code == 0, result.output
+    assert csv.read_text().splitlines()[0].split(",") == list(FRAME_TABLE_COLUMNS)

@@ -61,9 +61,7 @@ def audit(
     """Audit LiDAR-camera sync per camera (Eq 1-6), the recommended delay and the verdict."""
 
     def job() -> None:
-        from syncaudit.writers.log_writer import infer_format, log_target
-
-        pairings = log_target(pairings_out, infer_format(pairings_out)) if pairings_out else None
+        pairings = _pairings_target(pairings_out) if pairings_out else None
         with output_set(
             overwrite=overwrite, inputs=(log, rig), targets=(json_out, html_out, csv_out)
         ) as outputs:
@@ -101,3 +99,14 @@ def audit(
             raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
 
     run(job)
+
+
+def _pairings_target(path: Path) -> Path:
+    """Where `--pairings PATH` is written (`p.db3` -> the bag folder `p`); usage error if unknown."""
+    from syncaudit.errors import ConfigError, UsageError
+    from syncaudit.writers.log_writer import infer_format, log_target
+
+    try:
+        return log_target(path, infer_format(path))
+    except ConfigError as exc:
+        raise UsageError(f"--pairings: {exc}") from None
