@@ -468,3 +468,16 @@ def test_csv_header_is_the_frame_tables_columns(tmp_path: Path) -> None:
     result = runner.invoke(app, ["audit", str(BAG), "--rig", str(BAG_RIG), "--csv", str(csv)])
     assert result.exit_code == 0, result.output
     assert csv.read_text().splitlines()[0].split(",") == list(FRAME_TABLE_COLUMNS)
+
+
+def test_help_imports_nothing_heavy() -> None:
+    """`syncaudit --help` stays fast: no numpy, pandas, pydantic, rich, yaml or simulator."""
+    code = (
+        "import sys; from syncaudit.cli import app; "
+        "heavy = {'numpy', 'pandas', 'pydantic', 'rich', 'yaml', 'syncaudit.simulate.sync_log'}; "
+        "print(sorted(heavy & set(sys.modules)))"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert loaded == "[]"
