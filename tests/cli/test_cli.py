@@ -163,6 +163,7 @@ def test_help_lists_the_verbs_and_version() -> None:
         (["simulate", "sync", "o.xyz"], "suffix"),
         (["simulate", "calib", "o.mcap", "--stops", "1"], "--stops"),
         (["simulate", "calib", "o.mcap", "--beams", "1"], "--beams"),
+        (["simulate", "calib", "o.mcap", "--turning-scans", "2"], "--turning-scans need --scans-"),
         (["calib", "x.mcap", "--topics", "/only/one"], "--topics needs two or more topics"),
         (["simulate", "nonsense"], "nonsense"),
     ],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, get_args
 
@@ -43,10 +44,32 @@ FormatOption = Annotated[
 ]
 
 
-def _option_error(option: str, exc: ConfigError) -> UsageError:
-    """A setting refused by the simulator's config, worded for the option the user typed."""
-    detail = str(exc).split(": ", 1)[-1]
-    return UsageError(f"{option}: {detail}")
+_OPTION_OF_FIELD: dict[str, str] = {
+    "duration_s": "--duration",
+    "packet_drop_fraction": "--drop-fraction",
+    "clock_offset_ns": "--clock-offset-s",
+    "delay_error_us": "--delay-error-us",
+    "lidar_model": "--lidar",
+    "log_format": "--format",
+    "n_stops": "--stops",
+    "scans_per_stop": "--scans-per-stop",
+    "turning_scans": "--turning-scans",
+    "beams": "--beams",
+    "recorded_rotation_error_deg": "--rotation-error-deg",
+    "recorded_translation_error_cm": "--translation-error-cm",
+}
+"""Simulator config fields and the options that set them, for messages in the user's words."""
+
+
+def _usage(exc: ConfigError) -> UsageError:
+    """A setting the simulator's config refused, worded with the options the user typed."""
+    detail = str(exc)
+    if detail.startswith("invalid "):
+        detail = detail.split(": ", 1)[-1]
+    detail = detail.removeprefix("(top level): ")
+    for field, option in _OPTION_OF_FIELD.items():
+        detail = re.sub(rf"(?<![\w-]){field}\b", option, detail)
+    return UsageError(detail)
 
 
 @simulate_app.command("sync")
@@ -107,7 +130,7 @@ def simulate_sync(
         try:
             model = lidar_model(lidar)
         except ConfigError as exc:
-            raise _option_error("--lidar", exc) from None
+            raise UsageError(f"--lidar: {exc}") from None
         log_format = _format(out, fmt)
         target = log_target(out, log_format)
         try:
@@ -125,7 +148,7 @@ def simulate_sync(
                 packet_drop_fraction=drop_fraction,
             )
         except ConfigError as exc:
-            raise UsageError(f"simulate sync: {exc}") from None
+            raise _usage(exc) from None
         import yaml
 
         from syncaudit.simulate.rig_file import rig_from_truth, rig_path
@@ -199,6 +222,24 @@ def simulate_calib(
             "--degenerate", help="A scene of ground and one wall only (not calibratable)."
         ),
     ] = False,
+    scans_per_stop: Annotated[
+        int,
+        typer.Option(
+            "--scans-per-stop",
+            min=1,
+            max=50,
+            help="Scans each LiDAR records per stop (2 or more lets calib find the stops).",
+        ),
+    ] = 1,
+    turning_scans: Annotated[
+        int,
+        typer.Option(
+            "--turning-scans",
+            min=0,
+            max=50,
+            help="Scans recorded while turning between stops (needs --scans-per-stop >= 2).",
+        ),
+    ] = 0,
     seed: SeedOption = 0,
     fmt: FormatOption = None,
     overwrite: OverwriteFlag = False,
@@ -216,6 +257,8 @@ def simulate_calib(
             config = CalibSceneConfig(
                 seed=seed,
                 n_stops=stops,
+                scans_per_stop=scans_per_stop,
+                turning_scans=turning_scans,
                 scene=SceneConfig(kind="ground_and_wall" if degenerate else "yard"),
                 lidars=rig_preset(
                     beams,
@@ -224,7 +267,7 @@ def simulate_calib(
                 ),
             )
         except ConfigError as exc:
-            raise UsageError(f"simulate calib: {exc}") from None
+            raise _usage(exc) from None
         with output_set(overwrite=overwrite) as outputs:
             simulate_calib_session(
                 target,
