@@ -337,6 +337,11 @@ def test_simulate_db3_names_the_bag_folder_sanely(tmp_path: Path) -> None:
     assert (tmp_path / "drive" / "drive.db3").is_file()
     assert (tmp_path / "drive.truth.json").is_file() and (tmp_path / "drive.rig.yaml").is_file()
     assert not (tmp_path / "drive.db3").exists()
+    pairs = runner.invoke(
+        app, ["audit", str(BAG), "--rig", str(BAG_RIG), "--pairings", str(tmp_path / "p.db3")]
+    )
+    assert pairs.exit_code == 0, pairs.output
+    assert sorted(p.name for p in (tmp_path / "p").iterdir()) == ["metadata.yaml", "p.db3"]
 
 
 def test_simulate_calib_writes_session(tmp_path: Path) -> None:
@@ -406,9 +411,9 @@ def test_piped_output_is_complete_and_head_is_fine(tmp_path: Path) -> None:
     assert piped.stderr == ""
 
 
-def test_sigterm_leaves_no_partial_output(tmp_path: Path) -> None:
-    """SIGTERM while simulating: exit 130, no temporary, the previous output intact."""
-    import signal
+@pytest.mark.parametrize("signum", [15, 2])
+def test_a_signal_leaves_no_partial_output(tmp_path: Path, signum: int) -> None:
+    """SIGTERM or SIGINT while simulating: exit 130, no temporary, the previous output intact."""
     import time
 
     out = tmp_path / "long.mcap"
@@ -433,7 +438,7 @@ def test_sigterm_leaves_no_partial_output(tmp_path: Path) -> None:
     while time.monotonic() < deadline and not any(tmp_path.glob(".syncaudit-*")):
         time.sleep(0.05)
     time.sleep(0.3)
-    process.send_signal(signal.SIGTERM)
+    process.send_signal(signum)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
