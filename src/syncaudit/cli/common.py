@@ -12,7 +12,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
@@ -58,12 +58,23 @@ def _on_sigterm(signum: int, frame: FrameType | None) -> None:
     raise Interrupted(f"signal {signum}")
 
 
-def install_signal_handlers() -> None:
-    """SIGTERM raises `Interrupted` in the main process (SIGINT already raises)."""
+@contextlib.contextmanager
+def signals_raise() -> Iterator[None]:
+    """While running a command, SIGTERM raises `Interrupted` (SIGINT already raises).
+
+    The previous handler comes back afterwards (the app may run inside a test or a host
+    program).
+    """
     global _MAIN_PID
-    if threading.current_thread() is threading.main_thread():
-        _MAIN_PID = os.getpid()
-        signal.signal(signal.SIGTERM, _on_sigterm)
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _MAIN_PID = os.getpid()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _usage_line(exc: click_errors.UsageError) -> str:
@@ -90,15 +101,15 @@ class SyncauditGroup(TyperGroup):
         **extra: Any,
     ) -> Any:
         """Run the command line; in standalone mode exit with the documented code."""
-        install_signal_handlers()
         try:
-            code = super().main(
-                args=args,
-                prog_name=prog_name,
-                complete_var=complete_var,
-                standalone_mode=False,
-                **extra,
-            )
+            with signals_raise():
+                code = super().main(
+                    args=args,
+                    prog_name=prog_name,
+                    complete_var=complete_var,
+                    standalone_mode=False,
+                    **extra,
+                )
         except _NO_ARGS_IS_HELP as exc:
             if exc.ctx is not None:
                 typer.echo(exc.ctx.get_help())
