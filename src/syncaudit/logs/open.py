@@ -52,7 +52,9 @@ def open_log(path: str | Path) -> LogReader:
     if head.startswith(MCAP_MAGIC):
         return McapLog(path)
     if head.startswith(ROSBAG1_MAGIC):
-        return _rosbags_log(path, ros1=True)
+        from syncaudit.logs.rosbag1_log import Rosbag1Log
+
+        return Rosbag1Log(path)
     if head.startswith(ROSBAG_ANY_MAGIC):
         version = head[len(ROSBAG_ANY_MAGIC) :].split(b"\n")[0].decode("ascii", "replace")
         raise LogOpenError(f"{path}: ROS 1 bag format version {version} is not supported (2.0 is)")

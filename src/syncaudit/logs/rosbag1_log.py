@@ -1,0 +1,268 @@
+"""ROS 1 `.bag` files read by our own reader: chunk units, a scan for bags without an index."""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.logs.base import LogReader
+from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
+from syncaudit.logs.rosbag1 import (
+    MAGIC,
+    UNIT_KIND,
+    BagCutError,
+    BagFile,
+    BagFormatError,
+    BagIndex,
+    Rosbag1ChunkReader,
+    open_bag_file,
+    read_bag_header,
+    read_index,
+    scan_chunks,
+)
+from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
+
+Message = tuple[int, int, int, bytes | memoryview]
+"""(log_time_ns, index_in_unit, connection id, payload) as a chunk reader yields them."""
+
+if TYPE_CHECKING:
+    from rosbags.interfaces.typing import Typesdict
+
+
+class Rosbag1Log(LogReader):
+    """A ROS 1 bag (format 2.0): chunk-parallel units from its index, or from a chunk scan."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.warnings = []
+        self._registry: TypeRegistry | None = None
+        try:
+            bag = open_bag_file(path)
+        except OSError as exc:
+            raise LogOpenError(f"{path}: cannot read: {one_line(exc)}") from exc
+        try:
+            self._index = self._load(bag)
+        finally:
+            bag.handle.close()
+        self.summary = self._make_summary()
+        self._report_damage()
+        self._chunk_reader = Rosbag1ChunkReader()
+
+    def _load(self, bag: BagFile) -> BagIndex:
+        """The index if it is whole, else a scan of the chunks (with the reason kept)."""
+
+        if bag.read(0, len(MAGIC)) != MAGIC:
+            raise LogOpenError(f"{self.path}: not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0')")
+        try:
+            index_pos, conn_count, chunk_count, first = read_bag_header(bag)
+        except BagCutError:
+            raise LogReadError(
+                f"{self.path}: ROS 1 bag cut off at byte {bag.size} inside its bag header "
+                "record; no message can be read"
+            ) from None
+        except BagFormatError as exc:
+            raise LogReadError(f"{self.path}: ROS 1 bag header unreadable: {exc}") from None
+        if first > bag.size:
+            raise LogReadError(
+                f"{self.path}: ROS 1 bag cut off at byte {bag.size} inside its bag header "
+                "record; no message can be read"
+            )
+        if index_pos == 0:
+            index = scan_chunks(bag, first)
+            index.damage = index.damage or "it has no index (the recording was not closed)"
+            return index
+        if index_pos >= bag.size or index_pos < first:
+            reason = (
+                f"its index at byte {index_pos} is past the end of the file"
+                if index_pos >= bag.size
+                else f"its index position {index_pos} is inside the bag header"
+            )
+            index = scan_chunks(bag, first)
+            index.damage = index.damage or reason
+            if index_pos >= bag.size and index.cut_at is None:
+                index.cut_at = bag.size  # cut at a record boundary, before the index
+            return index
+        try:
+            return read_index(bag, index_pos, conn_count, chunk_count)
+        except BagFormatError as exc:
+            index = scan_chunks(bag, first)
+            index.damage = index.damage or f"its index is damaged ({one_line(exc)})"
+            return index
+
+    def _make_summary(self) -> LogSummary:
+        chunks = self._index.chunks
+        counts: dict[int, int] = {}
+        for span in chunks:
+            for conn_id, count in span.counts.items():
+                counts[conn_id] = counts.get(conn_id, 0) + count
+        total = sum(counts.values())
+        summary = LogSummary(
+            path=str(self.path),
+            container="rosbag1",
+            start_ns=min((c.start_ns for c in chunks if c.counts), default=None) if total else None,
+            end_ns=max((c.end_ns for c in chunks if c.counts), default=None) if total else None,
+            message_count=total,
+        )
+        for conn in sorted(self._index.connections.values(), key=lambda c: c.conn_id):
+            prior = summary.topics.get(conn.topic)
+            summary.topics[conn.topic] = TopicInfo(
+                name=conn.topic,
+                msgtype=prior.msgtype if prior is not None else conn.msgtype,
+                encoding="ros1",
+                count=counts.get(conn.conn_id, 0) + (prior.count or 0 if prior else 0),
+                has_definition=bool(conn.definition) or bool(prior and prior.has_definition),
+            )
+            if prior is not None and prior.msgtype != conn.msgtype:
+                self.warn(
+                    "rosbag1-mixed-types",
+                    f"{self.path}: topic {conn.topic} is recorded with types {prior.msgtype} "
+                    f"and {conn.msgtype}; only {prior.msgtype} is reported",
+                )
+        unknown = {c for span in chunks for c in span.counts} - set(self._index.connections)
+        if unknown:
+            self.warn(
+                "rosbag1-unknown-connection",
+                f"{self.path}: messages of connection(s) {sorted(unknown)} have no connection "
+                "record (their topic is unknown); they are left out",
+            )
+        return summary
+
+    def _report_damage(self) -> None:
+        index = self._index
+        if index.damage is None and index.cut_at is None:
+            return
+        total = self.summary.message_count or 0
+        if index.cut_at is not None:
+            text = (
+                f"{self.path}: ROS 1 bag cut off at byte {index.cut_at} (recording "
+                f"interrupted?); reading the {total} complete messages before the cut"
+            )
+            code = "rosbag1-truncated"
+        elif index.damage is not None and index.damage.startswith("it "):
+            text = (
+                f"{self.path}: ROS 1 bag read by scanning its chunks because {index.damage}; "
+                f"{total} messages found"
+            )
+            code = "rosbag1-no-index"
+        else:
+            text = (
+                f"{self.path}: ROS 1 bag damaged ({index.damage}); reading the {total} "
+                "complete messages before it"
+            )
+            code = "rosbag1-damaged"
+        if total == 0 and (index.cut_at is not None or code == "rosbag1-damaged"):
+            raise LogReadError(text.split("; reading")[0] + "; no complete message can be read")
+        self.warn(code, text)
+
+    # -- units -------------------------------------------------------------------------------
+
+    def _conn_ids(self, topics: frozenset[str] | None) -> set[int]:
+        return {
+            c.conn_id
+            for c in self._index.connections.values()
+            if topics is None or c.topic in topics
+        }
+
+    def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
+        """One unit per chunk holding a message of `topics`, in file order."""
+        return self._units(self._conn_ids(topics))
+
+    def _units(self, conn_ids: set[int]) -> list[ReadUnit]:
+        return [
+            ReadUnit(
+                source=str(self.path),
+                kind=UNIT_KIND,
+                offset=span.offset,
+                length=span.length,
+                start_ns=span.start_ns,
+                end_ns=span.end_ns,
+                cost=span.compressed_bytes,
+            )
+            for span in sorted(self._index.chunks, key=lambda s: s.offset)
+            if not conn_ids.isdisjoint(span.counts)
+        ]
+
+    def unit_channels(self, topics: frozenset[str]) -> dict[int, ChannelInfo]:
+        """Connection id -> topic, type, 'ros1' for the connections of `topics`."""
+        return self._channels(topics)
+
+    def _channels(self, topics: frozenset[str] | None) -> dict[int, ChannelInfo]:
+        out: dict[int, ChannelInfo] = {}
+        for conn in self._index.connections.values():
+            if topics is None or conn.topic in topics:
+                msgtype = self.summary.topics[conn.topic].msgtype
+                if msgtype == conn.msgtype:
+                    out[conn.conn_id] = ChannelInfo(conn.topic, msgtype, "ros1")
+        return out
+
+    # -- serial reading ----------------------------------------------------------------------
+
+    def _messages(
+        self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
+    ) -> Iterator[RawMessage]:
+        """Messages in (log time, chunk offset, index) order, chunks opened as time reaches them."""
+        channels = self._channels(topics)
+        if not channels:
+            return
+        units = [
+            u
+            for u in self._units(set(channels))
+            if (start_ns is None or u.end_ns >= start_ns)
+            and (stop_ns is None or u.start_ns < stop_ns)
+        ]
+        units.sort(key=lambda u: (u.start_ns, u.offset))
+        heap: list[tuple[int, int, int, int, bytes | memoryview, Iterator[Message]]] = []
+        next_unit = 0
+        while heap or next_unit < len(units):
+            while next_unit < len(units) and (not heap or units[next_unit].start_ns <= heap[0][0]):
+                unit = units[next_unit]
+                next_unit += 1
+                stream = self._sorted_unit(unit, channels)
+                for item in stream:
+                    heapq.heappush(heap, (item[0], unit.offset, item[1], item[2], item[3], stream))
+                    break
+            if not heap:
+                break
+            t, offset, _index, conn_id, payload, stream = heapq.heappop(heap)
+            for item in stream:
+                heapq.heappush(heap, (item[0], offset, item[1], item[2], item[3], stream))
+                break
+            if start_ns is not None and t < start_ns:
+                continue
+            if stop_ns is not None and t >= stop_ns:
+                continue
+            info = channels[conn_id]
+            yield RawMessage(info.topic, info.msgtype, t, payload, "ros1")
+
+    def _sorted_unit(self, unit: ReadUnit, channels: dict[int, ChannelInfo]) -> Iterator[Message]:
+        """A chunk's wanted messages in (log time, index) order (a recorder writes them in
+        arrival order, which need not be log-time order)."""
+        return iter(sorted(self._chunk_reader.messages(unit, channels), key=_time_index))
+
+    def type_registry(self, encoding: str) -> TypeRegistry:
+        """Types from the bag's connection definitions, then schemas/ and ROS 1 defaults."""
+        if self._registry is None:
+            log_types: Typesdict = {}
+            for conn in self._index.connections.values():
+                if not conn.definition or conn.msgtype in log_types:
+                    continue
+                try:
+                    parsed = parse_definition("msg", conn.definition, conn.msgtype)
+                except Exception as exc:  # a bad definition must not stop the audit
+                    self.warn(
+                        "bad-schema", f"definition of {conn.msgtype!r} unreadable: {one_line(exc)}"
+                    )
+                    continue
+                log_types.update({k: v for k, v in parsed.items() if k not in log_types})
+            self._registry = TypeRegistry(ros1=True, log_types=log_types)
+        return self._registry
+
+    def _close(self) -> None:
+        self._chunk_reader.close()
+
+
+def _time_index(item: Message) -> tuple[int, int]:
+    return item[0], item[1]
