@@ -48,6 +48,10 @@ that only by one message bigger than it). Bounds what a hostile `size` field can
 MAX_RATIO = 1000
 """Largest uncompressed/compressed ratio accepted for chunks over 16 MiB (decompression bombs)."""
 
+MAX_HEADER_BYTES = 1 << 20
+"""Largest record header accepted: headers hold a few short fields (a topic, a type name);
+a larger length is damage, not a record cut off by the end of the file."""
+
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _TIME = struct.Struct("<II")
@@ -205,7 +209,7 @@ class BagFile:
         if len(head) < 4:
             raise BagCutError(offset, "record header length cut off")
         (hlen,) = _U32.unpack(head)
-        if hlen > 1 << 24:
+        if hlen > MAX_HEADER_BYTES:
             raise BagFormatError(offset, f"record header length {hlen} is not plausible")
         raw = self.read(offset + 4, hlen + 4)
         if len(raw) < hlen + 4:

@@ -39,6 +39,8 @@ class Rosbag1Log(LogReader):
         self.path = path
         self.warnings = []
         self._registry: TypeRegistry | None = None
+        self._fallback = ""
+        """Why the index was not used ('' where it was)."""
         try:
             bag = open_bag_file(path)
         except OSError as exc:
@@ -71,26 +73,28 @@ class Rosbag1Log(LogReader):
                 "record; no message can be read"
             )
         if index_pos == 0:
-            index = scan_chunks(bag, first)
-            index.damage = index.damage or "it has no index (the recording was not closed)"
-            return index
-        if index_pos >= bag.size or index_pos < first:
-            reason = (
-                f"its index at byte {index_pos} is past the end of the file"
-                if index_pos >= bag.size
-                else f"its index position {index_pos} is inside the bag header"
-            )
-            index = scan_chunks(bag, first)
-            index.damage = index.damage or reason
-            if index_pos >= bag.size and index.cut_at is None:
-                index.cut_at = bag.size  # cut at a record boundary, before the index
+            return self._scan(bag, first, "it has no index (the recording was not closed)")
+        if index_pos < first:
+            return self._scan(bag, first, f"its index position {index_pos} is inside its header")
+        if index_pos >= bag.size:
+            index = self._scan(bag, first, f"its index at byte {index_pos} is past the end")
+            if index.cut_at is None:
+                index.cut_at = bag.size  # cut at a record boundary before the index
             return index
         try:
             return read_index(bag, index_pos, conn_count, chunk_count)
-        except BagFormatError as exc:
-            index = scan_chunks(bag, first)
-            index.damage = index.damage or f"its index is damaged ({one_line(exc)})"
+        except BagCutError as exc:
+            index = self._scan(bag, first, f"its index is cut off ({one_line(exc)})")
+            if index.cut_at is None:
+                index.cut_at = bag.size  # cut inside the index section
             return index
+        except BagFormatError as exc:
+            return self._scan(bag, first, f"its index is damaged ({one_line(exc)})")
+
+    def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
+        """Scan the chunks, keeping why the index was not used."""
+        self._fallback = reason
+        return scan_chunks(bag, first)
 
     def _make_summary(self) -> LogSummary:
         chunks = self._index.chunks
@@ -132,7 +136,7 @@ class Rosbag1Log(LogReader):
 
     def _report_damage(self) -> None:
         index = self._index
-        if index.damage is None and index.cut_at is None:
+        if index.damage is None and index.cut_at is None and not self._fallback:
             return
         total = self.summary.message_count or 0
         if index.cut_at is not None:
@@ -141,9 +145,9 @@ class Rosbag1Log(LogReader):
                 f"interrupted?); reading the {total} complete messages before the cut"
             )
             code = "rosbag1-truncated"
-        elif index.damage is not None and index.damage.startswith("it "):
+        elif index.damage is None:
             text = (
-                f"{self.path}: ROS 1 bag read by scanning its chunks because {index.damage}; "
+                f"{self.path}: ROS 1 bag read by scanning its chunks because {self._fallback}; "
                 f"{total} messages found"
             )
             code = "rosbag1-no-index"
