@@ -24,6 +24,33 @@ def _rosbags_log(path: Path, ros1: bool) -> LogReader:
     return RosbagsLog(path, ros1=ros1)
 
 
+def _bag_folder(path: Path) -> LogReader:
+    """A rosbag2 folder: its metadata.yaml read here (quirks resolved), then by storage."""
+    from syncaudit.logs.rosbag2_meta import read_metadata
+
+    meta = read_metadata(path)
+    if meta.storage == "sqlite3":
+        from syncaudit.logs.sqlite_log import open_sqlite_log
+
+        return open_sqlite_log(path, meta)
+    # TODO(lead): MCAP storage goes to the mcapio engineer's `open_mcap_bag(folder, files)`
+    # (chunk-parallel across all files) once it is merged; until then rosbags reads it.
+    if meta.warnings:
+        # rosbags refuses a blank storage_identifier or serialization_format: read the one
+        # MCAP file directly (it names its own channels' encodings)
+        if len(meta.files) != 1 or meta.compression_mode:
+            raise LogOpenError(
+                f"{path}: metadata.yaml has blank fields ({meta.warnings[0].message}) and "
+                f"the bag is split into {len(meta.files)} files or compressed; pass its "
+                ".mcap files one by one"
+            )
+        log = McapLog(meta.files[0])
+        for warning in meta.warnings:
+            log.warn(warning.code, warning.message)
+        return log
+    return _rosbags_log(path, ros1=False)
+
+
 def open_log(path: str | Path) -> LogReader:
     """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`) or a ROS 1 `.bag`.
 
@@ -39,7 +66,7 @@ def open_log(path: str | Path) -> LogReader:
                 f"{path}: directory has no metadata.yaml, so it is not a ROS 2 bag "
                 "(pass the .db3/.mcap file itself to read it without metadata)"
             )
-        return _rosbags_log(path, ros1=False)
+        return _bag_folder(path)
     if not path.is_file():
         raise LogOpenError(f"{path}: not a regular file or directory")
     try:
@@ -59,7 +86,9 @@ def open_log(path: str | Path) -> LogReader:
         version = head[len(ROSBAG_ANY_MAGIC) :].split(b"\n")[0].decode("ascii", "replace")
         raise LogOpenError(f"{path}: ROS 1 bag format version {version} is not supported (2.0 is)")
     if head.startswith(SQLITE_MAGIC):
-        return _rosbags_log(path, ros1=False)
+        from syncaudit.logs.sqlite_log import open_sqlite_log
+
+        return open_sqlite_log(path)
     raise LogOpenError(
         f"{path}: unknown log format (expected MCAP, ROS 2 .db3/.mcap, or ROS 1 .bag)"
     )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import heapq
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,9 +23,7 @@ from syncaudit.logs.rosbag1 import (
     scan_chunks,
 )
 from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
-
-Message = tuple[int, int, int, bytes | memoryview]
-"""(log_time_ns, index_in_unit, connection id, payload) as a chunk reader yields them."""
+from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
@@ -217,34 +214,17 @@ class Rosbag1Log(LogReader):
             if (start_ns is None or u.end_ns >= start_ns)
             and (stop_ns is None or u.start_ns < stop_ns)
         ]
-        units.sort(key=lambda u: (u.start_ns, u.offset))
-        heap: list[tuple[int, int, int, int, bytes | memoryview, Iterator[Message]]] = []
-        next_unit = 0
-        while heap or next_unit < len(units):
-            while next_unit < len(units) and (not heap or units[next_unit].start_ns <= heap[0][0]):
-                unit = units[next_unit]
-                next_unit += 1
-                stream = self._sorted_unit(unit, channels)
-                for item in stream:
-                    heapq.heappush(heap, (item[0], unit.offset, item[1], item[2], item[3], stream))
-                    break
-            if not heap:
-                break
-            t, offset, _index, conn_id, payload, stream = heapq.heappop(heap)
-            for item in stream:
-                heapq.heappush(heap, (item[0], offset, item[1], item[2], item[3], stream))
-                break
+
+        def read(unit: ReadUnit) -> Iterator[UnitMessage]:
+            return sorted_unit(self._chunk_reader.messages(unit, channels))
+
+        for t, conn_id, payload in merge_units(units, read):
             if start_ns is not None and t < start_ns:
                 continue
             if stop_ns is not None and t >= stop_ns:
                 continue
             info = channels[conn_id]
             yield RawMessage(info.topic, info.msgtype, t, payload, "ros1")
-
-    def _sorted_unit(self, unit: ReadUnit, channels: dict[int, ChannelInfo]) -> Iterator[Message]:
-        """A chunk's wanted messages in (log time, index) order (a recorder writes them in
-        arrival order, which need not be log-time order)."""
-        return iter(sorted(self._chunk_reader.messages(unit, channels), key=_time_index))
 
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types from the bag's connection definitions, then schemas/ and ROS 1 defaults."""
@@ -266,7 +246,3 @@ class Rosbag1Log(LogReader):
 
     def _close(self) -> None:
         self._chunk_reader.close()
-
-
-def _time_index(item: Message) -> tuple[int, int]:
-    return item[0], item[1]
