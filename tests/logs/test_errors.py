@@ -151,7 +151,8 @@ CASES: dict[str, tuple[Case, type[SyncauditError], str, bool]] = {
     # cut anywhere later, a ROS 1 bag is read up to the cut (tests/logs/test_rosbag1.py)
     "bag-cut-in-bag-header": (_truncated_bag(0.01), LogReadError, "inside its bag header", True),
     "bag-damaged-record": (_damaged_bag_record, LogReadError, "ROS 1 chunk at byte 4109", True),
-    "db3-cut": (_truncated_db3, LogOpenError, "ROS 2 bag", True),
+    # cut where no complete row is left: exit 3 (cuts that leave rows: tests/logs/test_sqlite.py)
+    "db3-cut": (_truncated_db3, LogReadError, "no message can be read", True),
     "metadata-yaml-garbage": (_yaml_garbage, LogOpenError, "metadata", True),
     "metadata-db3-missing": (_metadata_case(_db3_missing), LogOpenError, "missing", True),
     "metadata-version-42": (_metadata_case(_future_version), LogOpenError, "version 42", True),

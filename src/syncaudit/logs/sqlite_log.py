@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import sqlite3
 import tempfile
@@ -13,7 +14,13 @@ from syncaudit.errors import LogOpenError, LogReadError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
 from syncaudit.logs.rosbag2_meta import BagMetadata
-from syncaudit.logs.sqlite_rows import SqliteFile, SqliteRowsReader, open_sqlite, plan_units
+from syncaudit.logs.sqlite_rows import (
+    SqliteFile,
+    SqliteRowsReader,
+    declared_bytes,
+    open_sqlite,
+    plan_units,
+)
 from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
 from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
 
@@ -38,7 +45,7 @@ class SqliteLog(LogReader):
                 if meta is not None and meta.compression_mode == "file":
                     source = self._decompressed(source)
                 self._check_wal(source)
-                db, info = open_sqlite(source)
+                db, info = self._open_file(source)
                 self._dbs.append(db)
                 self._files.append(info)
             self._channels = self._make_channels(meta)
@@ -55,15 +62,38 @@ class SqliteLog(LogReader):
         file (sqlite needs a file; rosbags does the same); deleted on close."""
         import zstandard
 
-        if self._tmpdir is None:
-            self._tmpdir = Path(tempfile.mkdtemp(prefix="syncaudit-db3-"))
-        target = self._tmpdir / source.name.removesuffix(".zstd")
+        target = self._scratch() / source.name.removesuffix(".zstd")
         try:
             with source.open("rb") as src, target.open("wb") as out:
                 zstandard.ZstdDecompressor().copy_stream(src, out)
         except (OSError, zstandard.ZstdError) as exc:
             raise LogReadError(f"{source}: zstd storage file unreadable: {one_line(exc)}") from exc
         return target
+
+    def _open_file(self, source: Path) -> tuple[sqlite3.Connection, SqliteFile]:
+        """Open one .db3; one cut off is read from a copy padded to its declared size."""
+        declared = declared_bytes(source)
+        if declared is None or declared <= source.stat().st_size:
+            return open_sqlite(source)
+        # sqlite refuses a schema whose tables start past the end of the file: pad a copy with
+        # zero pages (a sparse file) so the pages before the cut can be read
+        padded = self._scratch() / source.name
+        try:
+            shutil.copyfile(source, padded)
+            os.truncate(padded, declared)
+        except OSError as exc:
+            raise LogReadError(
+                f"{source}: cut-off bag database could not be copied for reading: {one_line(exc)}"
+            ) from exc
+        db, info = open_sqlite(padded, shown_as=source, salvage=True)
+        info.damage = f"cut off at byte {source.stat().st_size}"
+        info.shown_as = source
+        return db, info
+
+    def _scratch(self) -> Path:
+        if self._tmpdir is None:
+            self._tmpdir = Path(tempfile.mkdtemp(prefix="syncaudit-db3-"))
+        return self._tmpdir
 
     def _check_wal(self, source: Path) -> None:
         wal = source.with_name(source.name + "-wal")
@@ -142,13 +172,14 @@ class SqliteLog(LogReader):
         total = self.summary.message_count or 0
         for info in damaged:
             read = sum(t.count for t in info.topics.values())
+            where = info.shown_as or info.path
             text = (
-                f"{info.path}: ROS 2 bag database damaged or cut off ({info.damage}); reading "
+                f"{where}: ROS 2 bag database damaged or cut off ({info.damage}); reading "
                 f"the {read} messages before the damage (rows below {info.salvaged_until})"
             )
             if total == 0:
                 raise LogReadError(
-                    f"{info.path}: ROS 2 bag database damaged or cut off ({info.damage}); "
+                    f"{where}: ROS 2 bag database damaged or cut off ({info.damage}); "
                     "no message can be read"
                 )
             self.warn("rosbag2-sqlite-damaged", text)

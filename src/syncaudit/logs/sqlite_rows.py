@@ -74,22 +74,58 @@ class SqliteFile:
     """Where reading stopped ('' : whole file)."""
     salvaged_until: int | None = None
     """Rowid past the last row read before the damage (None: the file is whole)."""
+    shown_as: Path | None = None
+    """The input file where `path` is a temporary copy of it."""
 
 
-def open_sqlite(path: Path) -> tuple[sqlite3.Connection, SqliteFile]:
+class SqliteDamagedError(LogReadError):
+    """The database's schema is unreadable (a file cut off, or damaged pages)."""
+
+
+def declared_bytes(path: Path) -> int | None:
+    """Size the database header says the file has (page size x page count), None if unknown."""
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(100)
+    except OSError:
+        return None
+    if len(head) < 100:
+        return None
+    page = int.from_bytes(head[16:18], "big")
+    page = 65536 if page == 1 else page
+    pages = int.from_bytes(head[28:32], "big")
+    if int.from_bytes(head[24:28], "big") != int.from_bytes(head[92:96], "big"):
+        return None  # the page count is stale (sqlite's own rule): unknown
+    return page * pages or None
+
+
+def open_sqlite(
+    path: Path, *, shown_as: Path | None = None, salvage: bool = False
+) -> tuple[sqlite3.Connection, SqliteFile]:
     """Open `path` and read its topics and per-topic counts.
 
-    LogOpenError where it is no rosbag2 database; a database whose message rows are damaged
-    is read in rowid order up to the damage (`damage`, `salvaged_until` set).
+    LogOpenError where it is no rosbag2 database, SqliteDamagedError where its schema cannot
+    be read; a database whose message rows are damaged is read in rowid order up to the
+    damage (`damage`, `salvaged_until` set). `shown_as`: the name used in messages (the input
+    a temporary copy was made of); `salvage`: read only what a rowid scan reaches.
     """
+    name = shown_as or path
     try:
         db = connect(path)
-        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     except sqlite3.Error as exc:
-        raise LogOpenError(f"{path}: cannot open as a ROS 2 bag database: {one_line(exc)}") from exc
+        raise LogOpenError(f"{name}: cannot open as a ROS 2 bag database: {one_line(exc)}") from exc
+    try:
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    except sqlite3.DatabaseError as exc:
+        db.close()
+        if "malformed" in str(exc) or "corrupt" in str(exc):
+            raise SqliteDamagedError(
+                f"{name}: ROS 2 bag database damaged or cut off ({one_line(exc)})"
+            ) from exc
+        raise LogOpenError(f"{name}: cannot open as a ROS 2 bag database: {one_line(exc)}") from exc
     if not {"messages", "topics"} <= tables:
         db.close()
-        raise LogOpenError(f"{path}: SQLite file is not a ROS 2 bag (no messages/topics tables)")
+        raise LogOpenError(f"{name}: SQLite file is not a ROS 2 bag (no messages/topics tables)")
     try:
         rows = db.execute("SELECT id, name, type, serialization_format FROM topics").fetchall()
         definitions: dict[str, tuple[str, str]] = {}
@@ -101,10 +137,14 @@ def open_sqlite(path: Path) -> tuple[sqlite3.Connection, SqliteFile]:
                     definitions[str(name)] = (str(encoding), str(text))
     except sqlite3.Error as exc:
         db.close()
-        raise LogReadError(f"{path}: ROS 2 bag topics table unreadable: {one_line(exc)}") from exc
+        raise SqliteDamagedError(
+            f"{name}: ROS 2 bag topics table unreadable: {one_line(exc)}"
+        ) from exc
     info = SqliteFile(path, {}, definitions)
     stats: dict[int, tuple[int, int | None, int | None]] = {}
     try:
+        if salvage:
+            raise sqlite3.DatabaseError("file ends before its declared size")
         for topic_id, count, lo, hi in db.execute(
             "SELECT topic_id, COUNT(*), MIN(timestamp), MAX(timestamp) FROM messages "
             "GROUP BY topic_id"
@@ -124,12 +164,18 @@ def open_sqlite(path: Path) -> tuple[sqlite3.Connection, SqliteFile]:
 def _salvage_stats(
     db: sqlite3.Connection,
 ) -> tuple[dict[int, tuple[int, int | None, int | None]], int]:
-    """Per-topic (count, first, last) of the rows readable in rowid order before the damage."""
+    """Per-topic (count, first, last) of the rows readable in rowid order before the damage.
+
+    Each payload is read whole (its last byte asked for), so a row whose overflow pages are
+    lost ends the salvage before it, not in a worker.
+    """
     stats: dict[int, list[int]] = {}
     last = -1
-    cursor = db.execute("SELECT id, topic_id, timestamp FROM messages ORDER BY id")
     try:
-        for rowid, topic_id, t in cursor:
+        cursor = db.execute(
+            "SELECT id, topic_id, timestamp, substr(data, -1) FROM messages ORDER BY id"
+        )
+        for rowid, topic_id, t, _last_byte in cursor:
             entry = stats.setdefault(int(topic_id), [0, t, t])
             entry[0] += 1
             entry[1] = min(entry[1], t)
