@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import shutil
 import sqlite3
 import tempfile
@@ -17,9 +16,11 @@ from syncaudit.logs.rosbag2_meta import BagMetadata
 from syncaudit.logs.sqlite_rows import (
     SqliteFile,
     SqliteRowsReader,
+    connect,
     declared_bytes,
     open_sqlite,
     plan_units,
+    verify_tail,
 )
 from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
 from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
@@ -75,17 +76,33 @@ class SqliteLog(LogReader):
         declared = declared_bytes(source)
         if declared is None or declared <= source.stat().st_size:
             return open_sqlite(source)
-        # sqlite refuses a schema whose tables start past the end of the file: pad a copy with
-        # zero pages (a sparse file) so the pages before the cut can be read
+        # sqlite refuses a schema whose tables start past the end of the file: pad a copy to
+        # the declared size so the pages before the cut can be read. The padding is 0xFF, not
+        # zeros: a zero page would pass for the last page of a payload's overflow chain (next
+        # page 0) and hand up zeros as data; 0xFF names a page past the end (and is no valid
+        # b-tree page type), which sqlite reports as damage.
         padded = self._scratch() / source.name
         try:
             shutil.copyfile(source, padded)
-            os.truncate(padded, declared)
+            with padded.open("ab") as out:
+                missing = declared - source.stat().st_size
+                block = b"\xff" * min(missing, 1 << 20)
+                while missing > 0:
+                    missing -= out.write(block[:missing])
         except OSError as exc:
             raise LogReadError(
                 f"{source}: cut-off bag database could not be copied for reading: {one_line(exc)}"
             ) from exc
-        db, info = open_sqlite(padded, shown_as=source, salvage=True)
+        tail: dict[int, int] = {}
+        db, info = open_sqlite(padded, shown_as=source, salvage=True, tail=tail)
+        db.close()  # reopened below: the padding is rewritten by the check
+        try:
+            verify_tail(padded, info, tail, source.stat().st_size)
+            db = connect(padded)
+        except (OSError, sqlite3.Error) as exc:
+            raise LogReadError(
+                f"{source}: cut-off bag database could not be checked: {one_line(exc)}"
+            ) from exc
         info.damage = f"cut off at byte {source.stat().st_size}"
         info.shown_as = source
         return db, info

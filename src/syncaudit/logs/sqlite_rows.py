@@ -19,8 +19,9 @@ those rows are in the units.
 from __future__ import annotations
 
 import sqlite3
+import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import quote
 
@@ -39,6 +40,8 @@ ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 """A zstd frame: the payload of a bag with compression_mode 'message' (a CDR payload begins
 with its encapsulation header 00 0x 00 00, never with 0x28)."""
 MAX_MESSAGE_BYTES = 1 << 30
+TAIL_ROWS = 256
+"""Salvaged rows of a cut-off file checked for bytes from beyond the cut."""
 
 
 def connect(path: Path) -> sqlite3.Connection:
@@ -76,6 +79,8 @@ class SqliteFile:
     """Rowid past the last row read before the damage (None: the file is whole)."""
     shown_as: Path | None = None
     """The input file where `path` is a temporary copy of it."""
+    salvaged_rows: list[tuple[int, int, int, int]] = field(default_factory=list)
+    """(rowid, topic id, timestamp, payload bytes) of the rows salvaged, in rowid order."""
 
 
 class SqliteDamagedError(LogReadError):
@@ -100,14 +105,19 @@ def declared_bytes(path: Path) -> int | None:
 
 
 def open_sqlite(
-    path: Path, *, shown_as: Path | None = None, salvage: bool = False
+    path: Path,
+    *,
+    shown_as: Path | None = None,
+    salvage: bool = False,
+    tail: dict[int, int] | None = None,
 ) -> tuple[sqlite3.Connection, SqliteFile]:
     """Open `path` and read its topics and per-topic counts.
 
     LogOpenError where it is no rosbag2 database, SqliteDamagedError where its schema cannot
     be read; a database whose message rows are damaged is read in rowid order up to the
     damage (`damage`, `salvaged_until` set). `shown_as`: the name used in messages (the input
-    a temporary copy was made of); `salvage`: read only what a rowid scan reaches.
+    a temporary copy was made of); `salvage`: read only what a rowid scan reaches; `tail`:
+    gets the crc32 of the last salvaged payloads.
     """
     name = shown_as or path
     try:
@@ -149,12 +159,15 @@ def open_sqlite(
             "SELECT topic_id, COUNT(*), MIN(timestamp), MAX(timestamp) FROM messages "
             "GROUP BY topic_id"
         ):
-            stats[int(topic_id)] = (int(count), lo, hi)
+            if isinstance(topic_id, int) and isinstance(lo, int) and isinstance(hi, int):
+                stats[topic_id] = (int(count), lo, hi)
     except sqlite3.DatabaseError as exc:
         info.damage = one_line(exc)
-        stats, info.salvaged_until = _salvage_stats(db)
+        stats, info.salvaged_until = _salvage_stats(db, info.salvaged_rows, tail)
     for topic_id, name, msgtype, fmt in rows:
-        count, lo, hi = stats.get(int(topic_id), (0, None, None))
+        if not isinstance(topic_id, int) or name is None or msgtype is None:
+            continue  # a topics row without id, name or type: nothing can be said of it
+        count, lo, hi = stats.get(topic_id, (0, None, None))
         info.topics[int(topic_id)] = SqliteTopic(
             int(topic_id), str(name), str(msgtype), "" if fmt is None else str(fmt), count, lo, hi
         )
@@ -162,21 +175,30 @@ def open_sqlite(
 
 
 def _salvage_stats(
-    db: sqlite3.Connection,
+    db: sqlite3.Connection, rows: list[tuple[int, int, int, int]], tail: dict[int, int] | None
 ) -> tuple[dict[int, tuple[int, int | None, int | None]], int]:
     """Per-topic (count, first, last) of the rows readable in rowid order before the damage.
 
-    Each payload is read whole (its last byte asked for), so a row whose overflow pages are
-    lost ends the salvage before it, not in a worker.
+    Each payload is read whole, so a row whose overflow pages are lost ends the salvage
+    before it, not in a worker. `tail`: filled with the crc32 of the last TAIL_ROWS payloads
+    (for the check of a padded copy, see `verify_tail`).
     """
     stats: dict[int, list[int]] = {}
     last = -1
+    column = "data" if tail is not None else "substr(data, -1)"
     try:
         cursor = db.execute(
-            "SELECT id, topic_id, timestamp, substr(data, -1) FROM messages ORDER BY id"
+            f"SELECT id, topic_id, timestamp, length(data), {column} FROM messages ORDER BY id"
         )
-        for rowid, topic_id, t, _last_byte in cursor:
-            entry = stats.setdefault(int(topic_id), [0, t, t])
+        for rowid, topic_id, t, size, payload in cursor:
+            if not isinstance(topic_id, int) or not isinstance(t, int):
+                break  # a row whose fields are not what rosbag2 writes: damage
+            rows.append((int(rowid), topic_id, t, int(size or 0)))
+            if tail is not None:
+                tail[int(rowid)] = zlib.crc32(payload if isinstance(payload, bytes) else b"")
+                if len(tail) > TAIL_ROWS:
+                    del tail[next(iter(tail))]
+            entry = stats.setdefault(topic_id, [0, t, t])
             entry[0] += 1
             entry[1] = min(entry[1], t)
             entry[2] = max(entry[2], t)
@@ -184,6 +206,57 @@ def _salvage_stats(
     except sqlite3.DatabaseError:
         pass
     return {k: (v[0], v[1], v[2]) for k, v in stats.items()}, last + 1
+
+
+def verify_tail(path: Path, info: SqliteFile, tail: dict[int, int], real_bytes: int) -> None:
+    """Drop the salvaged rows that took bytes from the padding of a cut-off file's copy.
+
+    The copy was padded with 0xFF; the padding is now rewritten with zeros and the last
+    payloads read again: a row whose bytes changed reached past the cut (a payload's last
+    overflow page may lie there, and sqlite does not notice). Pages are allocated as rows are
+    appended, so only the last rows can be affected.
+    """
+    with path.open("r+b") as handle:
+        handle.seek(real_bytes)
+        missing = path.stat().st_size - real_bytes
+        block = bytes(min(missing, 1 << 20))
+        while missing > 0:
+            missing -= handle.write(block[:missing])
+    bad: int | None = None
+    db = connect(path)
+    try:
+        for rowid, crc in tail.items():
+            try:
+                row = db.execute("SELECT data FROM messages WHERE id = ?", (rowid,)).fetchone()
+            except sqlite3.DatabaseError:
+                row = None
+            payload = row[0] if row is not None and isinstance(row[0], bytes) else None
+            if payload is None or zlib.crc32(payload) != crc:
+                bad = rowid
+                break
+    finally:
+        db.close()
+    if bad is None:
+        return
+    info.salvaged_rows = [r for r in info.salvaged_rows if r[0] < bad]
+    info.salvaged_until = bad
+    stats: dict[int, list[int]] = {}
+    for _rowid, topic_id, t, _size in info.salvaged_rows:
+        entry = stats.setdefault(topic_id, [0, t, t])
+        entry[0] += 1
+        entry[1] = min(entry[1], t)
+        entry[2] = max(entry[2], t)
+    for topic_id, topic in list(info.topics.items()):
+        got = stats.get(topic_id)
+        info.topics[topic_id] = SqliteTopic(
+            topic.topic_id,
+            topic.name,
+            topic.msgtype,
+            topic.serialization_format,
+            got[0] if got else 0,
+            got[1] if got else None,
+            got[2] if got else None,
+        )
 
 
 def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -> list[ReadUnit]:
@@ -194,6 +267,8 @@ def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -
     """
     if not topic_ids:
         return []
+    if info.salvaged_until is not None:
+        return _plan_salvaged(info, set(topic_ids))
     marks = ",".join("?" * len(topic_ids))
     limit = info.salvaged_until
     where = f"topic_id IN ({marks})" + (" AND id < ?" if limit is not None else "")
@@ -225,6 +300,38 @@ def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -
                 cost=int(size or 0),
             )
         )
+    return units
+
+
+def _plan_salvaged(info: SqliteFile, topic_ids: set[int]) -> list[ReadUnit]:
+    """Units over the rows a salvage scan reached (sqlite must not step past them)."""
+    units: list[ReadUnit] = []
+    group: list[tuple[int, int, int, int]] = []
+    size = 0
+
+    def flush() -> None:
+        units.append(
+            ReadUnit(
+                source=str(info.path),
+                kind=UNIT_KIND,
+                offset=group[0][0],
+                length=group[-1][0] + 1,
+                start_ns=min(r[2] for r in group),
+                end_ns=max(r[2] for r in group),
+                cost=size,
+            )
+        )
+
+    for row in info.salvaged_rows:
+        if row[1] not in topic_ids:
+            continue
+        group.append(row)
+        size += row[3]
+        if size >= UNIT_BYTES:
+            flush()
+            group, size = [], 0
+    if group:
+        flush()
     return units
 
 
@@ -268,20 +375,30 @@ class SqliteRowsReader:
         if not local:
             return
         marks = ",".join("?" * len(local))
+        # every row of the range, the payload only of wanted ones (sqlite loads a column when
+        # asked for it); the LIMIT ends the scan on the unit's last row, so sqlite never
+        # steps onto the row after it (which a cut-off file may not have)
         cursor = db.execute(
-            "SELECT id, topic_id, timestamp, data FROM messages "
-            f"WHERE id >= ? AND id < ? AND topic_id IN ({marks}) ORDER BY id",
-            [unit.offset, unit.length, *local],
+            f"SELECT id, topic_id, timestamp, CASE WHEN topic_id IN ({marks}) THEN data END "
+            "FROM messages WHERE id >= ? AND id < ? ORDER BY id LIMIT ?",
+            [*local, unit.offset, unit.length, unit.length - unit.offset],
         )
         decompress = self._zstd.decompress
         try:
             while rows := cursor.fetchmany(FETCH_ROWS):
                 for rowid, topic_id, t, data in rows:
-                    if data is None:
-                        data = b""
+                    if topic_id not in local:
+                        continue
+                    if not isinstance(t, int):
+                        raise LogReadError(
+                            f"{unit.source}: bag database row {rowid} has timestamp {t!r}, "
+                            "not an integer"
+                        )
+                    if not isinstance(data, bytes):
+                        data = b"" if data is None else str(data).encode()
                     elif data[:4] == ZSTD_MAGIC:
                         data = decompress(data, max_output_size=MAX_MESSAGE_BYTES)
-                    yield int(t), int(rowid) - unit.offset, local[topic_id], data
+                    yield t, int(rowid) - unit.offset, local[topic_id], data
         except sqlite3.DatabaseError as exc:
             raise LogReadError(
                 f"{unit.source}: bag database damaged in rows {unit.offset}..{unit.length - 1}: "
