@@ -267,3 +267,22 @@ def test_hostile_chunk_size_is_refused_before_allocating(
     assert isinstance(info.value, LogReadError)
     assert str(info.value).startswith(f"{path}: ROS 1 chunk at byte 4109: chunk claims")
     assert "decompression bomb" in str(info.value)
+
+
+def test_encrypted_bag_is_refused_in_one_line(bags: dict[str, Path], tmp_path: Path) -> None:
+    """rosbag's AES encryptor plugin: chunks are ciphertext, so the bag cannot be opened."""
+    raw = bytearray(bags["none"].read_bytes())
+    (hlen,) = struct.unpack_from("<I", raw, 13)
+    field = b"encryptor=rosbag/AesCbcEncryptor"
+    header = bytes(raw[17 : 17 + hlen]) + struct.pack("<I", len(field)) + field
+    (dlen,) = struct.unpack_from("<I", raw, 17 + hlen)
+    record = struct.pack("<I", len(header)) + header + struct.pack("<I", dlen - 4 - len(field))
+    rest = raw[17 + hlen + 4 + dlen :]
+    path = tmp_path / "secret.bag"
+    path.write_bytes(bytes(raw[:13]) + record + b" " * (dlen - 4 - len(field)) + rest)
+    with pytest.raises(SyncauditError) as info:
+        open_log(path)
+    assert info.value.exit_code == 2
+    assert str(info.value).startswith(
+        f"{path}: ROS 1 bag is encrypted with rosbag/AesCbcEncryptor;"
+    )

@@ -298,3 +298,20 @@ def test_storage_cannot_be_told_is_one_line(tmp_path: Path, ros2_store: Typestor
     text = str(info.value)
     assert info.value.exit_code == 2 and text.startswith(str(bag)) and "report" not in text
     assert "names storage '' and the files do not tell" in text
+
+
+def test_wal_beside_the_database_is_reported_and_left_alone(
+    bag: Path, tmp_path: Path, untouched: Untouched
+) -> None:
+    """A -wal left by a recorder that died is not read (immutable open) and not touched."""
+    (db3,) = bag.glob("*.db3")
+    folder = tmp_path / "w"
+    folder.mkdir()
+    copy = folder / "bag.db3"
+    shutil.copyfile(db3, copy)
+    (folder / "bag.db3-wal").write_bytes(b"\x37\x7f\x06\x82" + bytes(60))
+    untouched(folder)
+    with open_log(copy) as log:
+        assert len(list(log.messages())) == 600
+        assert [w.code for w in log.warnings] == ["rosbag2-wal-ignored"]
+    assert _siblings(folder) == {"bag.db3", "bag.db3-wal"}

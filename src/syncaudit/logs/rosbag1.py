@@ -66,6 +66,10 @@ class BagFormatError(Exception):
         self.problem = problem
 
 
+class BagEncryptedError(BagFormatError):
+    """A bag written with rosbag's encryption plugin (its chunks cannot be read)."""
+
+
 class BagCutError(BagFormatError):
     """A record whose bytes run past the end of the file (or of its chunk)."""
 
@@ -234,6 +238,9 @@ def read_bag_header(bag: BagFile) -> tuple[int, int, int, int]:
         chunk_count = _u32(fields, "chunk_count")
     except ValueError as exc:
         raise BagFormatError(len(MAGIC), str(exc)) from None
+    encryptor = fields.get("encryptor", b"").decode("utf-8", "replace")
+    if encryptor:
+        raise BagEncryptedError(len(MAGIC), encryptor)
     return index_pos, conn_count, chunk_count, data_at + dlen
 
 

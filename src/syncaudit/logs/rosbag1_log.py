@@ -13,6 +13,7 @@ from syncaudit.logs.rosbag1 import (
     MAGIC,
     UNIT_KIND,
     BagCutError,
+    BagEncryptedError,
     BagFile,
     BagFormatError,
     BagIndex,
@@ -57,6 +58,11 @@ class Rosbag1Log(LogReader):
             raise LogOpenError(f"{self.path}: not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0')")
         try:
             index_pos, conn_count, chunk_count, first = read_bag_header(bag)
+        except BagEncryptedError as exc:
+            raise LogOpenError(
+                f"{self.path}: ROS 1 bag is encrypted with {exc.problem}; encrypted bags are not "
+                "supported (decrypt it with `rosbag decrypt` first)"
+            ) from None
         except BagCutError:
             raise LogReadError(
                 f"{self.path}: ROS 1 bag cut off at byte {bag.size} inside its bag header "
