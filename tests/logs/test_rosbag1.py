@@ -9,6 +9,7 @@ recorder writes in arrival order). Damage: every cut position class, a bag never
 
 from __future__ import annotations
 
+import random
 import struct
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -286,3 +287,39 @@ def test_encrypted_bag_is_refused_in_one_line(bags: dict[str, Path], tmp_path: P
     assert str(info.value).startswith(
         f"{path}: ROS 1 bag is encrypted with rosbag/AesCbcEncryptor;"
     )
+
+
+def _mutate(raw: bytes, rng: random.Random) -> bytes:
+    """Bit flips and hostile 32-bit values (0, 2^31-1, 2^32-1, random) at random offsets."""
+    out = bytearray(raw)
+    for _ in range(rng.choice([1, 1, 3, 10])):
+        at = rng.randrange(len(out))
+        if rng.random() < 0.5:
+            out[at] ^= 1 << rng.randrange(8)
+        else:
+            out[at : at + 4] = rng.choice(
+                [bytes(4), b"\xff\xff\xff\x7f", b"\xff\xff\xff\xff", rng.randbytes(4)]
+            )
+    return bytes(out)
+
+
+def test_mutated_bags_end_in_a_documented_error_or_a_read(
+    bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """Fixed-seed mutants of each fixture: read, or one SyncauditError line naming the file."""
+    rng = random.Random(2024)
+    path = tmp_path / "mutant.bag"
+    outcomes: dict[str, int] = {}
+    for _ in range(150):
+        path.write_bytes(_mutate(bags[rng.choice(COMPRESSIONS)].read_bytes(), rng))
+        try:
+            with open_log(path) as log:
+                for _msg in log.messages():
+                    pass
+            outcome = "read"
+        except SyncauditError as exc:
+            text = str(exc)
+            assert text.startswith(str(path)) and "\n" not in text, text
+            outcome = type(exc).__name__
+        outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    assert outcomes.get("read", 0) > 50 and outcomes.get("LogReadError", 0) > 10, outcomes

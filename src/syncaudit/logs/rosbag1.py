@@ -200,6 +200,11 @@ class BagFile:
         self.size = size
 
     def read(self, offset: int, length: int) -> bytes:
+        """Up to `length` bytes at `offset` (fewer at the end; none past it, whatever the
+        offset a damaged field names)."""
+        length = min(length, self.size - offset)
+        if offset < 0 or length <= 0:
+            return b""
         self.handle.seek(offset)
         return self.handle.read(length)
 
