@@ -38,7 +38,8 @@ flat; collect groups units into bigger tasks by their cost."""
 FETCH_ROWS = 64
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 """A zstd frame: the payload of a bag with compression_mode 'message' (a CDR payload begins
-with its encapsulation header 00 0x 00 00, never with 0x28)."""
+with its encapsulation header 00 0x 00 00, never with 0x28). Told by the payload, so a
+worker needs nothing but the unit; rosbags decides by the metadata's compression_mode."""
 MAX_MESSAGE_BYTES = 1 << 30
 TAIL_ROWS = 256
 """Salvaged rows of a cut-off file checked for bytes from beyond the cut."""
@@ -400,17 +401,21 @@ class SqliteRowsReader:
                     if not isinstance(data, bytes):
                         data = b"" if data is None else str(data).encode()
                     elif data[:4] == ZSTD_MAGIC:
-                        data = decompress(data, max_output_size=MAX_MESSAGE_BYTES)
+                        try:
+                            data = decompress(data, max_output_size=MAX_MESSAGE_BYTES)
+                        except zstandard.ZstdError as exc:
+                            if channels[local[topic_id]].encoding == "cdr":
+                                raise LogReadError(
+                                    f"{unit.source}: zstd message payload of row {rowid} "
+                                    f"damaged: {one_line(exc)}"
+                                ) from exc
+                            # not CDR (protobuf, json...): bytes that merely begin like a
+                            # zstd frame are kept as they are
                     yield t, int(rowid) - unit.offset, local[topic_id], data
         except sqlite3.DatabaseError as exc:
             raise LogReadError(
                 f"{unit.source}: bag database damaged in rows {unit.offset}..{unit.length - 1}: "
                 f"{one_line(exc)}"
-            ) from exc
-        except zstandard.ZstdError as exc:
-            raise LogReadError(
-                f"{unit.source}: zstd message payload damaged in rows "
-                f"{unit.offset}..{unit.length - 1}: {one_line(exc)}"
             ) from exc
         finally:
             cursor.close()
