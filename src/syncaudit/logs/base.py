@@ -60,12 +60,12 @@ class LogReader(ABC):
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Pieces of the log holding `topics` that workers can read on their own.
 
-        None: this log is read serially with `messages()`.
+        None (the default): the log cannot be split; read it serially with `messages()`.
         """
         return None
 
     def unit_channels(self, topics: frozenset[str]) -> dict[int, ChannelInfo]:
-        """Channel/connection ids of `topics` in the units, with what a worker needs of each."""
+        """Channel/connection id -> topic, type, encoding for the units' wanted messages."""
         return {}
 
     @abstractmethod

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
+from collections.abc import Callable
 from pathlib import Path
 
 from syncaudit.errors import LogOpenError
@@ -33,22 +36,38 @@ def _bag_folder(path: Path) -> LogReader:
         from syncaudit.logs.sqlite_log import open_sqlite_log
 
         return open_sqlite_log(path, meta)
-    # TODO(lead): MCAP storage goes to the mcapio engineer's `open_mcap_bag(folder, files)`
-    # (chunk-parallel across all files) once it is merged; until then rosbags reads it.
+    opener = _mcap_bag_opener()
+    if opener is not None and not meta.compression_mode:
+        log = opener(path, meta.files)  # the chunk-parallel MCAP path, across every file
+        for warning in meta.warnings:
+            log.warn(warning.code, warning.message)
+        return log
+    # TODO(lead): until the mcapio branch's `mcap_bag.open_mcap_bag` is merged, and for
+    # MCAP bags with rosbag2 compression modes, rosbags reads MCAP folders. rosbags refuses
+    # a blank storage_identifier or serialization_format: such a bag's single MCAP file is
+    # read directly instead (it names its own channels' encodings).
     if meta.warnings:
-        # rosbags refuses a blank storage_identifier or serialization_format: read the one
-        # MCAP file directly (it names its own channels' encodings)
         if len(meta.files) != 1 or meta.compression_mode:
             raise LogOpenError(
                 f"{path}: metadata.yaml has blank fields ({meta.warnings[0].message}) and "
                 f"the bag is split into {len(meta.files)} files or compressed; pass its "
                 ".mcap files one by one"
             )
-        log = McapLog(meta.files[0])
+        mcap = McapLog(meta.files[0])
         for warning in meta.warnings:
-            log.warn(warning.code, warning.message)
-        return log
+            mcap.warn(warning.code, warning.message)
+        return mcap
     return _rosbags_log(path, ros1=False)
+
+
+def _mcap_bag_opener() -> Callable[[Path, list[Path]], LogReader] | None:
+    """`open_mcap_bag(folder, files)` of the mcapio engineer's module, once it is merged."""
+    if importlib.util.find_spec("syncaudit.logs.mcap_bag") is None:
+        return None
+    opener: Callable[[Path, list[Path]], LogReader] = importlib.import_module(
+        "syncaudit.logs.mcap_bag"
+    ).open_mcap_bag
+    return opener
 
 
 def open_log(path: str | Path) -> LogReader:

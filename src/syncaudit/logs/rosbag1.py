@@ -497,10 +497,15 @@ def open_bag_file(path: Path) -> BagFile:
 
 
 class Rosbag1ChunkReader:
-    """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused."""
+    """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused.
 
-    def __init__(self) -> None:
+    `source` (optional) is the file the worker will read (`logs.units` builds one reader per
+    worker and file); units of other files are read too.
+    """
+
+    def __init__(self, source: str | None = None) -> None:
         self._files: dict[str, BagFile] = {}
+        del source  # files are opened when their first unit is read
 
     def messages(
         self, unit: ReadUnit, channels: dict[int, ChannelInfo]

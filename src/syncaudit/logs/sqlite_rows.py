@@ -347,7 +347,9 @@ class SqliteRowsReader:
     differently read right.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, source: str | None = None) -> None:
+        """`source` (optional): the file the worker will read; units of others work too."""
+        del source  # files are opened when their first unit is read
         self._files: dict[str, tuple[sqlite3.Connection, dict[int, tuple[str, str]]]] = {}
         self._zstd = zstandard.ZstdDecompressor()
 
