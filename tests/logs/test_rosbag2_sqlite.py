@@ -315,3 +315,55 @@ def test_wal_beside_the_database_is_reported_and_left_alone(
         assert len(list(log.messages())) == 600
         assert [w.code for w in log.warnings] == ["rosbag2-wal-ignored"]
     assert _siblings(folder) == {"bag.db3", "bag.db3-wal"}
+
+
+def test_split_bag_whose_files_number_topics_differently(
+    tmp_path: Path, ros2_store: Typestore
+) -> None:
+    """rosbag2 numbers topics per file in order of first message: a topic's id differs
+    between the files of a split bag; units and the serial read still give each its topic."""
+    string = ros2_store.types["std_msgs/msg/String"]
+
+    def part(name: str, order: tuple[str, ...], stamps: range) -> Path:
+        with Writer(tmp_path / name, version=9) as writer:
+            conns = {
+                t: writer.add_connection(t, string.__msgtype__, typestore=ros2_store) for t in order
+            }
+            for i, t in enumerate(stamps):
+                topic = order[i % len(order)]
+                data = ros2_store.serialize_cdr(string(data=f"{topic}{t}"), string.__msgtype__)
+                writer.write(conns[topic], t, data)
+        return tmp_path / name
+
+    first = part("p0", ("/a", "/b"), range(100, 200, 10))
+    second = part("p1", ("/c", "/b", "/a"), range(195, 300, 7))
+    bag = tmp_path / "split"
+    bag.mkdir()
+    doc = yaml.safe_load((first / "metadata.yaml").read_text())
+    info = doc["rosbag2_bagfile_information"]
+    counts: dict[str, int] = {}
+    for folder in (first, second):
+        (db3,) = folder.glob("*.db3")
+        shutil.copyfile(db3, bag / f"{folder.name}.db3")
+        meta = yaml.safe_load((folder / "metadata.yaml").read_text())
+        for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+            name = entry["topic_metadata"]["name"]
+            counts[name] = counts.get(name, 0) + entry["message_count"]
+            if name == "/c":
+                info["topics_with_message_count"].append(entry)
+    info["relative_file_paths"] = ["p0.db3", "p1.db3"]
+    info.pop("files", None)
+    for entry in info["topics_with_message_count"]:
+        entry["message_count"] = counts[entry["topic_metadata"]["name"]]
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(doc))
+    expected = sorted(reference(first) + reference(second), key=lambda m: m[1])
+    for topic, _t, data in expected:  # every payload names its own topic
+        assert topic.encode() in data
+    assert ours(bag) == expected
+    with open_log(bag) as log:
+        assert {n: t.count for n, t in log.topics.items()} == counts
+        units = log.read_units(frozenset({"/a", "/c"}))
+        channels = log.unit_channels(frozenset({"/a", "/c"}))
+    assert units is not None and {Path(u.source).name for u in units} == {"p0.db3", "p1.db3"}
+    want = [m for m in expected if m[0] in {"/a", "/c"}]
+    assert _merged(map(_read_unit, [(u, channels) for u in units])) == want
