@@ -264,3 +264,10 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     console.print(table)
     for note in result.notes:
         console.print(f"[dim]note: {note}[/]")
+
+
+def render_calibration_html(result: CalibrationResult) -> str:
+    """A self-contained HTML page of a calibration result (what `calib --html` writes)."""
+    from syncaudit.report.html import render_report_html
+
+    return render_report_html(None, result)

@@ -41,6 +41,13 @@ def _fmt(value: float | None, digits: int = 1) -> str:
     return f"{value:,.{digits}f}"
 
 
+def _signed(value: float | None, digits: int) -> str:
+    """A number with its sign always shown (clock offsets: which clock is ahead matters)."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:+,.{digits}f}"
+
+
 def _table(rows: Sequence[tuple[str, str]]) -> str:
     body = "".join(f"<tr><th>{_e(k)}</th><td class=num>{v}</td></tr>" for k, v in rows)
     return f"<table>{body}</table>"
@@ -296,32 +303,14 @@ def _camera_section(
     )
 
 
-def _lidar_notes(result: AuditResult) -> list[str]:
-    lidar = result.lidar
-    notes = []
-    if lidar.cropped_sector:
-        notes.append(f"FOV crop: {lidar.cropped_sector}")
-    if lidar.outlier_blocks:
-        notes.append(
-            f"{lidar.outlier_blocks} blocks ignored: their azimuth contradicts the rest of their packet"
-        )
-    if lidar.clock_synchronised is False:
-        notes.append(
-            "LiDAR clock NOT synchronised: host minus sensor clock "
-            f"{_fmt(lidar.clock_offset_s, 6)} s (median); offset used "
-            f"{result.clock_offset_ns / 1e9:+,.6f} s"
-        )
-    return notes
-
-
 def _header(result: AuditResult) -> str:
     lidar = result.lidar
     clock = (
         "unknown"
         if lidar.clock_synchronised is None
-        else f"synchronised (host - sensor {_fmt(lidar.clock_offset_s, 6)} s)"
+        else f"synchronised (host - sensor {_signed(lidar.clock_offset_s, 6)} s)"
         if lidar.clock_synchronised
-        else f"NOT synchronised (host - sensor {_fmt(lidar.clock_offset_s, 6)} s)"
+        else f"NOT synchronised (host - sensor {_signed(lidar.clock_offset_s, 6)} s)"
     )
     facts = _table(
         [
@@ -358,7 +347,7 @@ def _header(result: AuditResult) -> str:
         ("Guessed", [f"<li>{_e(x)}</li>" for x in result.guessed]),
         (
             "Warnings",
-            [f'<li class="warn">{_e(x)}</li>' for x in [*_lidar_notes(result), *result.warnings]],
+            [f'<li class="warn">{_e(x)}</li>' for x in result.warnings],
         ),
     ]
     body = "".join(
