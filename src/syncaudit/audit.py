@@ -14,7 +14,7 @@ from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
-from syncaudit.inspect_log import LidarRow, lidar_row
+from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
 from syncaudit.lidar.scan import LidarScan, LidarScanner
 from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
 from syncaudit.logs import LogReader, open_log
@@ -294,11 +294,16 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
 def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[str]:
     """What one camera's log lacks."""
     checks = (
-        ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
-        ("exposure metadata", tables.exposure_source is not None),
-        ("trigger records", tables.trigger_source is not None),
+        (
+            f"image topic {cam.image_topic} is not in the log"
+            if cam.image_topic
+            else "no image topic (set image_topic in the rig)",
+            cam.image_topic in log.topics if cam.image_topic else False,
+        ),
+        ("no exposure metadata", tables.exposure_source is not None),
+        ("no trigger records", tables.trigger_source is not None),
     )
-    return [f"camera {cam.name}: no {what}" for what, present in checks if not present]
+    return [f"camera {cam.name}: {what}" for what, present in checks if not present]
 
 
 def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
@@ -340,6 +345,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         result_cams.append(
             CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))
         )
+    warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in log.warnings)
     return AuditResult(
         path=log.summary.path,

@@ -9,7 +9,8 @@ from typing import Any
 import pandas as pd
 
 from syncaudit.audit import AuditResult
-from syncaudit.writers.log_writer import infer_format, open_writer
+from syncaudit.writers.log_writer import open_writer
+from syncaudit.writers.outputs import OutputSet
 
 PAIRING_TYPE = "syncaudit_msgs/msg/FramePairing"
 
@@ -20,14 +21,22 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    """An Int64 stamp as an exact int (0 where missing: builtin Time has no null)."""
+    """An Int64 value as an exact int (0 where missing: builtin Time has no null)."""
     return 0 if value is None or value is pd.NA else int(value)
 
 
-def write_pairings(result: AuditResult, out: Path, *, overwrite: bool = False) -> int:
-    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); returns the count."""
+def write_pairings(
+    result: AuditResult, out: Path, *, overwrite: bool = False, outputs: OutputSet | None = None
+) -> int:
+    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); return the count.
+
+    With `outputs` the log goes into that OutputSet (committed by its owner).
+
+    Raises:
+        OutputError: `out` exists without `overwrite`, or cannot be written.
+    """
     count = 0
-    with open_writer(out, infer_format(out), overwrite=overwrite) as writer:
+    with open_writer(out, None, overwrite=overwrite, outputs=outputs) as writer:
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
@@ -43,7 +52,7 @@ def write_pairings(result: AuditResult, out: Path, *, overwrite: bool = False) -
                     PAIRING_TYPE,
                     header=writer.header(stamp, str(cam.sync.camera)),
                     camera=str(cam.sync.camera),
-                    frame_sequence=int(row.frame_sequence) if row.frame_sequence is not None else 0,
+                    frame_sequence=_ns(row.frame_sequence),
                     image_stamp=writer.time(_ns(row.header_stamp_ns)),
                     exposure_middle=writer.time(t_l),
                     lidar_at_camera=writer.time(_ns(row.t_estimated_ns)),
