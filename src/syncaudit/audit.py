@@ -298,13 +298,13 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
 
 def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[str]:
     """What one camera's log lacks."""
-    image = (
-        f"image topic {cam.image_topic} is not in the log"
-        if cam.image_topic
-        else "no image topic (set image_topic in the rig)"
-    )
     checks = (
-        (image, cam.image_topic in log.topics if cam.image_topic else False),
+        (
+            f"image topic {cam.image_topic} is not in the log"
+            if cam.image_topic
+            else "no image topic (set image_topic in the rig)",
+            cam.image_topic in log.topics if cam.image_topic else False,
+        ),
         ("no exposure metadata", tables.exposure_source is not None),
         ("no trigger records", tables.trigger_source is not None),
     )

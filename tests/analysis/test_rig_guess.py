@@ -125,7 +125,9 @@ def test_trigger_event_topic_is_not_a_phantom_camera() -> None:
     assert by_name["cam_rear"].trigger_topic == "/sync/events"
 
 
-@pytest.mark.parametrize("name", ["vlp16_short.bag", "vlp16_short.db3", "vlp16_three_cameras.mcap"])
+@pytest.mark.parametrize(
+    "name", ["vlp16_short.bag", "vlp16_short_ros2", "vlp16_three_cameras.mcap"]
+)
 def test_header_frame_id_from_raw_bytes(name: str) -> None:
     with open_log(SAMPLES / name) as log:
         msg = next(iter(log.messages(["/cameras/front/image_raw"])))

@@ -21,7 +21,7 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    """An Int64 stamp as an exact int (0 where missing: builtin Time has no null)."""
+    """An Int64 value as an exact int (0 where missing: builtin Time has no null)."""
     return 0 if value is None or value is pd.NA else int(value)
 
 
@@ -52,7 +52,7 @@ def write_pairings(
                     PAIRING_TYPE,
                     header=writer.header(stamp, str(cam.sync.camera)),
                     camera=str(cam.sync.camera),
-                    frame_sequence=int(row.frame_sequence) if row.frame_sequence is not None else 0,
+                    frame_sequence=_ns(row.frame_sequence),
                     image_stamp=writer.time(_ns(row.header_stamp_ns)),
                     exposure_middle=writer.time(t_l),
                     lidar_at_camera=writer.time(_ns(row.t_estimated_ns)),
