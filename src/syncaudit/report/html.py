@@ -203,7 +203,9 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     rpm = TimePlot("Rotation rate per revolution", "RPM", kind="lidar-rpm")
     rpm.series.append(Series("RPM", t_s, revs.omega_deg_s / 6.0, COLOURS[0]))
     packets = TimePlot(
-        "Packets per revolution and packets dropped (cadence gaps)", "packets", kind="lidar-packets"
+        "Packets per revolution (the first and last are partial) and packets dropped (cadence gaps)",
+        "packets",
+        kind="lidar-packets",
     )
     packets.series += [
         Series("packets", t_s, revs.packets.astype(np.float64), COLOURS[0]),

@@ -123,13 +123,12 @@ def nice_ticks(low: float, high: float, count: int = 6) -> list[float]:
     return ticks
 
 
-def fmt_tick(value: float) -> str:
-    """A tick label: thousands separated, no trailing zeros."""
-    if value == 0:
-        return "0"
-    if abs(value) >= 100:
-        return f"{value:,.0f}"
-    return f"{value:,.6g}"
+def tick_labels(ticks: Sequence[float]) -> list[str]:
+    """Labels with the decimals the tick spacing needs (599.9, 600.0, 600.1), thousands
+    separated."""
+    step = abs(ticks[1] - ticks[0]) if len(ticks) > 1 else abs(ticks[0]) if ticks else 1.0
+    decimals = max(0, -math.floor(math.log10(step) + 1e-9)) if 0 < step < 1 else 0
+    return [f"{0.0 if v == 0 else v:,.{decimals}f}" for v in ticks]
 
 
 X_RESOLUTION = 1e-6
@@ -237,11 +236,12 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
         f'<rect x="{LEFT}" y="{TOP}" width="{pw}" height="{ph}" fill="#fff" stroke="#bbb"/>',
     ]
     # y axis: ticks, grid, unit label
-    for tick in nice_ticks(y0, y1):
+    y_ticks = nice_ticks(y0, y1)
+    for tick, text in zip(y_ticks, tick_labels(y_ticks), strict=True):
         y = py(tick)
         out.append(
             f'<line x1="{LEFT}" x2="{LEFT + pw}" y1="{y:.1f}" y2="{y:.1f}" class="grid"/>'
-            f'<text x="{LEFT - 5}" y="{y + 4:.1f}" class="yt">{esc(fmt_tick(tick))}</text>'
+            f'<text x="{LEFT - 5}" y="{y + 4:.1f}" class="yt">{esc(text)}</text>'
         )
     out.append(
         f'<text x="14" y="{TOP + ph / 2:.0f}" class="ylabel" '
@@ -249,11 +249,12 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
     )
     # x axis: ticks in seconds (the script redraws them on zoom)
     out.append(f'<g class="xt" data-y="{TOP + ph}">')
-    for tick in nice_ticks(x0, x1, 10):
+    x_ticks = nice_ticks(x0, x1, 10)
+    for tick, text in zip(x_ticks, tick_labels(x_ticks), strict=True):
         x = px(tick)
         out.append(
             f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{TOP}" y2="{TOP + ph}" class="grid"/>'
-            f'<text x="{x:.1f}" y="{TOP + ph + 14}" class="xtick">{esc(fmt_tick(tick))}</text>'
+            f'<text x="{x:.1f}" y="{TOP + ph + 14}" class="xtick">{esc(text)}</text>'
         )
     out.append("</g>")
     out.append(
@@ -349,17 +350,17 @@ def histogram_svg(
     def px(v: float) -> float:
         return LEFT + pw * (v - low) / (high - low)
 
-    for tick in nice_ticks(0, top, 4):
+    count_ticks = [t for t in nice_ticks(0, top, 4) if t == int(t)]
+    for tick, text in zip(count_ticks, tick_labels(count_ticks), strict=True):
         y = TOP + ph * (1 - tick / top)
         out.append(
             f'<line x1="{LEFT}" x2="{LEFT + pw}" y1="{y:.1f}" y2="{y:.1f}" class="grid"/>'
-            f'<text x="{LEFT - 5}" y="{y + 4:.1f}" class="yt">{esc(fmt_tick(tick))}</text>'
+            f'<text x="{LEFT - 5}" y="{y + 4:.1f}" class="yt">{esc(text)}</text>'
         )
-    for tick in nice_ticks(low, high, 6):
+    value_ticks = nice_ticks(low, high, 6)
+    for tick, text in zip(value_ticks, tick_labels(value_ticks), strict=True):
         x = px(tick)
-        out.append(
-            f'<text x="{x:.1f}" y="{TOP + ph + 14}" class="xtick">{esc(fmt_tick(tick))}</text>'
-        )
+        out.append(f'<text x="{x:.1f}" y="{TOP + ph + 14}" class="xtick">{esc(text)}</text>')
     for count, a, b in zip(counts.tolist(), edges[:-1].tolist(), edges[1:].tolist(), strict=True):
         if not count:
             continue
@@ -417,11 +418,12 @@ def bar_chart_svg(
         f'<svg class="plot" width="{width}" height="{h}" viewBox="0 0 {width} {h}" role="img" '
         f'aria-label="{esc(title)}">'
     ]
-    for tick in nice_ticks(0, high, 5):
+    bar_ticks = nice_ticks(0, high, 5)
+    for tick, text in zip(bar_ticks, tick_labels(bar_ticks), strict=True):
         x = left + pw * tick / high
         out.append(
             f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{TOP}" y2="{h - BOTTOM}" class="grid"/>'
-            f'<text x="{x:.1f}" y="{h - BOTTOM + 14}" class="xtick">{esc(fmt_tick(tick))}</text>'
+            f'<text x="{x:.1f}" y="{h - BOTTOM + 14}" class="xtick">{esc(text)}</text>'
         )
     for i, bar in enumerate(bars):
         y = TOP + i * row

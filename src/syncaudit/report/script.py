@@ -157,7 +157,10 @@ SCRIPT = r"""
     vb.width = b - a;
     var g = p.svg.querySelector('g.xt');
     while (g.firstChild) g.removeChild(g.firstChild);
-    nice(a, b, 10).forEach(function (t) {
+    var ticks = nice(a, b, 10);
+    var step = ticks.length > 1 ? ticks[1] - ticks[0] : 1;
+    var decimals = step < 1 ? Math.min(9, -Math.floor(Math.log10(step) + 1e-9)) : 0;
+    ticks.forEach(function (t) {
       var px = p.x + (t - a) / (b - a) * p.w;
       var line = document.createElementNS(NS, 'line');
       line.setAttribute('class', 'grid');
@@ -166,7 +169,7 @@ SCRIPT = r"""
       var text = document.createElementNS(NS, 'text');
       text.setAttribute('class', 'xtick');
       text.setAttribute('x', String(px)); text.setAttribute('y', String(p.y + p.h + 14));
-      text.textContent = fmt(t);
+      text.textContent = t.toLocaleString('en-US', {minimumFractionDigits: decimals, maximumFractionDigits: decimals});
       g.appendChild(line); g.appendChild(text);
     });
   }
