@@ -66,14 +66,6 @@ def test_a_line_breaks_across_missing_frames() -> None:
 
 def test_tick_labels_carry_the_decimals_their_spacing_needs() -> None:
     assert tick_labels(nice_ticks(599.85, 600.2)) == ["599.9", "600.0", "600.1", "600.2"]
-    assert tick_labels(nice_ticks(2.0, 2.06)) == [
-        "2.00",
-        "2.01",
-        "2.02",
-        "2.03",
-        "2.04",
-        "2.05",
-        "2.06",
-    ]
+    assert tick_labels(nice_ticks(2.0, 2.06)) == ["2.00", "2.02", "2.04", "2.06"]
     assert tick_labels(nice_ticks(0, 600, 10)) == ["0", "100", "200", "300", "400", "500", "600"]
     assert tick_labels([-4000.0, -2000.0, 0.0, 2000.0]) == ["-4,000", "-2,000", "0", "2,000"]
