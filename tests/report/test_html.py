@@ -173,6 +173,12 @@ def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> 
         "frames.parquet",
         "report.html",
     ]
+    (tmp_path / "frames.parquet").unlink()  # the summary alone still blocks a rerun
+    again = CliRunner().invoke(
+        app, ["audit", str(THREE_CAMERAS), "--parquet", str(tmp_path / "frames.parquet")]
+    )
+    assert again.exit_code == 8 and "--overwrite" in again.output, again.output
+    assert not (tmp_path / "frames.parquet").exists()
     calib.write_text('{"kind": "something else"}')
     bad = CliRunner().invoke(
         app,
