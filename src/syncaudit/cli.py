@@ -13,6 +13,7 @@ import typer
 from rich.console import Console
 
 from syncaudit.errors import OutputError, SyncauditError
+from syncaudit.fleet.cli import register as register_fleet
 from syncaudit.simulate import LidarModel
 
 app = typer.Typer(
@@ -388,6 +389,9 @@ def calib(
             raise GateFailedError(f"{log}: calibration check failed: {why}")
 
     _run(job)
+
+
+register_fleet(app)  # syncaudit gate, syncaudit fleet report (src/syncaudit/fleet/cli.py)
 
 
 def main() -> None:
