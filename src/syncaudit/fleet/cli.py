@@ -112,8 +112,11 @@ def register(app: typer.Typer) -> None:
             typer.Option("--output", "-o", help="With --init: the policy file to write."),
         ] = None,
         db: Annotated[
-            Path | None, typer.Option("--db", help="Results database (DuckDB file).")
-        ] = None,
+            Path, typer.Option("--db", help="Results database (DuckDB file), created if absent.")
+        ] = Path("fleet.duckdb"),
+        no_db: Annotated[
+            bool, typer.Option("--no-db", help="Record nothing (no skipping of unchanged logs).")
+        ] = False,
         junit: Annotated[Path | None, typer.Option("--junit", help="Write JUnit XML here.")] = None,
         summary: Annotated[
             Path | None, typer.Option("--summary", help="Write a Markdown summary here.")
@@ -199,6 +202,8 @@ def register(app: typer.Typer) -> None:
         if html is None and parquet is None and csv is None:
             raise _fail(EXIT_USAGE, "nothing to do: give --html, --parquet and/or --csv")
 
+        _need_duckdb()
+
         def body() -> None:
             from syncaudit.fleet.dashboard import write_report
 
@@ -207,6 +212,17 @@ def register(app: typer.Typer) -> None:
         _guarded(body)
 
     app.add_typer(fleet, name="fleet")
+
+
+def _need_duckdb() -> None:
+    """The results database needs the `fleet` extra: say so (exit 64) rather than crash."""
+    try:
+        import duckdb  # noqa: F401
+    except ImportError:
+        raise _fail(
+            EXIT_USAGE,
+            "the results database needs DuckDB: pip install 'syncaudit[fleet]' (or pass --no-db)",
+        ) from None
 
 
 def _init(
@@ -257,6 +273,8 @@ def _gate(
     from syncaudit.fleet.policy import load_policy
 
     policy = load_policy(policy_path)
+    if db is not None:
+        _need_duckdb()
     options = GateOptions(
         db=db,
         junit=junit,
