@@ -31,7 +31,9 @@ def _judged(outcome: LogOutcome, group: str, check: str, spec: dict[str, Any]) -
 
 
 @pytest.mark.parametrize("check", list(CameraChecks.model_fields))
-def test_camera_checks_fire_past_the_limit_only(three_cameras_outcome: LogOutcome, check: str) -> None:
+def test_camera_checks_fire_past_the_limit_only(
+    three_cameras_outcome: LogOutcome, check: str
+) -> None:
     cams = three_cameras_outcome.audit["cameras"]  # type: ignore[index]
     values = {c["camera"]: _camera_values(c)[check] for c in cams}
     assert all(v is not None for v in values.values()), values
@@ -68,7 +70,9 @@ def test_lidar_checks(three_cameras_outcome: LogOutcome) -> None:
         ("packets_per_revolution", lidar["packets_per_revolution"]),
         ("drop_rate", rate),
     ):
-        (ok,) = _judged(three_cameras_outcome, "lidar", check, {"min": value * 0.99, "max": value * 1.01})
+        (ok,) = _judged(
+            three_cameras_outcome, "lidar", check, {"min": value * 0.99, "max": value * 1.01}
+        )
         assert ok.passed and ok.value == pytest.approx(value)
         (low,) = _judged(three_cameras_outcome, "lidar", check, {"max": value * 0.99})
         (high,) = _judged(three_cameras_outcome, "lidar", check, {"min": value * 1.01})
@@ -85,10 +89,16 @@ def test_log_checks(three_cameras_outcome: LogOutcome) -> None:
     (bad,) = _judged(three_cameras_outcome, "log", "duration_s", {"min": duration + 0.01})
     assert ok.passed and not bad.passed
     (ok,) = _judged(
-        three_cameras_outcome, "log", "required_topics", {"topics": ["/velodyne_packets", "/tf_static"]}
+        three_cameras_outcome,
+        "log",
+        "required_topics",
+        {"topics": ["/velodyne_packets", "/tf_static"]},
     )
     (bad,) = _judged(
-        three_cameras_outcome, "log", "required_topics", {"topics": ["/velodyne_packets", "/gps/fix"]}
+        three_cameras_outcome,
+        "log",
+        "required_topics",
+        {"topics": ["/velodyne_packets", "/gps/fix"]},
     )
     assert ok.passed and ok.value == 0
     assert not bad.passed and bad.value == 1 and bad.message == "missing: /gps/fix"
@@ -101,26 +111,50 @@ def test_calibration_checks(three_cameras_outcome: LogOutcome) -> None:
     calibrated = dataclasses.replace(
         three_cameras_outcome,
         calibration=[
-            {"topic": "/left/points", "rotation_diff_deg": 0.1, "translation_diff_cm": 3.0, "reason": None},
-            {"topic": "/right/points", "rotation_diff_deg": 0.4, "translation_diff_cm": 1.0, "reason": None},
+            {
+                "topic": "/left/points",
+                "rotation_diff_deg": 0.1,
+                "translation_diff_cm": 3.0,
+                "reason": None,
+            },
+            {
+                "topic": "/right/points",
+                "rotation_diff_deg": 0.4,
+                "translation_diff_cm": 1.0,
+                "reason": None,
+            },
         ],
     )
     rot = _judged(calibrated, "calibration", "rotation_deg", spec)
-    assert [(r.subject, r.passed) for r in rot] == [("/left/points", True), ("/right/points", False)]
+    assert [(r.subject, r.passed) for r in rot] == [
+        ("/left/points", True),
+        ("/right/points", False),
+    ]
     trans = _judged(calibrated, "calibration", "translation_cm", {"max": 2.0})
-    assert [(r.subject, r.passed) for r in trans] == [("/left/points", False), ("/right/points", True)]
-    failed = dataclasses.replace(three_cameras_outcome, calibration_error="/left/points has 1 stop(s)")
+    assert [(r.subject, r.passed) for r in trans] == [
+        ("/left/points", False),
+        ("/right/points", True),
+    ]
+    failed = dataclasses.replace(
+        three_cameras_outcome, calibration_error="/left/points has 1 stop(s)"
+    )
     (missing,) = _judged(failed, "calibration", "rotation_deg", spec)
     assert not missing.passed and missing.value is None and "1 stop" in missing.message
 
 
 def test_verdicts(three_cameras_outcome: LogOutcome) -> None:
-    warn = evaluate(three_cameras_outcome, _policy("camera", "error_mean_us", {"max": 1, "severity": "warn"}), None)
+    warn = evaluate(
+        three_cameras_outcome,
+        _policy("camera", "error_mean_us", {"max": 1, "severity": "warn"}),
+        None,
+    )
     fail = evaluate(three_cameras_outcome, _policy("camera", "error_mean_us", {"max": 1}), None)
     ok = evaluate(three_cameras_outcome, _policy("camera", "error_mean_us", {"max": 1e6}), None)
     assert verdict(three_cameras_outcome, warn) == "warn"
     assert verdict(three_cameras_outcome, fail) == "fail"
     assert verdict(three_cameras_outcome, ok) == "pass"
-    no_cameras = dataclasses.replace(three_cameras_outcome, audit={**three_cameras_outcome.audit, "cameras": []})  # type: ignore[dict-item]
+    no_cameras = dataclasses.replace(
+        three_cameras_outcome, audit={**three_cameras_outcome.audit, "cameras": []}
+    )  # type: ignore[dict-item]
     assert verdict(no_cameras, []) == "fail"
     assert verdict(dataclasses.replace(three_cameras_outcome, audit=None, error="x"), []) == "error"

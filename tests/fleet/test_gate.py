@@ -111,7 +111,9 @@ def test_gate_outputs_on_a_two_vehicle_fleet(small_fleet: Path, tmp_path: Path) 
     assert (out / "forced.json").read_bytes() == (out / "gate.json").read_bytes()
     # A changed policy is a new verdict: judged again.
     looser = {**POLICY, "vehicles": {}}
-    changed = run_gate([str(small_fleet)], parse_policy(looser, "p"), GateOptions(db=out / "fleet.duckdb"))
+    changed = run_gate(
+        [str(small_fleet)], parse_policy(looser, "p"), GateOptions(db=out / "fleet.duckdb")
+    )
     assert not any(log.skipped for log in changed.logs) and changed.exit_code == 0
 
     import duckdb
@@ -141,7 +143,10 @@ def test_corrupt_log_dying_worker_and_hung_log_become_error_rows(
     (fleet / "hangme.mcap").symlink_to(SAMPLES / "pandar40p_adaptive.mcap")
     monkeypatch.setenv("SYNCAUDIT_FLEET_TEST_CRASH", "crashme")
     monkeypatch.setenv("SYNCAUDIT_FLEET_TEST_HANG", "hangme")
-    policy = parse_policy({"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}}, "p")
+    policy = parse_policy(
+        {"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}},
+        "p",
+    )
     run = run_gate(
         [str(fleet), str(tmp_path / "absent.mcap")],
         policy,
@@ -152,7 +157,9 @@ def test_corrupt_log_dying_worker_and_hung_log_become_error_rows(
     assert rows["crashme.mcap"].verdict == "error"
     assert rows["crashme.mcap"].attempts == 2
     assert "worker died" in (rows["crashme.mcap"].error or "")
-    assert rows["hangme.mcap"].verdict == "error" and "timed out after 3 s" in (rows["hangme.mcap"].error or "")
+    assert rows["hangme.mcap"].verdict == "error" and "timed out after 3 s" in (
+        rows["hangme.mcap"].error or ""
+    )
     corrupt = rows["corrupt.mcap"]
     assert corrupt.verdict == "error" and corrupt.error_code == 3
     assert "corrupt.mcap: MCAP chunk at offset" in (corrupt.error or "")
@@ -161,7 +168,9 @@ def test_corrupt_log_dying_worker_and_hung_log_become_error_rows(
     import duckdb
 
     with duckdb.connect(str(tmp_path / "fleet.duckdb"), read_only=True) as con:
-        verdicts = dict(con.execute("SELECT verdict, count(*) FROM logs GROUP BY verdict").fetchall())
+        verdicts = dict(
+            con.execute("SELECT verdict, count(*) FROM logs GROUP BY verdict").fetchall()
+        )
     assert verdicts == {"pass": 1, "error": 4}
 
 
@@ -175,11 +184,15 @@ def test_cli_exit_codes_for_policy_usage_and_outputs(tmp_path: Path) -> None:
     assert "defaults.lidar.rpm.mn: unknown key" in result.output
     assert runner.invoke(app, ["gate", str(THREE_CAMERAS)]).exit_code == 64
     assert runner.invoke(app, ["gate", "--init", str(THREE_CAMERAS)]).exit_code == 64
-    good = _write_policy(tmp_path, {"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}})
+    good = _write_policy(
+        tmp_path,
+        {"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}},
+    )
     existing = tmp_path / "gate.xml"
     existing.write_text("keep")
     result = runner.invoke(
-        app, ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db", "--junit", str(existing)]
+        app,
+        ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db", "--junit", str(existing)],
     )
     assert result.exit_code == 8 and "--overwrite" in result.output
     assert existing.read_text() == "keep"

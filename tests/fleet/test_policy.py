@@ -52,7 +52,10 @@ def test_overrides_merge_field_by_field_in_order() -> None:
 @pytest.mark.parametrize(
     ("raw", "lines"),
     [
-        ({"defaults": {"camera": {"eror_mean_us": {"max": 1}}}}, ["defaults.camera.eror_mean_us: unknown key"]),
+        (
+            {"defaults": {"camera": {"eror_mean_us": {"max": 1}}}},
+            ["defaults.camera.eror_mean_us: unknown key"],
+        ),
         (
             {"defaults": {"camera": {"error_mean_us": {"max": "x", "sev": "fail"}}}},
             [
@@ -60,11 +63,26 @@ def test_overrides_merge_field_by_field_in_order() -> None:
                 "defaults.camera.error_mean_us.sev: unknown key",
             ],
         ),
-        ({"defaults": {"lidar": {"rpm": {"min": 700, "max": 500}}}}, ["defaults.lidar.rpm: min (700.0) is above max (500.0)"]),
-        ({"defaults": {"camera": {"error_mean_us": {"max": 1, "severity": "error"}}}}, ["defaults.camera.error_mean_us.severity:"]),
-        ({"vehicles": {"car1": {"cameras": {"front": {"nope": {}}}}}}, ["vehicles.car1.cameras.front.nope: unknown check"]),
-        ({"vehicle_pattern": "cars/([^/]+)/"}, ["vehicle_pattern: needs a named group (?P<vehicle>...)"]),
-        ({"defaults": {"camera": {"error_mean_us": {"max": float("nan")}}}}, ["defaults.camera.error_mean_us.max:"]),
+        (
+            {"defaults": {"lidar": {"rpm": {"min": 700, "max": 500}}}},
+            ["defaults.lidar.rpm: min (700.0) is above max (500.0)"],
+        ),
+        (
+            {"defaults": {"camera": {"error_mean_us": {"max": 1, "severity": "error"}}}},
+            ["defaults.camera.error_mean_us.severity:"],
+        ),
+        (
+            {"vehicles": {"car1": {"cameras": {"front": {"nope": {}}}}}},
+            ["vehicles.car1.cameras.front.nope: unknown check"],
+        ),
+        (
+            {"vehicle_pattern": "cars/([^/]+)/"},
+            ["vehicle_pattern: needs a named group (?P<vehicle>...)"],
+        ),
+        (
+            {"defaults": {"camera": {"error_mean_us": {"max": float("nan")}}}},
+            ["defaults.camera.error_mean_us.max:"],
+        ),
     ],
 )
 def test_each_bad_key_gets_one_clear_line(raw: dict[str, object], lines: list[str]) -> None:

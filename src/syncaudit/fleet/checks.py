@@ -47,6 +47,9 @@ class CheckResult:
     severity: str
     passed: bool
     message: str
+    limit_min: float | None = None
+    limit_max: float | None = None
+    """The numeric bounds of `limit` (None where open), for plots and SQL."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
@@ -75,11 +78,35 @@ def judge_limit(
     text = _limit_text(limit)
     if value is None:
         reason = why_missing or "not measured in this log"
-        return CheckResult(scope, subject, check, None, text, unit, limit.severity, False, reason)
+        return CheckResult(
+            scope,
+            subject,
+            check,
+            None,
+            text,
+            unit,
+            limit.severity,
+            False,
+            reason,
+            limit.min,
+            limit.max,
+        )
     passed = (limit.min is None or value >= limit.min) and (limit.max is None or value <= limit.max)
     unit_text = f" {unit}" if unit else ""
     message = f"{check} = {_fmt(value)}{unit_text} (limit {text}{unit_text})"
-    return CheckResult(scope, subject, check, value, text, unit, limit.severity, passed, message)
+    return CheckResult(
+        scope,
+        subject,
+        check,
+        value,
+        text,
+        unit,
+        limit.severity,
+        passed,
+        message,
+        limit.min,
+        limit.max,
+    )
 
 
 def _judge_flag(

@@ -22,7 +22,7 @@ from syncaudit.errors import OutputError
 from syncaudit.fleet.checks import CheckResult, drop_rate
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.record import JudgedLog
-from syncaudit.fleet.schema import columns, create_statements
+from syncaudit.fleet.schema import SCHEMA_VERSION, columns, create_statements
 
 LOCK_TIMEOUT_S = 600.0
 
@@ -60,11 +60,25 @@ class ResultsDB:
                     if not read_only:
                         for statement in create_statements():
                             con.execute(statement)
+                    self._check_version(con)
                     yield con
+                except duckdb.Error as exc:
+                    first = str(exc).splitlines()[0]
+                    raise OutputError(f"{self.path}: results database error: {first}") from exc
                 finally:
                     con.close()
             finally:
                 fcntl.flock(handle, fcntl.LOCK_UN)
+
+    def _check_version(self, con: Any) -> None:
+        """Refuse a database of another schema version (no silent mixing of layouts)."""
+        row = con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+        if row is None or row[0] != str(SCHEMA_VERSION):
+            found = "none" if row is None else row[0]
+            raise OutputError(
+                f"{self.path}: results database schema version {found}, this syncaudit "
+                f"writes {SCHEMA_VERSION}: use a new --db file"
+            )
 
     def _lock(self, handle: Any, lock_path: Path) -> None:
         deadline = time.monotonic() + self.lock_timeout_s
@@ -163,6 +177,8 @@ class ResultsDB:
                     c.severity,
                     c.passed,
                     c.message,
+                    c.limit_min,
+                    c.limit_max,
                 )
                 for c in log.checks
             )

@@ -12,7 +12,7 @@ Tables (one row per judged log in `logs`, keyed by `log_key`):
 - `cameras`: every statistic of the audit per camera (times in microseconds).
 - `lidars`: the triggering LiDAR's statistics.
 - `checks`: one row per check: `scope`, `subject`, `check`, `value`, `limit`, `unit`,
-  `severity`, `passed`, `message`.
+  `severity`, `passed`, `message`, `limit_min`, `limit_max` (numeric bounds, null where open).
 """
 
 from __future__ import annotations
@@ -101,7 +101,9 @@ TABLES: dict[str, str] = {
         unit VARCHAR,
         severity VARCHAR NOT NULL,
         passed BOOLEAN NOT NULL,
-        message VARCHAR
+        message VARCHAR,
+        limit_min DOUBLE,
+        limit_max DOUBLE
     """,
 }
 

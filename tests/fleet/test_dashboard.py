@@ -1,0 +1,160 @@
+"""`fleet report`: the dashboard rendered in a real headless Chromium, and the exports."""
+
+from __future__ import annotations
+
+import csv
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import duckdb
+import pytest
+
+from syncaudit.fleet.checks import CheckResult
+from syncaudit.fleet.dashboard import write_report
+from syncaudit.fleet.database import ResultsDB
+from syncaudit.fleet.inputs import LogJob
+from syncaudit.fleet.job import LogOutcome
+from syncaudit.fleet.record import JudgedLog
+
+DAY_NS = 86_400 * 10**9
+ARTIFACTS = Path(tempfile.gettempdir()) / "syncaudit-test-artifacts" / "fleet"
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def _fleet_db(tmp_path: Path, outcome: LogOutcome) -> Path:
+    """Five days of one real audit per vehicle, Eq. 5 drifting up on car2 (last day fails)."""
+    db = tmp_path / "fleet.duckdb"
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    logs = []
+    for vehicle in ("car1", "car2"):
+        for day in range(5):
+            audit = dict(outcome.audit or {})
+            drift = 1.0 + (0.2 * day if vehicle == "car2" else 0.0)
+            audit["cameras"] = [
+                {**cam, "error_mean_us": cam["error_mean_us"] * drift} for cam in audit["cameras"]
+            ]
+            failed = vehicle == "car2" and day == 4
+            key = f"{vehicle}-{day}"
+            report = reports / f"{key}.html"
+            report.write_text(f"<html><body>{key}</body></html>")
+            checks = [
+                CheckResult(
+                    "camera",
+                    cam["camera"],
+                    "error_mean_us",
+                    cam["error_mean_us"],
+                    "<= 2500",
+                    "us",
+                    "fail",
+                    cam["error_mean_us"] <= 2500,
+                    "",
+                    None,
+                    2500.0,
+                )
+                for cam in audit["cameras"]
+            ]
+            logs.append(
+                JudgedLog(
+                    job=LogJob(path=f"/uploads/{vehicle}/day{day}.mcap", vehicle=vehicle),
+                    key=key,
+                    fingerprint=key,
+                    rig_fingerprint=None,
+                    policy_fingerprint="p",
+                    tool_version="t",
+                    verdict="fail" if failed else "pass",
+                    checks=checks,
+                    audit=audit,
+                    start_ns=1_763_000_000 * 10**9 + day * DAY_NS,
+                    report=str(report),
+                )
+            )
+    ResultsDB(db).write(logs)
+    return db
+
+
+def test_exports_hold_the_same_rows(tmp_path: Path, three_cameras_outcome: LogOutcome) -> None:
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    write_report(db, parquet=tmp_path / "fleet.parquet", csv=tmp_path / "fleet.csv")
+    rows = list(csv.DictReader((tmp_path / "fleet.csv").open()))
+    assert len(rows) == 2 * 5 * 3
+    with duckdb.connect() as con:
+        parquet = con.execute(
+            f"SELECT count(*), max(error_mean_us) FROM '{tmp_path / 'fleet.parquet'}'"
+        ).fetchone()
+    assert parquet is not None and parquet[0] == 30
+    assert parquet[1] == pytest.approx(max(float(r["error_mean_us"]) for r in rows))
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.skipif(
+    shutil.which("chromium") is None,
+    reason="chromium is not installed (.ci/run installs Debian's chromium package as root; "
+    "apt-get was unavailable here)",
+)
+def test_dashboard_renders_in_headless_chromium(
+    tmp_path: Path, three_cameras_outcome: LogOutcome
+) -> None:
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    out = tmp_path / "dashboard"
+    write_report(db, html_dir=out)
+    page = (out / "index.html").read_text()
+    assert "http://" not in page.replace('xmlns="http://www.w3.org/2000/svg"', "")
+    assert "https://" not in page and "<link" not in page and " src=" not in page  # self-contained
+    url = (out / "index.html").resolve().as_uri()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shot = ARTIFACTS / "dashboard.png"
+    with tempfile.TemporaryDirectory() as profile:
+        dom = subprocess.run(
+            [
+                "chromium",
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                "--enable-logging=stderr",
+                "--v=0",
+                "--dump-dom",
+                url,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        )
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run(
+            [
+                "chromium",
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                f"--screenshot={shot}",
+                "--window-size=1280,2400",
+                url,
+            ],
+            capture_output=True,
+            timeout=60,
+            check=True,
+        )
+    print(f"dashboard screenshot: {shot}")
+    console = [line for line in dom.stderr.splitlines() if ":CONSOLE" in line]
+    assert console == [], console
+    html = dom.stdout
+    assert 'data-ready="yes"' in html  # the inline script ran to its end
+    assert len(re.findall(r'<section class="vehicle"', html)) == 2
+    assert len(re.findall(r'<svg class="plot"', html)) == 2 * 3 * 3
+    assert len(re.findall(r'class="limit"', html)) == 2 * 3  # Eq. 5 limit on each camera
+    failing = re.findall(r'<a class="fail" href="([^"]+)"', html)
+    assert len(failing) == 3 and all(f.endswith("car2-4.html") for f in failing)
+    assert (out / failing[0]).resolve().is_file()
+    assert shot.stat().st_size > 10_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
