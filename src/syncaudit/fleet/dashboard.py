@@ -310,9 +310,9 @@ def write_report(
         cursor = con.execute(EXPORT_QUERY)
         names = [d[0] for d in cursor.description]
         rows = [dict(zip(names, row, strict=True)) for row in cursor.fetchall()]
-        for target, fmt in ((parquet, "parquet"), (csv, "csv")):
-            if target is not None:
-                _copy_to(con, target, fmt)
+        for export, fmt in ((parquet, "parquet"), (csv, "csv")):
+            if export is not None:
+                _copy_to(con, export, fmt)
     if html_dir is not None:
         html_dir.mkdir(parents=True, exist_ok=True)
         write_text_atomic(html_dir / "index.html", render_dashboard(rows, html_dir.resolve()))

@@ -90,7 +90,7 @@ class LocalExecutor:
         self.max_tries = max(1, max_tries)
         self.task = task
         methods = multiprocessing.get_all_start_methods()
-        self._context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+        self._context: Any = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         self._pool: list[_Worker] = []
 
     def _spawn(self, options: JobOptions) -> _Worker:

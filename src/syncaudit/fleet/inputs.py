@@ -92,7 +92,10 @@ def _expand(item: str) -> list[Path] | None:
         out: list[Path] = []
         for match in sorted(glob.glob(item, recursive=True)):
             p = Path(match)
-            out.extend(_walk(p) if p.is_dir() and not is_bag_dir(p) else [p])
+            if is_bag_dir(p) or _is_log_file(p):
+                out.append(p)
+            elif p.is_dir():
+                out.extend(_walk(p))
         return out
     return [path]  # missing: becomes that log's error row
 
@@ -131,9 +134,14 @@ def read_manifest(path: Path) -> list[LogJob]:
         if not log:
             raise ConfigError(f"{path}:{number}: empty path")
         tags_raw = row.get("tags") or ()
-        tags = tuple(
-            t for t in (tags_raw.split(";") if isinstance(tags_raw, str) else tags_raw) if t
+        items: list[object] = (
+            list(tags_raw.split(";"))
+            if isinstance(tags_raw, str)
+            else list(tags_raw)
+            if isinstance(tags_raw, (list, tuple))
+            else [tags_raw]
         )
+        tags = tuple(str(t) for t in items if t)
         rig = row.get("rig") or None
         jobs.append(
             LogJob(

@@ -71,7 +71,7 @@ def render_junit(logs: list[JudgedLog]) -> str:
         totals["tests"] += tests
         totals["failures"] += failures
         totals["errors"] += errors
-    for name, value in totals.items():
-        root.set(name, str(value))
+    for name, total in totals.items():
+        root.set(name, str(total))
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from syncaudit.errors import ConfigError
 
 Severity = Literal["fail", "warn"]
-POLICY_VERSION = 1
+POLICY_VERSION: Literal[1] = 1
 
 
 class _Strict(BaseModel):

@@ -98,9 +98,9 @@ def render_markdown(logs: list[JudgedLog]) -> str:
     lines.append("| --- | --- | --- | --- | --- |")
     for log in ranked:
         note = "unchanged, verdict from the database" if log.skipped else ""
-        failed = len(log.failed_checks)
+        n_failed = len(log.failed_checks)
         lines.append(
             f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {icon[log.verdict]} {log.verdict} | "
-            f"{failed} of {len(log.checks)} | {note} |"
+            f"{n_failed} of {len(log.checks)} | {note} |"
         )
     return "\n".join(lines) + "\n"
