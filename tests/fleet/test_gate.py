@@ -198,3 +198,27 @@ def test_cli_exit_codes_for_policy_usage_and_outputs(tmp_path: Path) -> None:
     assert existing.read_text() == "keep"
     result = runner.invoke(app, ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db"])
     assert result.exit_code == 0, result.output
+
+
+def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
+    """README's and docs/fleet.md's fleet command, on a copy of sample_logs (pip step aside)."""
+    import subprocess
+    import sys
+
+    repo = SAMPLES.parent
+    readme = (repo / "README.md").read_text()
+    command = readme.split("## Fleet gate", 1)[1].split("```sh\n", 1)[1].split("\n```", 1)[0]
+    assert command in (repo / "docs" / "fleet.md").read_text()
+    install, rest = command.split(" && ", 1)
+    assert install == "pip install '.[fleet]'"
+    (tmp_path / "sample_logs").symlink_to(SAMPLES)
+    bindir = Path(sys.executable).parent
+    env = {"PATH": f"{bindir}:/usr/bin:/bin", "HOME": str(tmp_path)}
+    done = subprocess.run(
+        ["bash", "-c", rest], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "gate.json").read_text())
+    assert summary["counts"]["pass"] == 4
+    assert (tmp_path / "fleet-dashboard" / "index.html").is_file()
+    assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
