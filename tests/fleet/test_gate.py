@@ -174,7 +174,10 @@ def test_corrupt_log_dying_worker_and_hung_log_become_error_rows(
     assert verdicts == {"pass": 1, "error": 4}
 
 
-def test_cli_exit_codes_for_policy_usage_and_outputs(tmp_path: Path) -> None:
+def test_cli_exit_codes_for_policy_usage_and_outputs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
     runner = CliRunner()
     bad = tmp_path / "bad.yaml"
     bad.write_text("defaults:\n  camera:\n    eror_mean_us: {max: 1}\n  lidar:\n    rpm: {mn: 3}\n")
@@ -198,6 +201,7 @@ def test_cli_exit_codes_for_policy_usage_and_outputs(tmp_path: Path) -> None:
     assert existing.read_text() == "keep"
     result = runner.invoke(app, ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db"])
     assert result.exit_code == 0, result.output
+    assert not (tmp_path / "fleet.duckdb").exists()  # --no-db records nothing
 
 
 def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
@@ -222,3 +226,14 @@ def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
     assert summary["counts"]["pass"] == 4
     assert (tmp_path / "fleet-dashboard" / "index.html").is_file()
     assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
+
+
+def test_executor_sizing_shares_cores_only_between_few_logs() -> None:
+    from syncaudit.fleet.gate import make_executor
+
+    many, per_log = make_executor(GateOptions(jobs=4), 100)
+    assert (many.workers, per_log) == (4, 1)  # type: ignore[attr-defined]
+    few, per_log = make_executor(GateOptions(jobs=4), 2)
+    assert (few.workers, per_log) == (2, 2)  # type: ignore[attr-defined]
+    one, per_log = make_executor(GateOptions(jobs=4), 1)
+    assert (one.workers, per_log) == (1, 4)  # type: ignore[attr-defined]

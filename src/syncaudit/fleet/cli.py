@@ -166,7 +166,7 @@ def register(app: typer.Typer) -> None:
             lambda: _gate(
                 inputs,
                 policy,
-                db,
+                None if no_db else db,
                 junit,
                 summary,
                 json_out,

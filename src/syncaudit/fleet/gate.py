@@ -113,6 +113,7 @@ def _judge(
         attempts=outcome.attempts,
         elapsed_s=outcome.elapsed_s,
         html=outcome.html,
+        camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
     )
 
 
@@ -209,6 +210,8 @@ def run_gate(
             for outcome in executor.run([p[0] for p in pending], job_options):
                 fp, rig = by_path[outcome.job.path]
                 log = _judge(outcome, policy, fp, rig, policy_fp)
+                if db is None:
+                    log.audit = None  # only the database needs it: memory flat in the logs
                 judged.append(log)
                 unsaved.append(log)
                 if progress:
@@ -218,6 +221,8 @@ def run_gate(
                 ):
                     _save_reports(unsaved, options.html_dir)
                     db.write(unsaved)
+                    for saved in unsaved:
+                        saved.audit = None  # in the database now: memory flat in the logs
                     unsaved, last_save = [], time.monotonic()
         finally:
             if own:

@@ -33,7 +33,7 @@ def render_junit(logs: list[JudgedLog]) -> str:
             case = ET.SubElement(suite, "testcase", name="audit", classname=log.path, time="0")
             ET.SubElement(case, "error", message=log.error, type=f"exit {log.error_code}")
             tests, errors = 1, 1
-        elif not log.checks or (log.audit is not None and not log.audit.get("cameras")):
+        elif not log.checks or log.camera_count == 0:
             case = ET.SubElement(
                 suite, "testcase", name="cameras judged", classname=log.path, time="0"
             )

@@ -45,6 +45,8 @@ class JudgedLog:
     """Unchanged since an earlier run with the same tool, rig and policy: read from the DB."""
     report: str | None = None
     html: str | None = None
+    camera_count: int | None = None
+    """Cameras the audit judged (None for error rows and rows read from the database)."""
 
     @property
     def path(self) -> str:
