@@ -99,7 +99,7 @@ def _judge(
     checks = evaluate(outcome, policy, outcome.job.vehicle)
     return JudgedLog(
         job=outcome.job,
-        key=log_key(fp, __version__, rig_fp, policy_fp),
+        key=log_key(fp, outcome.job.path, __version__, rig_fp, policy_fp),
         fingerprint=fp,
         rig_fingerprint=rig_fp,
         policy_fingerprint=policy_fp,
@@ -120,7 +120,7 @@ def _judge(
 def _error_log(job: LogJob, error: SyncauditError, policy_fp: str) -> JudgedLog:
     return JudgedLog(
         job=job,
-        key=log_key(f"missing:{os.path.abspath(job.path)}", __version__, None, policy_fp),
+        key=log_key("missing", os.path.abspath(job.path), __version__, None, policy_fp),
         fingerprint="-",
         rig_fingerprint=None,
         policy_fingerprint=policy_fp,
@@ -173,13 +173,17 @@ def run_gate(
         pending.append((job, fp, file_fingerprint(job.rig_path)))
     db = ResultsDB(options.db) if options.db is not None else None
     if db is not None and not options.force:
-        keys = {log_key(fp, __version__, rig, policy_fp): job for job, fp, rig in pending}
+        keys = {log_key(fp, job.path, __version__, rig, policy_fp): job for job, fp, rig in pending}
         known = db.known(keys)
         for key, stored in known.items():
             job = keys[key]
             stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
             judged.append(stored)
-        pending = [p for p in pending if log_key(p[1], __version__, p[2], policy_fp) not in known]
+        pending = [
+            p
+            for p in pending
+            if log_key(p[1], p[0].path, __version__, p[2], policy_fp) not in known
+        ]
     total = len(judged) + len(pending)
     for index, log in enumerate(judged, 1):
         if progress:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -10,9 +11,13 @@ from syncaudit.fleet.checks import CheckResult
 from syncaudit.fleet.inputs import LogJob
 
 
-def log_key(fingerprint: str, tool_version: str, rig_fp: str | None, policy_fp: str) -> str:
-    """The database key of a verdict: same log, tool, rig and policy = same key (skipped)."""
-    text = "|".join((fingerprint, tool_version, rig_fp or "-", policy_fp))
+def log_key(
+    fingerprint: str, path: str, tool_version: str, rig_fp: str | None, policy_fp: str
+) -> str:
+    """The database key of a verdict: same content at the same place, tool, rig and policy
+    = same key (skipped). The path is part of it: two copies of one log are two rows."""
+    where = display_path(path) if "://" in path else os.path.abspath(path)
+    text = "|".join((fingerprint, where, tool_version, rig_fp or "-", policy_fp))
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 

@@ -2,7 +2,7 @@
 
 Tables (one row per judged log in `logs`, keyed by `log_key`):
 
-- `logs`: `log_key` (hash of fingerprint, tool version, rig and policy fingerprints),
+- `logs`: `log_key` (hash of fingerprint, path, tool version, rig and policy fingerprints),
   `fingerprint` (content, see `inputs.fingerprint`), `path` (or URL without its query
   string), `vehicle`, `start_time` (first message, UTC), `duration_s`, `container`,
   `tool_version`, `rig_fingerprint`, `policy_fingerprint`, `verdict` (pass, warn, fail,
