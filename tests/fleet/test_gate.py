@@ -237,3 +237,28 @@ def test_executor_sizing_shares_cores_only_between_few_logs() -> None:
     assert (few.workers, per_log) == (2, 2)  # type: ignore[attr-defined]
     one, per_log = make_executor(GateOptions(jobs=4), 1)
     assert (one.workers, per_log) == (1, 4)  # type: ignore[attr-defined]
+
+
+def test_two_copies_of_one_log_are_two_rows(tmp_path: Path) -> None:
+    for name in ("a.mcap", "b.mcap"):
+        (tmp_path / name).symlink_to(THREE_CAMERAS)
+    policy = parse_policy(
+        {"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}},
+        "p",
+    )
+    run = run_gate([str(tmp_path)], policy, GateOptions(db=tmp_path / "f.duckdb", jobs=2))
+    assert [Path(log.path).name for log in run.logs] == ["a.mcap", "b.mcap"]
+    assert run.logs[0].fingerprint == run.logs[1].fingerprint
+    assert run.logs[0].key != run.logs[1].key
+
+
+def test_error_rows_are_tried_again_on_the_next_run(tmp_path: Path) -> None:
+    data = bytearray(THREE_CAMERAS.read_bytes())
+    data[len(data) // 2 : len(data) // 2 + 4096] = bytes(4096)
+    (tmp_path / "corrupt.mcap").write_bytes(data)
+    policy = parse_policy({}, "p")
+    options = GateOptions(db=tmp_path / "f.duckdb", jobs=1)
+    first = run_gate([str(tmp_path / "corrupt.mcap")], policy, options)
+    second = run_gate([str(tmp_path / "corrupt.mcap")], policy, options)
+    assert first.logs[0].verdict == second.logs[0].verdict == "error"
+    assert not second.logs[0].skipped and first.exit_code == second.exit_code == 3

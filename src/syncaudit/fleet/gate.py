@@ -174,7 +174,8 @@ def run_gate(
     db = ResultsDB(options.db) if options.db is not None else None
     if db is not None and not options.force:
         keys = {log_key(fp, job.path, __version__, rig, policy_fp): job for job, fp, rig in pending}
-        known = db.known(keys)
+        # Error rows are judged again: a timeout or a dead worker may not recur.
+        known = {k: v for k, v in db.known(keys).items() if v.verdict != "error"}
         for key, stored in known.items():
             job = keys[key]
             stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
