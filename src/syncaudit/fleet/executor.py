@@ -114,11 +114,7 @@ class LocalExecutor:
         try:
             while queue or any(w.job is not None for w in self._pool):
                 for worker in self._pool:
-                    if worker.job is None and queue:
-                        job, attempt = queue.popleft()
-                        worker.job, worker.started = job, time.monotonic()
-                        worker.attempt = attempt
-                        worker.conn.send(job)
+                    self._feed(worker, queue)
                 busy = [w for w in self._pool if w.job is not None]
                 deadline = min(w.started for w in busy) + self.timeout_s
                 ready = wait(
@@ -137,6 +133,8 @@ class LocalExecutor:
                         if outcome is not None:
                             outcome.attempts = attempt
                             worker.job = None
+                            # Next log first: the worker audits while the caller judges.
+                            self._feed(worker, queue)
                             yield outcome
                             continue
                     if worker.process.sentinel in ready or worker.conn in ready:
@@ -165,6 +163,14 @@ class LocalExecutor:
                         )
         finally:
             self.close()
+
+    @staticmethod
+    def _feed(worker: _Worker, queue: deque[tuple[LogJob, int]]) -> None:
+        """Give an idle worker the next log, if any."""
+        if worker.job is None and queue:
+            job, attempt = queue.popleft()
+            worker.job, worker.started, worker.attempt = job, time.monotonic(), attempt
+            worker.conn.send(job)
 
     def _replace(self, index: int, options: JobOptions) -> None:
         """Kill a worker (dead or hung) and start a fresh one in its place."""
