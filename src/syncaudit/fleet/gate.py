@@ -85,6 +85,11 @@ def check_targets(options: GateOptions) -> None:
             raise OutputError(f"{target}: exists (use --overwrite to replace it)")
         if not target.parent.is_dir():
             raise OutputError(f"{target}: folder {target.parent} does not exist")
+    if options.db is not None:
+        if options.db.is_dir():
+            raise OutputError(f"{options.db}: is a directory (--db needs a DuckDB file)")
+        if not options.db.parent.is_dir():
+            raise OutputError(f"{options.db}: folder {options.db.parent} does not exist")
     html = options.html_dir
     if html is not None:
         if html.exists() and not html.is_dir():
