@@ -73,7 +73,14 @@ def test_overrides_merge_field_by_field_in_order() -> None:
         ),
         (
             {"vehicles": {"car1": {"cameras": {"front": {"nope": {}}}}}},
-            ["vehicles.car1.cameras.front.nope: unknown check"],
+            ["vehicles.car1.cameras.front.nope: unknown key"],
+        ),
+        (
+            {
+                "defaults": {"lidar": {"rpm": {"max": 500}}},
+                "vehicles": {"car1": {"lidar": {"rpm": {"min": 700}}}},
+            },
+            ["vehicles.car1.lidar.rpm: min (700.0) is above max (500.0)"],
         ),
         (
             {"vehicle_pattern": "cars/([^/]+)/"},
@@ -130,3 +137,17 @@ def test_init_policy_passes_its_logs_with_the_documented_margins(
     assert checks and all(c.passed for c in checks), [c for c in checks if not c.passed]
     topics = policy.defaults.log.required_topics
     assert topics is not None and "/velodyne_packets" in topics.topics
+
+
+def test_the_documented_example_policy_is_valid() -> None:
+    docs = (REPO / "docs" / "fleet.md").read_text()
+    example = docs.split("```yaml\n", 1)[1].split("\n```", 1)[0]
+    raw = yaml.safe_load(example)
+    jsonschema.validate(raw, json.loads((REPO / "schemas" / "policy.schema.json").read_text()))
+    policy = parse_policy(raw, "docs/fleet.md")
+    rear = policy.checks_for("car7", "rear")
+    assert rear.camera.error_mean_us is not None and rear.camera.error_mean_us.max == 400
+    assert rear.camera.t2_p99_us is not None and rear.camera.t2_p99_us.severity == "warn"
+    assert rear.lidar.clock_synchronised is not None and not rear.lidar.clock_synchronised.enabled
+    front = policy.checks_for("car1", "front")
+    assert front.camera.error_mean_us is not None and front.camera.error_mean_us.max == 200

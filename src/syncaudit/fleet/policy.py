@@ -112,14 +112,14 @@ class CheckSet(_Strict):
 
 
 class Override(_Strict):
-    """Partial checks for a vehicle; only the fields written replace the defaults."""
+    """Checks for one vehicle; only the fields written (at any depth) replace the defaults."""
 
-    camera: dict[str, Any] = Field(default_factory=dict)
-    lidar: dict[str, Any] = Field(default_factory=dict)
-    log: dict[str, Any] = Field(default_factory=dict)
-    calibration: dict[str, Any] = Field(default_factory=dict)
-    cameras: dict[str, dict[str, Any]] = Field(default_factory=dict)
-    """Per camera name, partial camera checks for this vehicle."""
+    camera: CameraChecks = CameraChecks()
+    lidar: LidarChecks = LidarChecks()
+    log: LogChecks = LogChecks()
+    calibration: CalibrationChecks = CalibrationChecks()
+    cameras: dict[str, CameraChecks] = Field(default_factory=dict)
+    """Per camera name, camera checks for this vehicle (fields written only)."""
 
 
 class Policy(_Strict):
@@ -134,8 +134,8 @@ class Policy(_Strict):
     default_rig: str | None = None
     """Rig file for logs with no rig beside them, in the manifest, or under `rigs`."""
     defaults: CheckSet = CheckSet()
-    cameras: dict[str, dict[str, Any]] = Field(default_factory=dict)
-    """Per camera name (every vehicle), partial camera checks."""
+    cameras: dict[str, CameraChecks] = Field(default_factory=dict)
+    """Per camera name (every vehicle), camera checks (fields written only)."""
     vehicles: dict[str, Override] = Field(default_factory=dict)
 
     @field_validator("vehicle_pattern")
@@ -186,7 +186,7 @@ class Policy(_Strict):
 
     def fingerprint(self) -> str:
         """A short hash of the policy's content (not its formatting), stored with each verdict."""
-        text = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+        text = json.dumps(_written(self), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -199,10 +199,12 @@ _GROUPS: dict[str, type[BaseModel]] = {
 
 
 def _merge_model(
-    model: type[BaseModel], base: BaseModel, partial: dict[str, Any], where: str
+    model: type[BaseModel], base: BaseModel, override: BaseModel, where: str
 ) -> BaseModel:
-    """`base` with `partial`'s checks merged field by field; ValueError naming `where`."""
+    """`base` with the fields written in `override` merged check by check and field by
+    field; ValueError naming `where` when the result is inconsistent (min above max)."""
     merged = base.model_dump()
+    partial = override.model_dump(exclude_unset=True)
     for key, value in partial.items():
         if key not in model.model_fields:
             raise ValueError(
@@ -215,7 +217,10 @@ def _merge_model(
     try:
         return model.model_validate(merged)
     except ValidationError as exc:
-        lines = [f"{where}.{_loc(e['loc'])}: {e['msg']}" for e in exc.errors()]
+        lines = [
+            f"{where}.{_loc(e['loc'])}: {str(e['msg']).removeprefix('Value error, ')}"
+            for e in exc.errors()
+        ]
         raise ValueError("; ".join(lines)) from exc
 
 
@@ -277,6 +282,20 @@ def policy_json_schema() -> dict[str, Any]:
     return schema
 
 
+def _written(policy: Policy) -> dict[str, Any]:
+    """The policy as data: `defaults` in full, overrides only as written."""
+    data = policy.model_dump(mode="json")
+    data["cameras"] = {
+        name: checks.model_dump(mode="json", exclude_unset=True)
+        for name, checks in policy.cameras.items()
+    }
+    data["vehicles"] = {
+        vid: override.model_dump(mode="json", exclude_unset=True)
+        for vid, override in policy.vehicles.items()
+    }
+    return data
+
+
 def _clean(node: Any, depth: int = 0) -> Any:
     """Drop unset limit bounds and `enabled: true` noise; keep `null` checks (= off)."""
     if isinstance(node, dict):
@@ -295,6 +314,6 @@ def _clean(node: Any, depth: int = 0) -> Any:
 
 def policy_to_yaml(policy: Policy, header: str = "") -> str:
     """The policy as YAML text (`null` marks a check switched off)."""
-    data = _clean(policy.model_dump(mode="json"))
+    data = _clean(_written(policy))
     body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
     return header + body
