@@ -178,3 +178,29 @@ def test_documented_queries_answer_on_a_fleet_database(
     # Logs failing Eq. 5: the last day of car2, one row per camera.
     assert {(row[0], row[1]) for row in failing} == {("/uploads/car2/day4.mcap", "car2")}
     assert len(failing) == 3
+
+
+def test_fleet_report_exit_codes(tmp_path: Path, three_cameras_outcome: LogOutcome) -> None:
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    runner = CliRunner()
+    missing = runner.invoke(
+        app,
+        ["fleet", "report", "--db", str(tmp_path / "no.duckdb"), "--csv", str(tmp_path / "x.csv")],
+    )
+    assert missing.exit_code == 8 and "no such results database" in missing.output
+    assert (
+        runner.invoke(app, ["fleet", "report", "--db", str(tmp_path / "no.duckdb")]).exit_code == 64
+    )
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    (tmp_path / "x.csv").write_text("keep")
+    exists = runner.invoke(
+        app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv")]
+    )
+    assert exists.exit_code == 8 and (tmp_path / "x.csv").read_text() == "keep"
+    done = runner.invoke(
+        app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv"), "--overwrite"]
+    )
+    assert done.exit_code == 0 and len((tmp_path / "x.csv").read_text().splitlines()) == 31
