@@ -23,14 +23,14 @@ def test_directories_globs_and_bag_folders() -> None:
     assert names == [
         "pandar40p_adaptive.mcap",
         "vlp16_short.bag",
-        "vlp16_short.db3",
+        "vlp16_short_ros2",
         "vlp16_three_cameras.mcap",
     ]
     assert all(j.rig_path == j.path + ".rig.yaml" for j in found.jobs)
     globbed = discover([str(SAMPLES / "vlp16_*"), str(SAMPLES / "vlp16_short.bag")], policy)
     assert [Path(j.path).name for j in globbed.jobs] == [
         "vlp16_short.bag",
-        "vlp16_short.db3",
+        "vlp16_short_ros2",
         "vlp16_three_cameras.mcap",
     ]
     assert discover([str(SAMPLES / "nothing*.mcap")], policy).problems
@@ -77,5 +77,5 @@ def test_fingerprint_follows_content(tmp_path: Path) -> None:
     data[-100] ^= 1
     a.write_bytes(data)
     assert fingerprint(a) != first
-    bag = fingerprint(SAMPLES / "vlp16_short.db3")
+    bag = fingerprint(SAMPLES / "vlp16_short_ros2")
     assert len(bag) == 32 and bag != first

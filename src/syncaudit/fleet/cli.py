@@ -4,22 +4,32 @@ from __future__ import annotations
 
 import os
 import sys
+from functools import cache
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.console import Console
 
-from syncaudit.errors import ConfigError, OutputError, SyncauditError
+from syncaudit.errors import ConfigError, Interrupted, OutputError, SyncauditError, UsageError
 
-EXIT_USAGE = 64
+if TYPE_CHECKING:
+    from rich.console import Console
+
+EXIT_USAGE = UsageError.exit_code
 EXIT_INTERNAL = 70
-stderr = Console(stderr=True, soft_wrap=True)
+
+
+@cache
+def _stderr() -> Console:
+    """The rich console on stderr, made on first use (`syncaudit --help` stays light)."""
+    from rich.console import Console
+
+    return Console(stderr=True, soft_wrap=True)
 
 
 def _fail(code: int, message: str) -> typer.Exit:
     for line in message.splitlines():
-        stderr.print(f"[red]error:[/] {line}", highlight=False)
+        typer.echo(f"error: {line}", err=True)
     return typer.Exit(code)
 
 
@@ -31,8 +41,8 @@ def _guarded(body: Any) -> Any:
         raise
     except SyncauditError as exc:
         raise _fail(exc.exit_code, str(exc)) from None
-    except KeyboardInterrupt:
-        raise typer.Exit(130) from None
+    except (KeyboardInterrupt, Interrupted):
+        raise _fail(130, "interrupted") from None
     except OSError as exc:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         raise _fail(OutputError.exit_code, f"{where}{exc.strerror or exc}") from None
@@ -62,7 +72,7 @@ def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.description}"),
-            console=stderr,
+            console=_stderr(),
             transient=False,
         )
         task = bar.add_task("", total=total_hint)
@@ -244,13 +254,13 @@ def _init(
     outcomes = list(executor.run(found.jobs, JobOptions(audit_jobs=audit_jobs)))
     bad = [o for o in outcomes if not o.ok]
     for outcome in bad:
-        stderr.print(f"[yellow]skipped:[/] {outcome.job.path}: {outcome.error}", highlight=False)
+        _stderr().print(f"[yellow]skipped:[/] {outcome.job.path}: {outcome.error}", highlight=False)
     if len(bad) == len(outcomes):
         from syncaudit.errors import LogReadError
 
         raise LogReadError("--init: no log could be audited")
     write_text_atomic(output, init_policy_yaml(outcomes))
-    stderr.print(
+    _stderr().print(
         f"policy from {len(outcomes) - len(bad)} log(s) written to {output}", highlight=False
     )
 
@@ -295,7 +305,7 @@ def _gate(
     counts = {
         v: sum(log.verdict == v for log in run.logs) for v in ("pass", "warn", "fail", "error")
     }
-    stderr.print(
+    _stderr().print(
         f"gate: {len(run.logs)} log(s): " + ", ".join(f"{n} {v}" for v, n in counts.items()),
         highlight=False,
     )

@@ -15,7 +15,7 @@ import os
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -77,7 +77,7 @@ def _finite(value: Any) -> bool:
 
 def _epoch(time: datetime) -> float:
     """Seconds since the epoch of a database timestamp (naive, UTC)."""
-    return time.replace(tzinfo=timezone.utc).timestamp()
+    return time.replace(tzinfo=UTC).timestamp()
 
 
 def _tick(value: float) -> str:
@@ -129,7 +129,7 @@ def plot_svg(
             f'<text x="{left - 4}" y="{y(value) + 4:.1f}" font-size="10" text-anchor="end">{_tick(value)}</text>'
         )
     for stamp, anchor in ((t0, "start"), (t1, "end")):
-        label = datetime.fromtimestamp(stamp, tz=timezone.utc).strftime("%Y-%m-%d %H:%M")
+        label = datetime.fromtimestamp(stamp, tz=UTC).strftime("%Y-%m-%d %H:%M")
         parts.append(
             f'<text x="{x(stamp):.1f}" y="{height - 8}" font-size="10" text-anchor="{anchor}">{label}</text>'
         )

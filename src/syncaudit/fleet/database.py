@@ -14,7 +14,7 @@ import fcntl
 import json
 import time
 from collections.abc import Iterable, Iterator
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,7 @@ LOCK_TIMEOUT_S = 600.0
 def _ts(ns: int | None) -> datetime | None:
     if ns is None:
         return None
-    return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).replace(tzinfo=None)
+    return datetime.fromtimestamp(ns / 1e9, tz=UTC).replace(tzinfo=None)
 
 
 class ResultsDB:
@@ -159,7 +159,7 @@ class ResultsDB:
         """Store verdicts (replacing any with the same key) in one transaction."""
         if not logs:
             return
-        now = datetime.now(timezone.utc).replace(tzinfo=None)
+        now = datetime.now(UTC).replace(tzinfo=None)
         rows: dict[str, list[tuple[Any, ...]]] = {
             t: [] for t in ("logs", "cameras", "lidars", "checks")
         }
