@@ -376,13 +376,41 @@ def _check_stages(stages_m: tuple[float, ...]) -> None:
         raise ValueError("correspondence_stages_m must not increase (coarse to fine)")
 
 
+class AlignmentLimits(ConfigModel):
+    """How a registration runs (coarse-to-fine distances) and when its result is trusted.
+
+    Acceptance rests on the point-to-plane error and the conditioning; overlap is judged
+    relative to what the two views can share from where they were taken (the fraction of
+    the source the target's field of view covers at the seed pose), with an absolute floor
+    below which too little is shared to check anything.
+    """
+
+    correspondence_stages_m: tuple[float, ...] = (1.0, 0.3, 0.15)
+    overlap_distance_m: float = Field(default=0.2, gt=0.0)
+    min_overlap: float = Field(default=0.1, gt=0.0, le=1.0)
+    """Absolute floor of the overlapping fraction of the source."""
+    min_overlap_ratio: float = Field(default=0.3, gt=0.0, le=1.0)
+    """Overlap must reach this share of the overlap the views allow (when it is known)."""
+    max_rmse_m: float = Field(default=0.05, gt=0.0)
+    min_translation_information: float = Field(default=0.03, gt=0.0, lt=1.0)
+    min_rotation_information: float = Field(default=0.01, gt=0.0, lt=1.0)
+
+    @model_validator(mode="after")
+    def _check(self) -> AlignmentLimits:
+        _check_stages(self.correspondence_stages_m)
+        return self
+
+
 class SelectionConfig(ConfigModel):
     """How scans are grouped into stops and which stops and pairs are used."""
 
     min_stops: int = Field(default=3, ge=2)
     min_static_scans: int = Field(default=2, ge=2)
-    static_rotation_deg: float = Field(default=0.1, gt=0.0)
-    static_translation_m: float = Field(default=0.02, gt=0.0)
+    static_residual_m: float = Field(default=0.02, gt=0.0)
+    """Median nearest-neighbour distance between consecutive still scans (raised
+    automatically for noisier LiDARs: 1.5x the quietest tenth of a LiDAR's pairs)."""
+    static_near_fraction: float = Field(default=0.9, gt=0.0, le=1.0)
+    """Share of a still scan's points within 5 cm of the previous scan."""
     max_static_gap_s: float = Field(default=0.5, gt=0.0)
     stop_match_tolerance_s: float = Field(default=0.3, ge=0.0)
     min_step_deg: float = Field(default=2.0, ge=0.0)
@@ -396,7 +424,6 @@ class RegistrationConfig(ConfigModel):
 
     voxel_m: float = Field(default=0.15, gt=0.0)
     neighbours: int = Field(default=30, ge=5, le=100)
-    correspondence_stages_m: tuple[float, ...] = (1.0, 0.3, 0.15)
     coarse_voxel_m: float = Field(default=0.5, gt=0.0)
     coarse_max_correspondence_m: float = Field(default=2.5, gt=0.0)
     yaw_search_step_deg: float = Field(default=10.0, gt=0.0, le=90.0)
@@ -406,18 +433,13 @@ class RegistrationConfig(ConfigModel):
     max_step_deg: float = Field(default=90.0, gt=0.0, le=180.0)
     """Largest turn searched between consecutive stops; views overlap only below ~90 deg."""
     max_iterations: int = Field(default=30, ge=5)
-    overlap_distance_m: float = Field(default=0.2, gt=0.0)
-    min_overlap: float = Field(default=0.4, gt=0.0, le=1.0)
-    max_rmse_m: float = Field(default=0.05, gt=0.0)
-    min_translation_information: float = Field(default=0.03, gt=0.0, lt=1.0)
-    min_rotation_information: float = Field(default=0.01, gt=0.0, lt=1.0)
+    limits: AlignmentLimits = AlignmentLimits()
     num_threads: int = Field(default=2, ge=1, le=64)
 
     @model_validator(mode="after")
     def _check(self) -> RegistrationConfig:
         if self.coarse_voxel_m < self.voxel_m:
             raise ValueError("coarse_voxel_m must be >= voxel_m")
-        _check_stages(self.correspondence_stages_m)
         return self
 
 
@@ -444,17 +466,9 @@ class MapToMapConfig(ConfigModel):
 
     voxel_m: float = Field(default=0.1, gt=0.0)
     neighbours: int = Field(default=30, ge=5, le=100)
-    correspondence_stages_m: tuple[float, ...] = (1.0, 0.3, 0.15)
-    overlap_distance_m: float = Field(default=0.2, gt=0.0)
-    min_overlap: float = Field(default=0.2, gt=0.0, le=1.0)
-    max_rmse_m: float = Field(default=0.05, gt=0.0)
-    min_translation_information: float = Field(default=0.01, gt=0.0, lt=1.0)
-    min_rotation_information: float = Field(default=0.005, gt=0.0, lt=1.0)
-
-    @model_validator(mode="after")
-    def _check(self) -> MapToMapConfig:
-        _check_stages(self.correspondence_stages_m)
-        return self
+    limits: AlignmentLimits = AlignmentLimits(
+        min_overlap=0.05, min_translation_information=0.01, min_rotation_information=0.005
+    )
 
 
 class ValidationConfig(ConfigModel):

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
+from syncaudit.calib.config import AlignmentLimits
 from syncaudit.errors import ConfigError
 
 F64 = NDArray[np.float64]
@@ -175,6 +176,8 @@ class Alignment:
     after: Fit
     accepted: bool
     reason: str | None
+    expected_overlap: float | None = None
+    """Overlap the two views allow at the seed pose (None: not judged relative to it)."""
 
 
 def gicp(
@@ -200,26 +203,97 @@ def gicp(
     )
 
 
+def visible_fraction(
+    target: Cloud,
+    source: Cloud,
+    target_from_source: F64,
+    *,
+    bin_deg: tuple[float, float] = (2.0, 4.0),
+) -> float:
+    """Share of the source the target's view could hold, with the source at the given pose.
+
+    Both clouds are in their sensor frames, so the target's field of view is the set of
+    (azimuth, elevation) cells its points occupy, each out to its farthest return. A moved
+    source point inside an occupied cell and not behind the target's farthest return there
+    could overlap the target; the rest (outside the target's view, or occluded) cannot.
+    This is the overlap "the geometry of the two stops allows" that an alignment's own
+    overlap is compared with.
+    """
+    if source.size == 0 or target.size == 0:
+        return 0.0
+    az_bin, el_bin = (math.radians(v) for v in bin_deg)
+
+    def cells(points: F64) -> tuple[NDArray[np.int64], F64]:
+        rng = np.linalg.norm(points, axis=1)
+        az = np.arctan2(points[:, 1], points[:, 0])
+        el = np.arcsin(np.clip(points[:, 2] / np.maximum(rng, 1e-9), -1.0, 1.0))
+        ia = np.floor((az + math.pi) / az_bin).astype(np.int64)
+        ie = np.floor((el + math.pi / 2.0) / el_bin).astype(np.int64)
+        return ia * 1000 + ie, rng
+
+    t_cell, t_rng = cells(target.points_m)
+    order = np.argsort(t_cell)
+    t_cell, t_rng = t_cell[order], t_rng[order]
+    keys, first = np.unique(t_cell, return_index=True)
+    far = np.maximum.reduceat(t_rng, first)
+    s_cell, s_rng = cells(se3.apply(target_from_source, source.points_m))
+    pos = np.clip(np.searchsorted(keys, s_cell), 0, keys.size - 1)
+    seen = (keys[pos] == s_cell) & (s_rng <= far[pos] * 1.05 + 0.5)
+    return float(seen.mean())
+
+
+def _verdict(after: Fit, limits: AlignmentLimits, expected_overlap: float | None) -> str | None:
+    """Why an alignment is rejected (None: accepted): error and conditioning first,
+    overlap against what the views allow (or the absolute floor alone)."""
+    cond = after.conditioning
+    floor = limits.min_overlap
+    if expected_overlap is not None:
+        floor = max(floor, limits.min_overlap_ratio * expected_overlap)
+    if after.overlap < floor:
+        if expected_overlap is None or floor == limits.min_overlap:
+            return f"overlap {after.overlap:.0%} < {limits.min_overlap:.0%}"
+        return (
+            f"overlap {after.overlap:.0%} < {limits.min_overlap_ratio:.0%} of the "
+            f"{expected_overlap:.0%} the two views allow"
+        )
+    if after.rmse_m > limits.max_rmse_m:
+        return f"error {after.rmse_m * 100:.1f} cm > {limits.max_rmse_m * 100:.1f} cm"
+    if cond.translation_information < limits.min_translation_information:
+        t = cond.weakest_translation
+        return (
+            f"degenerate: translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) barely "
+            f"constrained ({cond.translation_information:.4f} < "
+            f"{limits.min_translation_information})"
+        )
+    if cond.rotation_information < limits.min_rotation_information:
+        r = cond.weakest_rotation_axis
+        return (
+            f"degenerate: rotation about ({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}) barely "
+            f"constrained ({cond.rotation_information:.4f} < {limits.min_rotation_information})"
+        )
+    return None
+
+
 def align(
     target: Cloud,
     source: Cloud,
     initial: F64,
-    max_correspondences_m: tuple[float, ...],
+    limits: AlignmentLimits,
     *,
-    overlap_distance_m: float,
-    min_overlap: float,
-    max_rmse_m: float,
-    min_translation_information: float,
-    min_rotation_information: float,
     max_iterations: int,
     threads: int,
+    expected_overlap: float | None = None,
 ) -> Alignment:
-    """Coarse-to-fine GICP from `initial`, then the overlap, error and degeneracy tests."""
-    before = evaluate(target, source, initial, overlap_distance_m, threads)
+    """Coarse-to-fine GICP from `initial`, then the error, degeneracy and overlap tests.
+
+    `expected_overlap` (e.g. `visible_fraction` at the coarse pose) makes the overlap test
+    relative to what the two views can share; without it only the absolute floor applies.
+    """
+    before = evaluate(target, source, initial, limits.overlap_distance_m, threads)
     transform = np.asarray(initial, dtype=np.float64)
     converged, iterations = False, 0
     result: Any = None
-    for max_corr in max_correspondences_m:
+    for max_corr in limits.correspondence_stages_m:
         result = gicp(
             target,
             source,
@@ -233,25 +307,8 @@ def align(
         transform = np.asarray(result.T_target_source, dtype=np.float64)
         converged = bool(result.converged)
         iterations += int(result.iterations)
-    after = evaluate(target, source, transform, overlap_distance_m, threads)
-    cond = after.conditioning
-    reason = None
-    if after.overlap < min_overlap:
-        reason = f"overlap {after.overlap:.0%} < {min_overlap:.0%}"
-    elif after.rmse_m > max_rmse_m:
-        reason = f"error {after.rmse_m * 100:.1f} cm > {max_rmse_m * 100:.1f} cm"
-    elif cond.translation_information < min_translation_information:
-        t = cond.weakest_translation
-        reason = (
-            f"degenerate: translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) barely "
-            f"constrained ({cond.translation_information:.4f} < {min_translation_information})"
-        )
-    elif cond.rotation_information < min_rotation_information:
-        r = cond.weakest_rotation_axis
-        reason = (
-            f"degenerate: rotation about ({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}) barely "
-            f"constrained ({cond.rotation_information:.4f} < {min_rotation_information})"
-        )
+    after = evaluate(target, source, transform, limits.overlap_distance_m, threads)
+    reason = _verdict(after, limits, expected_overlap)
     return Alignment(
         target_from_source=transform,
         converged=converged,
@@ -260,6 +317,7 @@ def align(
         after=after,
         accepted=reason is None,
         reason=reason,
+        expected_overlap=expected_overlap,
     )
 
 

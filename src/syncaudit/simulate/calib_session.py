@@ -34,7 +34,40 @@ from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_sca
 from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 
-__all__ = ["CalibSceneConfig", "simulate_calib_session", "truth_path"]
+__all__ = ["MATRIX", "CalibSceneConfig", "simulate_calib_session", "truth_path"]
+
+MATRIX: dict[str, dict[str, Any]] = {
+    "turntable-32-roof": {"beams": 32, "mount": "roof_front_rear", "motion": "turntable"},
+    "drive-16-roof": {"beams": 16, "mount": "roof_front_rear", "motion": "drive"},
+    "drive-32-left-right": {"beams": 32, "mount": "roof_left_right", "motion": "drive"},
+    "drive-32-diagonal": {
+        "beams": 32,
+        "mount": "diagonal",
+        "motion": "drive",
+        "tf_chain": "sensor_kit",
+    },
+    "drive-64-bumper": {
+        "beams": 64,
+        "mount": "bumper_front_rear",
+        "motion": "drive",
+        "organized": "second",
+    },
+    "drive-64-roof-odom": {
+        "beams": 64,
+        "mount": "roof_front_rear",
+        "motion": "drive",
+        "odometry": "odometry",
+    },
+    "drive-128-left-right": {
+        "beams": 128,
+        "mount": "roof_left_right",
+        "motion": "drive",
+        "organized": "both",
+        "tf_chain": "sensor_kit",
+        "odometry": "tf",
+    },
+}
+"""The calibration test matrix: `calib_scene_config` arguments per case (add `seed`)."""
 
 _NS = 1_000_000_000
 _LOG_LATENCY_NS = 4_000_000
