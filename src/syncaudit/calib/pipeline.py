@@ -326,7 +326,8 @@ def _verify_turn(
         return f"structure off the ground overlaps {fit.overlap:.0%} < {_MIN_STRUCTURE_OVERLAP:.0%}"
     if fit.rmse_m > _MAX_STRUCTURE_RMSE_FACTOR * reg.coarse_voxel_m:
         return f"structure off the ground misfits by {fit.rmse_m * 100:.0f} cm"
-    cond = evaluate(full[0], full[1], turn, reg.coarse_voxel_m, reg.num_threads).conditioning
+    up = np.array([0.0, 0.0, 1.0])
+    cond = evaluate(full[0], full[1], turn, reg.coarse_voxel_m, reg.num_threads, up).conditioning
     if (
         cond.translation_information < reg.turn_min_translation_information
         or cond.rotation_information < reg.turn_min_rotation_information
@@ -469,6 +470,7 @@ def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig
         max_iterations=reg.max_iterations,
         threads=reg.num_threads,
         expected_overlap=visible_fraction(target, source, initial),
+        planar_axis=lidar.up if config.pose_graph.motion == "planar" else None,
     )
 
 

@@ -129,8 +129,29 @@ class Fit:
     tangent), so an edge's information in the pose graph is `hessian / sigma^2`."""
 
 
+def _planar_weakest(rows: F64, axis: F64) -> tuple[float, tuple[float, float, float]]:
+    """Like `_weakest`, over the plane across `axis` only (the directions a planar pose
+    graph uses)."""
+    axis = axis / np.linalg.norm(axis)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = ref - axis * (ref @ axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    basis = np.stack([e1, e2], axis=1)
+    planar = rows @ basis
+    values, vectors = np.linalg.eigh(planar.T @ planar / max(planar.shape[0], 1))
+    vec = basis @ vectors[:, 0]
+    vec = vec if vec[int(np.argmax(np.abs(vec)))] >= 0 else -vec
+    return max(float(values[0]), 0.0), (float(vec[0]), float(vec[1]), float(vec[2]))
+
+
 def evaluate(
-    target: Cloud, source: Cloud, target_from_source: F64, distance_m: float, threads: int
+    target: Cloud,
+    source: Cloud,
+    target_from_source: F64,
+    distance_m: float,
+    threads: int,
+    planar_axis: F64 | None = None,
 ) -> Fit:
     """Overlap, point-to-plane RMSE and conditioning of `source` moved by `target_from_source`."""
     if source.size == 0 or target.size == 0:
@@ -154,8 +175,15 @@ def evaluate(
     jacobian = np.hstack([np.cross(points, normals_src), normals_src])
     hessian = jacobian.T @ jacobian / jacobian.shape[0]
     lever_len = np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-6)
-    t_info, t_dir = _weakest(normals_src)
-    r_info, r_axis = _weakest(jacobian[:, :3] / lever_len)
+    if planar_axis is None:
+        t_info, t_dir = _weakest(normals_src)
+        r_info, r_axis = _weakest(jacobian[:, :3] / lever_len)
+    else:
+        # Planar motion: translation across the axis, rotation about it only.
+        t_info, t_dir = _planar_weakest(normals_src, planar_axis)
+        unit = planar_axis / np.linalg.norm(planar_axis)
+        r_info = float(np.mean(((jacobian[:, :3] / lever_len) @ unit) ** 2))
+        r_axis = (float(unit[0]), float(unit[1]), float(unit[2]))
     return Fit(
         overlap,
         float(np.sqrt(np.mean(residual**2))),
@@ -283,11 +311,14 @@ def align(
     max_iterations: int,
     threads: int,
     expected_overlap: float | None = None,
+    planar_axis: F64 | None = None,
 ) -> Alignment:
     """Coarse-to-fine GICP from `initial`, then the error, degeneracy and overlap tests.
 
     `expected_overlap` (e.g. `visible_fraction` at the coarse pose) makes the overlap test
     relative to what the two views can share; without it only the absolute floor applies.
+    With `planar_axis` (the LiDAR's up, for a planar pose graph) conditioning is judged on
+    the planar directions only: roll and pitch between stops are not estimated there.
     """
     before = evaluate(target, source, initial, limits.overlap_distance_m, threads)
     transform = np.asarray(initial, dtype=np.float64)
@@ -307,7 +338,7 @@ def align(
         transform = np.asarray(result.T_target_source, dtype=np.float64)
         converged = bool(result.converged)
         iterations += int(result.iterations)
-    after = evaluate(target, source, transform, limits.overlap_distance_m, threads)
+    after = evaluate(target, source, transform, limits.overlap_distance_m, threads, planar_axis)
     reason = _verdict(after, limits, expected_overlap)
     return Alignment(
         target_from_source=transform,

@@ -198,6 +198,14 @@ def html_section(result: CalibrationResult) -> str:
     )
 
 
+def render_calibration_html(result: CalibrationResult) -> str:
+    """A complete HTML page (UTF-8, no scripts) holding `html_section(result)`."""
+    return (
+        "<!doctype html><html lang=en><head><meta charset=utf-8>"
+        f"<title>syncaudit calib</title></head><body>{html_section(result)}</body></html>\n"
+    )
+
+
 def _extrinsic_table(extrinsics: list[ExtrinsicOut]) -> Table:
     table = Table(title="Extrinsics vs recorded (reference_from_lidar)")
     for col in ("LiDAR", "Δrot (deg)", "Δtrans (cm)", "map error (cm)", "verdict"):
