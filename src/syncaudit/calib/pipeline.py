@@ -298,13 +298,14 @@ def remove_ground(points_m: F64) -> F64:
     z = points_m[:, 2]
     low = points_m[z < float(np.percentile(z, 5)) + _GROUND_BAND_M]
     design = np.c_[points_m[:, :2], np.ones(points_m.shape[0])]
-    coef: F64 = np.linalg.lstsq(np.c_[low[:, :2], np.ones(low.shape[0])], low[:, 2], rcond=None)[0]
+    low_design = np.c_[low[:, :2], np.ones(low.shape[0])]
+    coef: F64 = np.asarray(np.linalg.lstsq(low_design, low[:, 2], rcond=None)[0], dtype=np.float64)
     for _ in range(2):
         resid = z - design @ coef
         inl = np.abs(resid) < _GROUND_KEEP_M
         if inl.sum() < 3:
             break
-        coef = np.linalg.lstsq(design[inl], z[inl], rcond=None)[0]
+        coef = np.asarray(np.linalg.lstsq(design[inl], z[inl], rcond=None)[0], dtype=np.float64)
     keep = np.abs(z - design @ coef) > _GROUND_KEEP_M
     return points_m[keep] if keep.sum() >= 50 else points_m
 
