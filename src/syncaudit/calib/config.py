@@ -179,14 +179,16 @@ _MOUNTS: dict[str, tuple[tuple[tuple[float, float, float], tuple[float, float, f
 def _beam_geometry(beams: int) -> tuple[tuple[float, float], float]:
     """(vertical FOV deg, column width deg) of a class of spinning LiDAR by beam count.
 
-    16: VLP-16-like (+-15 deg, 0.2 deg); 32: VLP-32C-like (-25..15, 0.2); more: OS1-64/128
-    like (+-22.5 deg, 0.35 deg).
+    16: VLP-16-like (+-15 deg, 0.2 deg); 32: VLP-32C-like (-25..15, 0.2); up to 64:
+    OS1-64 in 1024x10 mode (+-22.5 deg, 0.35 deg); more: OS1-128 in 512x10 mode (0.7 deg).
     """
     if beams <= 16:
         return (-15.0, 15.0), 0.2
     if beams <= 32:
         return (-25.0, 15.0), 0.2
-    return (-22.5, 22.5), 0.35
+    if beams <= 64:
+        return (-22.5, 22.5), 0.35
+    return (-22.5, 22.5), 0.7
 
 
 def _sector_overlap_deg(a_center: float, a_width: float, b_center: float, b_width: float) -> float:
