@@ -189,11 +189,15 @@ def test_free_motion_pose_graph(matrix_runs: dict[str, Any]) -> None:
     assert rot_deg <= 0.1 and trans_cm <= 1.0
 
 
-def test_degenerate_scene_is_refused_early_naming_the_free_direction(tmp_path: Path) -> None:
-    """Ground and one wall: sliding along the wall is unobservable; refused on that, fast."""
+@pytest.mark.parametrize("scene", ["ground_and_wall", "corridor"])
+def test_degenerate_scene_is_refused_early_naming_the_free_direction(
+    tmp_path: Path, scene: Any
+) -> None:
+    """Ground and one wall, or a corridor: sliding along the walls is unobservable; the
+    scene is refused on that, within seconds, naming the free direction."""
     out = tmp_path / "wall.mcap"
     truth = simulate_calib_session(
-        out, calib_scene_config(motion="drive", scene="ground_and_wall", n_stops=5)
+        out, calib_scene_config(motion="drive", beams=16, scene=scene, n_stops=5)
     )
     start = time.process_time()
     result = calibrate_log(out, CalibConfig())
@@ -201,9 +205,8 @@ def test_degenerate_scene_is_refused_early_naming_the_free_direction(tmp_path: P
     assert not result.calibratable and not result.passed
     assert result.reason is not None and "degenerate scene" in result.reason
     assert all(ext.result is None and not ext.calibrated for ext in result.extrinsics)
-    # The named free direction is the wall's run, seen from the vehicle at some stop.
-    wall = truth["scene"]["objects"][0]
-    assert wall["type"] == "wall"
+    # The named free direction is the walls' run, seen from the vehicle at some stop.
+    assert truth["scene"]["objects"][0]["type"] == "wall"
     assert "along (" in result.reason
     assert cpu_s < 10.0, cpu_s
     assert "NOT CALIBRATABLE" in html_section(result)

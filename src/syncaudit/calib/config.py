@@ -100,7 +100,9 @@ class LidarSimConfig(ConfigModel):
 class SceneConfig(ConfigModel):
     """What the ray-cast calibration environment contains."""
 
-    kind: Literal["yard", "ground_and_wall"] = "yard"
+    kind: Literal["yard", "ground_and_wall", "corridor"] = "yard"
+    """yard: walls, boxes and poles; ground_and_wall: flat ground and one long wall;
+    corridor: flat ground between two long parallel walls (both degenerate)."""
     yard_size_m: tuple[float, float] = (26.0, 20.0)
     n_boxes: int = Field(default=8, ge=0, le=200)
     n_poles: int = Field(default=10, ge=0, le=200)
@@ -334,7 +336,7 @@ def calib_scene_config(
     organized: Literal["none", "second", "both"] = "none",
     tf_chain: Literal["direct", "sensor_kit"] = "direct",
     odometry: Literal["none", "odometry", "tf", "both"] = "none",
-    scene: Literal["yard", "ground_and_wall"] = "yard",
+    scene: Literal["yard", "ground_and_wall", "corridor"] = "yard",
     range_noise_m: float = 0.01,
     rear_rotation_error_deg: float = 0.05,
     rear_translation_error_cm: float = 0.3,

@@ -234,6 +234,16 @@ def _find_stops(
             min_near_fraction=sel.static_near_fraction,
             max_gap_ns=round(sel.max_static_gap_s * 1e9),
         )
+    if not runs:
+        notes.append(
+            "no two consecutive scans of any LiDAR are alike (one scan per stop): every scan "
+            "is treated as a stop"
+        )
+        for lidar in lidars:
+            runs += [
+                selection.Run(lidar.topic, (i,), s.stamp_ns, s.stamp_ns)
+                for i, s in enumerate(lidar.scans)
+            ]
     moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
     if moving:
         notes.append(
@@ -681,6 +691,33 @@ def _graph_lidars(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
     return anchors
 
 
+def _causes(lidar: _Lidar) -> str:
+    """Why a LiDAR's stops did not join: unknown vehicle motion and rejected pairs, counted
+    by kind, each with its first example."""
+    parts = []
+    unknown = [k for k, angle in lidar.angles.items() if angle is None]
+    if unknown:
+        first = lidar.dropped.get(min(unknown), "motion unknown")
+        parts.append(
+            f"the vehicle's motion to {len(unknown)} stop(s) could not be found, "
+            f"first at stop {min(unknown)}: {first}"
+        )
+    rejected = [r.reason for r in lidar.results.values() if not r.accepted and r.reason]
+    if rejected:
+        kinds: dict[str, int] = {}
+        for reason in rejected:
+            kind = reason.split(":")[0].split(" ")[0]
+            kinds[kind] = kinds.get(kind, 0) + 1
+        counted = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items()))
+        parts.append(
+            f"{len(rejected)} of {len(lidar.results)} pair alignments rejected ({counted}), "
+            f"e.g. {rejected[0]}"
+        )
+    elif not lidar.results:
+        parts.append("no pairs of stops whose views should overlap")
+    return "; ".join(parts) or "no accepted alignments"
+
+
 def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
     """Used stops, reasons for the others, pose-graph totals and per-pair output."""
     sel = config.selection
@@ -712,18 +749,10 @@ def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
             iterations=max(s.iterations for s in sols),
         )
     else:
-        results = lidar.results
-        rejected = [r.reason for r in results.values() if not r.accepted and r.reason]
-        if results:
-            why = f"{len(rejected)} of {len(results)} pair alignments rejected"
-            why += f", e.g. {rejected[0]}" if rejected else ""
-        else:
-            first = next(iter(lidar.dropped.values()), "no overlapping stops")
-            why = f"no pairs to align: {first}"
         largest = max((len(g) for g in _components(lidar)), default=0)
         lidar.reason = (
             f"{lidar.topic}: at most {largest} of {len(lidar.stop_scan)} stops could be "
-            f"aligned together ({why}); need {sel.min_stops}"
+            f"aligned together ({_causes(lidar)}); need {sel.min_stops}"
         )
         lidar.dropped.setdefault(main, "too few stops aligned to it")
     for a, b, sep, pred in lidar.candidates:
@@ -1030,6 +1059,9 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         lidars.append(_Lidar(topic=topic, frame_id=frame, scans=scans, up=up))
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
+        degenerate = _degenerate_scene(lidars, recorded, config)
+        if degenerate is not None:
+            return _refusal(path, lidars, recorded, stops, degenerate, notes, timer, config)
         short = [
             f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
             for lidar in lidars
@@ -1042,9 +1074,6 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
                 f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
             )
             return _refusal(path, lidars, recorded, stops, why, notes, timer, config)
-        degenerate = _degenerate_scene(lidars, recorded, config)
-        if degenerate is not None:
-            return _refusal(path, lidars, recorded, stops, degenerate, notes, timer, config)
         reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         odometry = io.read_odometry(path, recorded.base_frame)

@@ -189,6 +189,14 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
         center = (dist_m * math.cos(yaw), dist_m * math.sin(yaw), 1.5)
         wall = Box(center, (0.3, 80.0, 3.0), yaw, "wall", 0.5)
         return Scene(boxes=(wall,), poles=())
+    if config.kind == "corridor":
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        half_m = config.clear_radius_m + 1.0
+        walls = []
+        for side in (-1.0, 1.0):
+            center = (-side * half_m * math.sin(yaw), side * half_m * math.cos(yaw), 1.5)
+            walls.append(Box(center, (80.0, 0.3, 3.0), yaw, "wall", 0.5))
+        return Scene(boxes=tuple(walls), poles=())
     size_x, size_y = config.yard_size_m
     yard_yaw = float(rng.uniform(-math.pi, math.pi))
     offset = rng.uniform(-1.0, 1.0, size=2)
