@@ -73,11 +73,10 @@ _MIN_POINTS = 100
 
 @dataclass
 class _Scan:
-    """A scan kept in memory: points at the finest voxel used (float32), a coarse cloud."""
+    """A scan kept in memory: points at the finest voxel used (float32)."""
 
     stamp_ns: int
     points_m: NDArray[np.float32]
-    coarse: Cloud
 
 
 @dataclass
@@ -179,8 +178,7 @@ def _read(
         if points.shape[0] < _MIN_POINTS:
             skipped += 1
             continue
-        coarse = prepare(points, reg.coarse_voxel_m, 20, reg.num_threads)
-        scans[scan.topic].append(_Scan(scan.stamp_ns, points, coarse))
+        scans[scan.topic].append(_Scan(scan.stamp_ns, points))
     if skipped:
         notes.append(f"{skipped} scan(s) with fewer than {_MIN_POINTS} points skipped")
     for topic in topics:
@@ -280,11 +278,11 @@ def _provisional_reference(
 
 
 def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtrinsics) -> F64:
-    """All LiDARs' coarse points at one stop in the base frame (recorded extrinsics)."""
+    """All LiDARs' points at one stop in the base frame (recorded extrinsics)."""
     parts = [
         se3.apply(
             recorded.base_from_frame[lidar.frame_id],
-            lidar.scans[lidar.stop_scan[stop]].coarse.points_m,
+            lidar.scans[lidar.stop_scan[stop]].points_m,
         )
         for lidar in lidars
         if stop in lidar.stop_scan
