@@ -110,8 +110,9 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     ok = True
     with tempfile.TemporaryDirectory(prefix="bench_calib_") as tmp:
-        for case in args.cases:
-            for seed in range(args.seeds):
+        # Seeds outer, cases inner: an interrupted run still covers every case.
+        for seed in range(args.seeds):
+            for case in args.cases:
                 row = _run(Path(tmp), case, seed, args.stops)
                 rows.append(row)
                 err = (
