@@ -1,19 +1,27 @@
-"""`calibrate_log`: method B end to end on a recorded turntable or slow-turn session.
+"""`calibrate_log`: method B end to end on a turntable, slow-turn or driving session.
 
-1. read the LiDARs' PointCloud2 scans and the recorded extrinsics;
-2. find stationary stops (runs of scans without motion; scans taken while turning are
-   left out), the vehicle's turn between consecutive stops (all LiDARs merged in the base
-   frame, yaw search + coarse GICP) and so each stop's turntable angle; keep distinct
-   angular positions;
-3. per LiDAR, align overlapping scan pairs with GICP, accept/reject each by overlap,
-   point-to-plane error and conditioning (degenerate alignments are rejected);
-4. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
-   stops the accepted alignments connect, anchored at a stop shared with the other
-   LiDARs: every scan lands in that LiDAR's frame at the anchor stop -- its local map;
-5. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
+1. read the LiDARs' PointCloud2 scans (organised or not), the recorded extrinsics (any
+   depth of /tf_static chain) and, when the log has it, the vehicle's odometry;
+2. find still stops from scan-to-scan change (nearest-neighbour residuals, no
+   registration, so low and sparse LiDARs work); scans taken while moving are skipped,
+   not deskewed. Refuse a degenerate scene (a direction no stop constrains: corridor,
+   ground plus one wall) before any registration, naming the free direction; a log
+   with too few stops gets a not-calibratable result saying why, never "nothing to audit";
+3. the vehicle's motion between stops (all LiDARs merged in the base frame): seeded by
+   odometry when present, else a yaw search scored on the structure off the ground
+   (ground plane fitted and removed), verified by a second criterion; a stop links to
+   the nearest earlier stop whose motion verifies, so one weak link does not drop the rest;
+4. per LiDAR, align every pair of stops whose views should overlap with GICP; accept on
+   point-to-plane error and conditioning (planar directions for a planar graph), with
+   overlap judged against the share the two views allow at the seed pose;
+5. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
+   stops the accepted alignments connect (loop closures included), anchored at a stop
+   shared with the other LiDARs: every scan lands in that LiDAR's frame at the anchor
+   stop -- its local map;
+6. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
    stop, seeded with the recorded extrinsic: the result is `reference_from_lidar`, the
    extrinsic calibration (estimates from several anchors are fused by their information);
-6. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
+7. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
@@ -1059,22 +1067,21 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         lidars.append(_Lidar(topic=topic, frame_id=frame, scans=scans, up=up))
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
-        degenerate = _degenerate_scene(lidars, recorded, config)
-        if degenerate is not None:
-            return _refusal(path, lidars, recorded, stops, degenerate, notes, timer, config)
-        short = [
-            f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
-            for lidar in lidars
-            if len(lidar.stop_scan) < config.selection.min_stops
-        ]
-        if short:
-            why = (
-                "; ".join(short)
-                + f"; calibration needs at least {config.selection.min_stops} stops "
-                f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
-            )
-            return _refusal(path, lidars, recorded, stops, why, notes, timer, config)
-        reference = _provisional_reference(stops, lidars, config)
+    with timer.stage("degeneracy"):
+        refusal = _degenerate_scene(lidars, recorded, config)
+    short = [
+        f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
+        for lidar in lidars
+        if len(lidar.stop_scan) < config.selection.min_stops
+    ]
+    if refusal is None and short:
+        refusal = (
+            "; ".join(short) + f"; calibration needs at least {config.selection.min_stops} stops "
+            f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
+        )
+    if refusal is not None:
+        return _refusal(path, lidars, recorded, stops, refusal, notes, timer, config)
+    reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         odometry = io.read_odometry(path, recorded.base_frame)
         _angular_chain(lidars, recorded, reference, config, odometry, notes)
