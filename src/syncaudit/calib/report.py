@@ -198,14 +198,6 @@ def html_section(result: CalibrationResult) -> str:
     )
 
 
-def render_calibration_html(result: CalibrationResult) -> str:
-    """A complete HTML page (UTF-8, no scripts) holding `html_section(result)`."""
-    return (
-        "<!doctype html><html lang=en><head><meta charset=utf-8>"
-        f"<title>syncaudit calib</title></head><body>{html_section(result)}</body></html>\n"
-    )
-
-
 def _extrinsic_table(extrinsics: list[ExtrinsicOut]) -> Table:
     table = Table(title="Extrinsics vs recorded (reference_from_lidar)")
     for col in ("LiDAR", "Δrot (deg)", "Δtrans (cm)", "map error (cm)", "verdict"):
@@ -264,3 +256,11 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     console.print(table)
     for note in result.notes:
         console.print(f"[dim]note: {note}[/]")
+
+
+def render_calibration_html(result: CalibrationResult) -> str:
+    """A self-contained HTML page of a calibration result (what `calib --html` writes)."""
+    return (
+        "<!doctype html><html lang=en><head><meta charset=utf-8>"
+        f"<title>syncaudit calib</title></head><body>{html_section(result)}</body></html>\n"
+    )
