@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import csv
 import re
-import shutil
-import subprocess
-import tempfile
 import time
 from pathlib import Path
 
 import duckdb
 import pytest
 
+from browser import needs_chromium, render, screenshot
 from syncaudit.fleet.checks import CheckResult
 from syncaudit.fleet.dashboard import write_report
 from syncaudit.fleet.database import ResultsDB
@@ -21,17 +19,6 @@ from syncaudit.fleet.job import LogOutcome
 from syncaudit.fleet.record import JudgedLog
 
 DAY_NS = 86_400 * 10**9
-ARTIFACTS = Path(tempfile.gettempdir()) / "syncaudit-test-artifacts" / "fleet"
-CHROMIUM_FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 
 
 def _fleet_db(tmp_path: Path, outcome: LogOutcome) -> Path:
@@ -101,11 +88,7 @@ def test_exports_hold_the_same_rows(tmp_path: Path, three_cameras_outcome: LogOu
     assert not list(tmp_path.glob(".*.tmp"))
 
 
-@pytest.mark.skipif(
-    shutil.which("chromium") is None,
-    reason="chromium is not installed (.ci/run installs Debian's chromium package as root; "
-    "apt-get was unavailable here)",
-)
+@needs_chromium
 def test_dashboard_renders_in_headless_chromium(
     tmp_path: Path, three_cameras_outcome: LogOutcome
 ) -> None:
@@ -115,43 +98,11 @@ def test_dashboard_renders_in_headless_chromium(
     page = (out / "index.html").read_text()
     assert "http://" not in page.replace('xmlns="http://www.w3.org/2000/svg"', "")
     assert "https://" not in page and "<link" not in page and " src=" not in page  # self-contained
-    url = (out / "index.html").resolve().as_uri()
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    shot = ARTIFACTS / "dashboard.png"
-    with tempfile.TemporaryDirectory() as profile:
-        dom = subprocess.run(
-            [
-                "chromium",
-                *CHROMIUM_FLAGS,
-                f"--user-data-dir={profile}",
-                "--enable-logging=stderr",
-                "--v=0",
-                "--dump-dom",
-                url,
-            ],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            check=True,
-        )
-    with tempfile.TemporaryDirectory() as profile:
-        subprocess.run(
-            [
-                "chromium",
-                *CHROMIUM_FLAGS,
-                f"--user-data-dir={profile}",
-                f"--screenshot={shot}",
-                "--window-size=1280,2400",
-                url,
-            ],
-            capture_output=True,
-            timeout=60,
-            check=True,
-        )
+    shown = render(out / "index.html")
+    shot = screenshot(out / "index.html", "fleet/dashboard.png", width=1280, height=2400)
     print(f"dashboard screenshot: {shot}")
-    console = [line for line in dom.stderr.splitlines() if ":CONSOLE" in line]
-    assert console == [], console
-    html = dom.stdout
+    assert shown.console == [], shown.console
+    html = shown.dom
     assert 'data-ready="yes"' in html  # the inline script ran to its end
     assert len(re.findall(r'<section class="vehicle"', html)) == 2
     assert len(re.findall(r'<svg class="plot"', html)) == 2 * 3 * 3
