@@ -44,9 +44,10 @@ def test_manifests_and_vehicle_sources(tmp_path: Path) -> None:
     (job,) = read_manifest(tmp_path / "m.csv")
     assert (job.vehicle, job.rig_path, job.tags) == ("car7", f"{log}.rig.yaml", ("night", "rain"))
     (tmp_path / "m.jsonl").write_text(json.dumps({"path": str(log), "tags": ["a"]}) + "\n")
-    policy = parse_policy({"vehicle_pattern": r"wt/(?P<vehicle>[a-z]+)/sample_logs"}, "p")
+    policy = parse_policy({"vehicle_pattern": r"/(?P<vehicle>[^/]+)/sample_logs/"}, "p")
     (job,) = discover([str(tmp_path / "m.jsonl")], policy).jobs
-    assert job.vehicle == "gate" and job.tags == ("a",)  # from the path pattern
+    # From the path pattern: the checkout's folder name (any worktree or CI clone).
+    assert job.vehicle == log.parent.parent.name and job.tags == ("a",)
     (tmp_path / "bad.csv").write_text("log,car\nx,y\n")
     with pytest.raises(ConfigError, match="'path' column"):
         read_manifest(tmp_path / "bad.csv")
