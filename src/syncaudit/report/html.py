@@ -343,7 +343,7 @@ def _header(result: AuditResult) -> str:
         for c in result.cameras
     ]
     lists = [
-        ("Judged", judged),
+        ("Cameras: verdict each", judged),
         ("Not judged (fails the audit)", [f"<li>{_e(x)}</li>" for x in result.not_judged]),
         ("Missing from the log", [f"<li>{_e(x)}</li>" for x in result.missing]),
         ("Guessed", [f"<li>{_e(x)}</li>" for x in result.guessed]),
