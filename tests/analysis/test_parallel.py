@@ -43,7 +43,7 @@ def test_parallel_items_in_log_order(
     monkeypatch.setattr(collect, "GROUP_BYTES", 100_000)
     rig = rig_from_truth(truth)  # type: ignore[arg-type]
     with open_log(out) as log:
-        refs = collect._chunk_refs(log, _plan(log, rig))  # type: ignore[arg-type]
+        refs = log.read_units(frozenset(_plan(log, rig).topics))
         assert refs is not None and len(refs) >= 3  # one group per chunk at this size
         serial = [(k, t) for k, t, _ in collect.iter_items(log, _plan(log, rig), jobs=1)]
         parallel = [(k, t) for k, t, _ in collect.iter_items(log, _plan(log, rig), jobs=2)]
@@ -77,13 +77,13 @@ def test_chunk_items_equal_message_items(
     rig = rig_from_truth(truth)  # type: ignore[arg-type]
     with open_log(out) as log:
         plan = _plan(log, rig)
-        refs = collect._chunk_refs(log, plan)  # type: ignore[arg-type]
+        refs = log.read_units(frozenset(plan.topics))
         assert refs is not None and len(refs) >= 2  # the buffers are reused
         chunked = {
             jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
             for jobs in (1, 2)
         }
-        monkeypatch.setattr(type(log), "indexed_summary", lambda self: None)
+        monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
         plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
     assert len(plain) > 100
     assert chunked[1] == plain
