@@ -265,6 +265,11 @@ class McapLog(LogReader):
         self.summary = LogSummary(str(self.path), "mcap", start, end, total)
         for cid, channel in self._channels.items():
             self._add_topic(channel, counts.get(cid, 0))
+        if self._cut is not None and total == 0:
+            raise LogReadError(
+                f"{self.path}: MCAP cut off {self._cut} (recording interrupted?), before "
+                "any complete message: nothing can be read"
+            )
         if self._cut is not None:
             self.warn(
                 "mcap-truncated",
