@@ -553,23 +553,29 @@ class McapLog(LogReader):
     def type_registry(self, encoding: str) -> TypeRegistry:
         """Types from this file's schemas of the given encoding, then schemas/ and ROS."""
         if encoding not in self._registries:
-            log_types: Typesdict = {}
-            for channel in self._channels.values():
-                schema = self._schemas.get(channel.schema_id)
-                if schema is None or not schema.data or channel.message_encoding != encoding:
-                    continue
-                try:
-                    text = schema.data.decode("utf-8")
-                    parsed = parse_definition(schema.encoding, text, schema.name)
-                except Exception as exc:  # a bad schema must not stop the audit
-                    self.warn(
-                        "bad-schema",
-                        f"{self.path}: schema {schema.name!r} unreadable: {one_line(exc)}",
-                    )
-                    continue
-                log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registries[encoding] = TypeRegistry(ros1=encoding == "ros1", log_types=log_types)
+            self._registries[encoding] = TypeRegistry(
+                ros1=encoding == "ros1", log_types=self.log_types(encoding)
+            )
         return self._registries[encoding]
+
+    def log_types(self, encoding: str) -> Typesdict:
+        """Message definitions this file's schemas give for channels of `encoding`."""
+        log_types: Typesdict = {}
+        for channel in self._channels.values():
+            schema = self._schemas.get(channel.schema_id)
+            if schema is None or not schema.data or channel.message_encoding != encoding:
+                continue
+            try:
+                text = schema.data.decode("utf-8")
+                parsed = parse_definition(schema.encoding, text, schema.name)
+            except Exception as exc:  # a bad schema must not stop the audit
+                self.warn(
+                    "bad-schema",
+                    f"{self.path}: schema {schema.name!r} unreadable: {one_line(exc)}",
+                )
+                continue
+            log_types.update({k: v for k, v in parsed.items() if k not in log_types})
+        return log_types
 
     def indexed_summary(self) -> Summary | None:
         """The MCAP summary where the file has chunk indexes (for chunk-parallel reading)."""

@@ -39,7 +39,10 @@ def open_log(path: str | Path) -> LogReader:
                 f"{path}: directory has no metadata.yaml, so it is not a ROS 2 bag "
                 "(pass the .db3/.mcap file itself to read it without metadata)"
             )
-        return _rosbags_log(path, ros1=False)
+        from syncaudit.logs.mcap_bag import mcap_storage_files, open_mcap_bag
+
+        files = mcap_storage_files(path)  # MCAP storage: the chunk-parallel MCAP reader
+        return open_mcap_bag(path, files) if files else _rosbags_log(path, ros1=False)
     if not path.is_file():
         raise LogOpenError(f"{path}: not a regular file or directory")
     try:

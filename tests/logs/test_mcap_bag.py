@@ -1,0 +1,121 @@
+"""ROS 2 bag folders with MCAP storage (issue 13): one file or split into many, written by
+rosbags' rosbag2 writer from a simulated log, audit exactly like the bare `.mcap`."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from syncaudit import collect
+from syncaudit.audit import audit_log
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap_bag import McapBag, open_mcap_bag
+from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.typesys import TypeRegistry
+from syncaudit.simulate.rig_file import rig_from_truth
+from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+
+@pytest.fixture(scope="module")
+def bare(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, object]]:
+    out = tmp_path_factory.mktemp("bare") / "log.mcap"
+    truth = simulate_sync_log(out, SyncSimConfig(seed=71, duration_s=3.0, lidar_model="VLP-16"))
+    return out, truth
+
+
+def _to_bag(bare: Path, folder: Path, parts: int, *, reorder: bool = False) -> list[Path]:
+    """Write the bare log's messages as a rosbag2 MCAP bag split into `parts` files by time.
+
+    Each part is written by its own rosbags Writer (as rosbag2 does on a split, every file
+    declares its channels anew); `reorder` declares them in reverse order in odd parts, so
+    the files number their channels differently.
+    """
+    with open_log(bare) as log:
+        assert isinstance(log, McapLog) and log.summary.start_ns is not None
+        assert log.summary.end_ns is not None
+        span = log.summary.end_ns - log.summary.start_ns + 1
+        topics = sorted(log.topics)
+        defs = {}
+        for channel in log._channels.values():
+            schema = log._schemas[channel.schema_id]
+            defs[channel.topic] = (log.topics[channel.topic].msgtype, schema.data.decode())
+        messages = list(log.messages())
+        registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
+    folder.mkdir()
+    files = []
+    for part in range(parts):
+        lo = log.summary.start_ns + span * part // parts
+        hi = log.summary.start_ns + span * (part + 1) // parts
+        scratch = folder.parent / f"{folder.name}-part{part}"
+        writer = Writer(scratch, version=8, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        order = topics[::-1] if reorder and part % 2 else topics
+        conns = {t: writer.add_connection(t, defs[t][0], typestore=registry.store) for t in order}
+        for m in messages:
+            if lo <= m.log_time_ns < hi:
+                writer.write(conns[m.topic], m.log_time_ns, bytes(m.data))
+        writer.close()
+        (produced,) = scratch.glob("*.mcap")
+        target = folder / f"{folder.name}_{part}.mcap"
+        shutil.move(produced, target)
+        if part == 0:
+            shutil.move(scratch / "metadata.yaml", folder / "metadata.yaml")
+        shutil.rmtree(scratch)
+        files.append(target)
+    meta = folder / "metadata.yaml"  # list every part, as rosbag2 does after a split
+    text = meta.read_text()
+    names = "".join(f"\n  - {f.name}" for f in files)
+    text = text.replace(f"  - {folder.name}-part0.mcap", names.lstrip("\n"), 1)
+    meta.write_text(text.replace("relative_file_paths:\n\n", "relative_file_paths:\n"))
+    return files
+
+
+def _json(result: object) -> str:
+    def strip(value: object) -> object:  # the path and container differ by design
+        if isinstance(value, dict):
+            return {k: strip(v) for k, v in value.items() if k not in ("path", "container")}
+        if isinstance(value, list):
+            return [strip(v) for v in value]
+        return value
+
+    return json.dumps(strip(result.to_dict()), sort_keys=True)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(("parts", "reorder"), [(1, False), (3, False), (3, True)])
+def test_bag_folder_audits_like_the_bare_mcap(
+    bare: tuple[Path, dict[str, object]],
+    tmp_path: Path,
+    parts: int,
+    reorder: bool,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    path, truth = bare
+    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)  # several tasks per file
+    folder = tmp_path / "bag"
+    files = _to_bag(path, folder, parts, reorder=reorder)
+    rig = rig_from_truth(truth)  # type: ignore[arg-type]
+    with open_mcap_bag(folder, files) as bag, open_log(path) as log:
+        assert bag.summary.container == "rosbag2-mcap"
+        assert bag.summary.message_count == log.summary.message_count
+        assert {n: t.count for n, t in bag.topics.items()} == {
+            n: t.count for n, t in log.topics.items()
+        }
+        topics = frozenset(bag.topics)
+        units = bag.read_units(topics)
+        if reorder:
+            assert units is None  # channel ids differ between files: read serially
+        else:
+            assert units is not None and {u.source for u in units} == {str(f) for f in files}
+        same = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
+        assert same == [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
+    with open_log(folder) as opened:  # open_log takes the MCAP path for such folders
+        assert isinstance(opened, McapBag)
+    reference = audit_log(path, rig, jobs=1)
+    for jobs in (1, 2):
+        result = audit_log(folder, rig, jobs=jobs)
+        assert _json(result) == _json(reference)
+        assert result.frames().equals(reference.frames())
