@@ -209,8 +209,8 @@ class McapLog(LogReader):
         """
         counts: dict[int, int] = {}
         for ci in summary.chunk_indexes:
-            if ci.message_index_length == 0 and ci.message_index_offsets:
-                return None
+            if not ci.message_index_offsets:
+                return None  # no message index: nothing to count from
             for cid, offset in ci.message_index_offsets.items():
                 self._file.seek(offset)
                 head = self._file.read(_MESSAGE_INDEX_HEAD.size)
@@ -450,7 +450,7 @@ class McapLog(LogReader):
                 (ci.chunk_start_offset, ci.chunk_length),
             )
             for ci in summary.chunk_indexes
-            if wanted & set(ci.message_index_offsets)
+            if _may_hold(ci.message_index_offsets, wanted)
             and (start_ns is None or ci.message_end_time >= start_ns)
             and (stop_ns is None or ci.message_start_time < stop_ns)
         ]
@@ -502,7 +502,7 @@ class McapLog(LogReader):
                 ci.compressed_size,
             )
             for ci in summary.chunk_indexes
-            if wanted & set(ci.message_index_offsets)
+            if _may_hold(ci.message_index_offsets, wanted)
         ]
 
     def unit_channels(self, topics: frozenset[str]) -> dict[int, ChannelInfo]:
@@ -597,6 +597,12 @@ class McapLog(LogReader):
 
     def _close(self) -> None:
         self._file.close()
+
+
+def _may_hold(index_offsets: dict[int, int], wanted: set[int]) -> bool:
+    """Whether a chunk may hold messages of `wanted` channels (one without message indexes
+    may hold any)."""
+    return not index_offsets or bool(wanted.intersection(index_offsets))
 
 
 def _in_range(t: int, start_ns: int | None, stop_ns: int | None) -> bool:
