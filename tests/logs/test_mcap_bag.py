@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+import yaml
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from syncaudit import collect
@@ -16,6 +17,7 @@ from syncaudit.logs import open_log
 from syncaudit.logs.mcap_bag import McapBag, open_mcap_bag
 from syncaudit.logs.mcap_log import McapLog
 from syncaudit.logs.typesys import TypeRegistry
+from syncaudit.logs.units import group_units
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
@@ -46,7 +48,7 @@ def _to_bag(bare: Path, folder: Path, parts: int, *, reorder: bool = False) -> l
         messages = list(log.messages())
         registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
     folder.mkdir()
-    files = []
+    files, metas = [], []
     for part in range(parts):
         lo = log.summary.start_ns + span * part // parts
         hi = log.summary.start_ns + span * (part + 1) // parts
@@ -59,18 +61,29 @@ def _to_bag(bare: Path, folder: Path, parts: int, *, reorder: bool = False) -> l
             if lo <= m.log_time_ns < hi:
                 writer.write(conns[m.topic], m.log_time_ns, bytes(m.data))
         writer.close()
-        (produced,) = scratch.glob("*.mcap")
+        meta = yaml.safe_load((scratch / "metadata.yaml").read_text())
+        info = meta["rosbag2_bagfile_information"]
+        (entry,) = info["files"]
         target = folder / f"{folder.name}_{part}.mcap"
-        shutil.move(produced, target)
-        if part == 0:
-            shutil.move(scratch / "metadata.yaml", folder / "metadata.yaml")
+        shutil.move(scratch / entry["path"], target)
+        entry["path"] = target.name
         shutil.rmtree(scratch)
         files.append(target)
-    meta = folder / "metadata.yaml"  # list every part, as rosbag2 does after a split
-    text = meta.read_text()
-    names = "".join(f"\n  - {f.name}" for f in files)
-    text = text.replace(f"  - {folder.name}-part0.mcap", names.lstrip("\n"), 1)
-    meta.write_text(text.replace("relative_file_paths:\n\n", "relative_file_paths:\n"))
+        metas.append(info)
+    # One metadata.yaml listing every part, as rosbag2 writes it after a split.
+    info = metas[0]
+    info["files"] = [m["files"][0] for m in metas]
+    info["relative_file_paths"] = [f.name for f in files]
+    info["message_count"] = sum(m["message_count"] for m in metas)
+    counts: dict[str, int] = {}
+    for m in metas:
+        for t in m["topics_with_message_count"]:
+            name = t["topic_metadata"]["name"]
+            counts[name] = counts.get(name, 0) + t["message_count"]
+    for t in info["topics_with_message_count"]:
+        t["message_count"] = counts[t["topic_metadata"]["name"]]
+    meta_text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
+    (folder / "metadata.yaml").write_text(meta_text)
     return files
 
 
@@ -97,7 +110,7 @@ def test_bag_folder_audits_like_the_bare_mcap(
     monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)  # several tasks per file
     folder = tmp_path / "bag"
     files = _to_bag(path, folder, parts, reorder=reorder)
-    rig = rig_from_truth(truth)  # type: ignore[arg-type]
+    rig = rig_from_truth(truth)
     with open_mcap_bag(folder, files) as bag, open_log(path) as log:
         assert bag.summary.container == "rosbag2-mcap"
         assert bag.summary.message_count == log.summary.message_count
@@ -110,6 +123,7 @@ def test_bag_folder_audits_like_the_bare_mcap(
             assert units is None  # channel ids differ between files: read serially
         else:
             assert units is not None and {u.source for u in units} == {str(f) for f in files}
+            assert len(group_units(units, collect.GROUP_BYTES)) > 1  # jobs=2 uses the pool
         same = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
         assert same == [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
     with open_log(folder) as opened:  # open_log takes the MCAP path for such folders

@@ -2,13 +2,19 @@
 
 Two ways of reading, chosen at open:
 
-- indexed: the file ends with a footer whose summary holds chunk indexes; `mcap`'s
-  `SeekingReader` reads only the chunks a query needs, in log-time order.
+- indexed: the file ends with a footer whose summary holds chunk indexes (read with
+  `mcap`'s `SeekingReader`); the chunks a query needs are read by our own `ChunkReader`
+  (sizes bounded before allocating) and merged in log-time order, and they are the read
+  units of the chunk-parallel path (`read_units`).
 - linear: no usable summary (a recording that was cut off, a writer that skipped the
   summary, an unchunked file). One pass at open builds the topic table and a list of
   chunks with their time ranges; queries then read chunk by chunk, merged by log time,
   so memory stays at the chunks that overlap in time. A cut-off file yields every
   message that is complete before the cut, including those of a partly written chunk.
+
+Malformed files are refused with one line naming the file and offset: a chunk whose
+declared size is impossible or a bomb, a log time past int64, one channel id declared for
+two topics (`mcap` would keep the last and silently lose the other topic).
 """
 
 from __future__ import annotations
