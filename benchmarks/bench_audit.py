@@ -1064,7 +1064,13 @@ def convert_container(one: Path, kind: str, dst: Path) -> None:
 
         sqlite = container_path(one.parent, one, "ros2-sqlite")
         compress = kind.removeprefix("ros1-")
-        convert([sqlite], tmp, None, None, compress, "chunk", None, None, [], [], [], [])
+        tmp.mkdir()  # rosbags writes ROS 1 for a `.bag` suffix: the bag goes inside
+        inner = tmp / dst.name
+        convert([sqlite], inner, "sqlite3", 8, compress, "file", None, None, [], [], [], [])
+        inner.rename(dst)
+        tmp.rmdir()
+        shutil.copyfile(rig_path(one), rig_path(dst))
+        return
     tmp.rename(dst)
     shutil.copyfile(rig_path(one), rig_path(dst))
 
