@@ -118,7 +118,8 @@ def test_size_disagreeing_with_the_zstd_frame_header(tmp_path: Path, probe: Any,
     offset = _chunks(data)[0]
     real = int.from_bytes(data[offset + 25 : offset + 33], "little")
     _set_size(path, real + 5_000_000)
-    with pytest.raises(LogReadError, match="zstd frame header says") as info:
+    # indexed: its chunk index disagrees (found at open); linear: the zstd frame header
+    with pytest.raises(LogReadError, match=r"zstd frame header says|its index 1") as info:
         _read_all(path)
     assert f"offset {offset}" in str(info.value)
 
@@ -182,19 +183,30 @@ def test_log_time_past_int64_is_a_read_error(tmp_path: Path, probe: Any, mode: s
 
 
 def test_log_time_past_int64_in_the_worker_reader(tmp_path: Path, probe: Any) -> None:
+    """A message time past int64 inside a chunk whose index is sound (uncompressed chunk
+    patched after the units were listed): the worker's reader names file, chunk, topic."""
     path = tmp_path / "time.mcap"
-    _write(path, probe, CompressionType.ZSTD, t0=2**63 - 500)
+    _write(path, probe, CompressionType.NONE)
     with open_log(path) as log:
-        units = log.read_units(frozenset(log.topics))
+        units = sorted(log.read_units(frozenset(log.topics)) or [], key=lambda u: u.offset)
         channels = log.unit_channels(frozenset(log.topics))
-    assert units
+    unit = units[0]
+    data = bytearray(path.read_bytes())
+    pos = unit.offset + 9 + 28 + 4 + 8  # the first record of the uncompressed chunk
+    while data[pos] != 0x05:
+        pos += 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+    data[pos + 9 + 6 : pos + 9 + 14] = (2**63 + 7).to_bytes(8, "little")
+    data[unit.offset + 33 : unit.offset + 37] = bytes(4)  # chunk CRC: not recorded
+    path.write_bytes(bytes(data))
     reader = McapChunkUnitReader(str(path))
     try:
-        with pytest.raises(LogReadError, match=r"on /(aaaa|bbbb) has log time 9223372036854775"):
-            for unit in units:
-                list(reader.messages(unit, channels))
+        with pytest.raises(LogReadError) as info:
+            list(reader.messages(unit, channels))
     finally:
         reader.close()
+    text = str(info.value)
+    assert text.startswith(f"{path}: MCAP chunk at offset {unit.offset}: message")
+    assert "on /aaaa has log time 9223372036854775815 ns, past the int64 range" in text
 
 
 def _duplicate_channel_ids(path: Path) -> None:
@@ -283,3 +295,24 @@ def test_cut_inside_the_first_chunk_says_so(
     with pytest.raises(LogReadError, match=r"cut off .* before any complete message") as info:
         open_log(path)
     assert f"byte {first}" in str(info.value)
+
+
+@pytest.mark.parametrize("size", [2**63, 2**40, 3_000_000_000])
+def test_info_and_audit_agree_on_a_hostile_chunk(tmp_path: Path, size: int) -> None:
+    """The sample log with one chunk's size made hostile: `info` and `audit` both exit 3
+    with one line naming the file and the chunk (info once exited 0 on such files)."""
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    repo = Path(__file__).resolve().parents[2]
+    sample = repo / "sample_logs" / "vlp16_three_cameras.mcap"
+    path = tmp_path / "hostile.mcap"
+    path.write_bytes(sample.read_bytes())
+    offset = _set_size(path, size, which=-1)
+    rig = str(sample) + ".rig.yaml"
+    for command in (["info", str(path)], ["audit", str(path), "--rig", rig]):
+        result = CliRunner().invoke(app, command)
+        assert result.exit_code == 3, (command, result.output)
+        assert f"MCAP chunk at offset {offset}" in result.output
+        assert "Traceback" not in result.output

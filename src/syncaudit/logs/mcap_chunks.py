@@ -59,12 +59,8 @@ def check_chunk_size(where: str, compression: str, declared: int, data: bytes | 
     by a ratio to the compressed bytes (lz4 cannot exceed ~255:1; zstd of real sensor data
     is far below 1024:1).
     """
-    if declared > MAX_CHUNK_BYTES:
-        raise LogReadError(
-            f"{where} declares {declared} bytes uncompressed, over the "
-            f"{MAX_CHUNK_BYTES // 2**20} MiB limit for one chunk (corrupt or hostile chunk)"
-        )
     compressed = len(data)
+    check_declared_size(where, declared, compressed)
     if compression == "":
         if declared != compressed:
             raise LogReadError(
@@ -72,16 +68,26 @@ def check_chunk_size(where: str, compression: str, declared: int, data: bytes | 
                 f"but declares {declared}"
             )
         return
-    if declared > RATIO_FLOOR_BYTES and declared > MAX_RATIO * compressed:
-        raise LogReadError(
-            f"{where} declares {declared} bytes from {compressed} compressed "
-            f"(over {MAX_RATIO}:1): refused as a decompression bomb"
-        )
     framed = _frame_content_size(compression, data)
     if framed is not None and framed != declared:
         raise LogReadError(
             f"{where} is corrupt: chunk declares {declared} bytes uncompressed but its "
             f"{compression} frame header says {framed}"
+        )
+
+
+def check_declared_size(where: str, declared: int, compressed: int) -> None:
+    """Refuse an uncompressed size over `MAX_CHUNK_BYTES`, or a large one over `MAX_RATIO`
+    times the compressed size (a decompression bomb)."""
+    if declared > MAX_CHUNK_BYTES:
+        raise LogReadError(
+            f"{where} declares {declared} bytes uncompressed, over the "
+            f"{MAX_CHUNK_BYTES // 2**20} MiB limit for one chunk (corrupt or hostile chunk)"
+        )
+    if declared > RATIO_FLOOR_BYTES and declared > MAX_RATIO * compressed:
+        raise LogReadError(
+            f"{where} declares {declared} bytes from {compressed} compressed "
+            f"(over {MAX_RATIO}:1): refused as a decompression bomb"
         )
 
 

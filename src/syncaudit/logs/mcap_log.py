@@ -41,6 +41,7 @@ from syncaudit.logs.mcap_chunks import (
     MAX_CHUNK_BYTES,
     MAX_LOG_TIME_NS,
     ChunkReader,
+    check_declared_size,
     chunk_where,
     decompress_bounded,
     decompress_upto,
@@ -56,6 +57,7 @@ MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offset start, crc
 _MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel id, records bytes
+_CHUNK_RECORD_HEAD = struct.Struct("<BQQQQ")  # opcode, length, start, end, uncompressed size
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,6 +157,7 @@ class McapLog(LogReader):
             # the linear scan is then the index.
             return None
         self._check_summary_channels()
+        self._check_chunks(summary)
         self._schemas = dict(summary.schemas)
         self._channels = dict(summary.channels)
         stats = summary.statistics
@@ -207,6 +210,37 @@ class McapLog(LogReader):
                         f"and {channel.topic!r} (one of the two topics cannot be read)"
                     )
             pos = body + length
+
+    def _check_chunks(self, summary: Summary) -> None:
+        """Refuse, at open, chunks whose index or header cannot be true: a size no chunk can
+        have (or a decompression bomb), a header disagreeing with its index, log times past
+        int64. One small read per chunk, so `info` and `audit` judge a log alike."""
+        for ci in summary.chunk_indexes:
+            where = chunk_where(str(self.path), ci.chunk_start_offset)
+            if max(ci.message_start_time, ci.message_end_time) > MAX_LOG_TIME_NS:
+                channels = summary.channels
+                names = sorted(
+                    {channels[c].topic for c in ci.message_index_offsets if c in channels}
+                )
+                raise LogReadError(
+                    f"{where} ({', '.join(names) or 'no message index'}): its index gives log "
+                    f"times up to {ci.message_end_time} ns, past the int64 range (year 2262): "
+                    "corrupt time"
+                )
+            check_declared_size(where, ci.uncompressed_size, ci.compressed_size)
+            self._file.seek(ci.chunk_start_offset)
+            head = self._file.read(_CHUNK_RECORD_HEAD.size)
+            if len(head) < _CHUNK_RECORD_HEAD.size:
+                raise LogReadError(f"{where} runs past the end of the file")
+            opcode, _length, _start, _end, size = _CHUNK_RECORD_HEAD.unpack(head)
+            if opcode != Opcode.CHUNK:
+                raise LogReadError(f"{where}: the chunk index points at no chunk record")
+            if size != ci.uncompressed_size:
+                check_declared_size(where, size, ci.compressed_size)
+                raise LogReadError(
+                    f"{where} is corrupt: it declares {size} bytes uncompressed, its index "
+                    f"{ci.uncompressed_size}"
+                )
 
     def _indexed_counts(self, summary: Summary) -> dict[int, int] | None:
         """Messages per channel from the message indexes after each chunk (no Statistics).
