@@ -88,3 +88,23 @@ def test_chunk_items_equal_message_items(
     assert len(plain) > 100
     assert chunked[1] == plain
     assert chunked[2] == plain
+
+
+def test_no_pool_for_a_log_of_one_group(
+    chunked_log: tuple[Path, dict[str, object]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A log that fits one task is read in the parent: starting workers would only cost."""
+    out, truth = chunked_log
+    rig = rig_from_truth(truth)  # type: ignore[arg-type]
+
+    def no_pool(*_args: object) -> None:
+        raise AssertionError("a pool was started for a log of one group")
+
+    monkeypatch.setattr(collect, "worker_pool", no_pool)
+    with open_log(out) as log:
+        plan = _plan(log, rig)
+        units = log.read_units(frozenset(plan.topics))
+        assert units is not None and len(units) > 1
+        assert sum(u.cost for u in units) < collect.GROUP_BYTES  # one group
+        items = list(collect.iter_items(log, plan, jobs=2))
+    assert len(items) > 100

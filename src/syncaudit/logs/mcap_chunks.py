@@ -38,8 +38,10 @@ _CHANNEL_HEAD = struct.Struct("<HHI")  # id, schema id, topic length
 
 MAX_LOG_TIME_NS = 2**63 - 1
 """Log times are u64 in MCAP; past int64 they cannot be a time (year 2262) and break numpy."""
-MAX_CHUNK_BYTES = 256 * 1024 * 1024
-"""Largest uncompressed chunk accepted: real writers chunk at 1-64 MiB; larger is hostile."""
+MAX_CHUNK_BYTES = 128 * 1024 * 1024
+"""Largest uncompressed chunk accepted: writers chunk at 1-64 MiB (rosbag2 768 KiB, mcap
+1 MiB, ours 4 MiB) and put a larger message in a chunk of its own; 128 MiB holds any
+camera frame or point cloud, and two workers' buffers stay within a few hundred MB."""
 MAX_RATIO = 1024
 """Largest uncompressed/compressed ratio accepted for chunks above `RATIO_FLOOR_BYTES`."""
 RATIO_FLOOR_BYTES = 16 * 1024 * 1024

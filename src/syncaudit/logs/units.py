@@ -5,7 +5,8 @@ worker then reads its units with the reader class registered for their kind. Add
 kind is one line in `UNIT_READERS` ("module:Class", imported only when a unit of that kind
 is read, so a bare MCAP audit never imports a bag library).
 
-A reader class is constructed as `cls(source, check_crc=...)` (one per worker and file)
+A reader class is constructed as `cls(source, check_crc=...)` (or `cls(source)` when it
+takes no `check_crc`; one per worker and file)
 and offers `messages(unit, channels)` yielding (log time ns, index in unit, channel id,
 payload) in file order (payloads may be views valid until the next unit is read) and
 `close()`. Damage raises LogReadError naming the file and the unit's offset.
@@ -14,6 +15,7 @@ payload) in file order (payloads may be views valid until the next unit is read)
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Iterator
 from typing import Protocol
 
@@ -47,7 +49,10 @@ def open_unit_reader(kind: str, source: str, *, check_crc: bool = False) -> Unit
         raise ValueError(f"no reader registered for read units of kind {kind!r}") from None
     module, _, name = target.partition(":")
     cls = getattr(importlib.import_module(module), name)
-    reader: UnitReader = cls(source, check_crc=check_crc)
+    if "check_crc" in inspect.signature(cls).parameters:
+        reader: UnitReader = cls(source, check_crc=check_crc)
+    else:  # a container without checksums to verify
+        reader = cls(source)
     return reader
 
 
