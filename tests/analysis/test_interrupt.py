@@ -17,11 +17,27 @@ import yaml
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
-# The real CLI, with tasks of 20 kB so that a small log keeps the workers busy for a while.
-RUN = (
-    "import sys; import syncaudit.collect as c; c.GROUP_BYTES = 20_000; "
-    "from syncaudit.cli import main; sys.argv = ['syncaudit', *sys.argv[1:]]; main()"
-)
+# The real CLI, with one chunk per task and each task held 0.3 s in the worker, so that the
+# worker phase lasts seconds on any machine (the signal must arrive while it runs).
+RUN = """
+import sys, time
+import syncaudit.collect as c
+
+c.GROUP_BYTES = 1
+_extract = c._extract_group
+
+
+def slow(*args):
+    time.sleep(0.3)
+    return _extract(*args)
+
+
+c._extract_group = slow
+from syncaudit.cli import main
+
+sys.argv = ["syncaudit", *sys.argv[1:]]
+main()
+"""
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +70,7 @@ def _alive(pid: int) -> bool:
 def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], float]:
     out, rig = log
     proc = subprocess.Popen(
-        [sys.executable, "-c", RUN, "audit", str(out), "--rig", str(rig), "--check-crc"],
+        [sys.executable, "-c", RUN, "audit", str(out), "--rig", str(rig)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,  # its own process group, as a shell gives a command
