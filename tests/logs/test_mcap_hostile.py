@@ -316,3 +316,16 @@ def test_info_and_audit_agree_on_a_hostile_chunk(tmp_path: Path, size: int) -> N
         assert result.exit_code == 3, (command, result.output)
         assert f"MCAP chunk at offset {offset}" in result.output
         assert "Traceback" not in result.output
+
+
+def test_linear_chunk_record_length_bounded(tmp_path: Path, probe: Any) -> None:
+    """An unindexed MCAP whose first chunk record claims 2^62 bytes: refused, not read."""
+    path = tmp_path / "long.mcap"
+    _write(path, probe, CompressionType.ZSTD, **LINEAR)
+    data = bytearray(path.read_bytes())
+    offset = _chunks(bytes(data))[0]
+    data[offset + 1 : offset + 9] = (2**62).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match="limit for one chunk record") as info:
+        _read_all(path)
+    assert f"MCAP chunk at offset {offset}" in str(info.value)

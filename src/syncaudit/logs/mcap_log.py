@@ -55,6 +55,8 @@ if TYPE_CHECKING:
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
+MAX_CHUNK_RECORD_BYTES = MAX_CHUNK_BYTES + MAX_CHUNK_BYTES // 64 + 2**20
+"""Longest chunk record read whole: compressed data never much exceeds the records."""
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offset start, crc
 _MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel id, records bytes
 _CHUNK_RECORD_HEAD = struct.Struct("<BQQQQ")  # opcode, length, start, end, uncompressed size
@@ -368,8 +370,14 @@ class McapLog(LogReader):
         """
         available = self._size - offset - _RECORD_HEAD.size
         whole = length <= available
-        body = handle.read(min(length, available))
         where = chunk_where(str(self.path), offset)
+        if length > MAX_CHUNK_RECORD_BYTES:  # read into memory below: bound it first
+            raise LogReadError(
+                f"{where} is {length} bytes long, over the "
+                f"{MAX_CHUNK_RECORD_BYTES // 2**20} MiB limit for one chunk record "
+                "(corrupt or hostile chunk)"
+            )
+        body = handle.read(min(length, available))
         if whole:
             try:
                 chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
