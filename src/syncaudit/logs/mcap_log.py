@@ -55,6 +55,8 @@ if TYPE_CHECKING:
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
+HEADER_CHECKS = 4096
+"""Chunk headers checked against their index at open (4096 chunks: ~16 GB of 4 MB chunks)."""
 MAX_CHUNK_RECORD_BYTES = MAX_CHUNK_BYTES + MAX_CHUNK_BYTES // 64 + 2**20
 """Longest chunk record read whole: compressed data never much exceeds the records."""
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offset start, crc
@@ -216,8 +218,12 @@ class McapLog(LogReader):
     def _check_chunks(self, summary: Summary) -> None:
         """Refuse, at open, chunks whose index or header cannot be true: a size no chunk can
         have (or a decompression bomb), a header disagreeing with its index, log times past
-        int64. One small read per chunk, so `info` and `audit` judge a log alike."""
-        for ci in summary.chunk_indexes:
+        int64. One small read per chunk (in file order, for the first `HEADER_CHECKS`
+        chunks: past that, a huge log is not made to seek through every chunk at open and
+        the chunk reader checks each header when it reads it), so `info` and `audit` judge
+        a log alike."""
+        ordered = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+        for number, ci in enumerate(ordered):
             where = chunk_where(str(self.path), ci.chunk_start_offset)
             if max(ci.message_start_time, ci.message_end_time) > MAX_LOG_TIME_NS:
                 channels = summary.channels
@@ -230,6 +236,8 @@ class McapLog(LogReader):
                     "corrupt time"
                 )
             check_declared_size(where, ci.uncompressed_size, ci.compressed_size)
+            if number >= HEADER_CHECKS:
+                continue
             self._file.seek(ci.chunk_start_offset)
             head = self._file.read(_CHUNK_RECORD_HEAD.size)
             if len(head) < _CHUNK_RECORD_HEAD.size:
