@@ -9,7 +9,7 @@ from typing import Any
 from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.lidar.scan import LidarScan, scan_lidar
-from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.units import json_ready
@@ -139,13 +139,11 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
         report.topics.append(TopicRow(info.name, info.msgtype, info.count, rate))
     if summary.message_count == 0:
         raise NoDataError(f"{summary.path}: the log holds no messages")
-    lidar_topics = (
-        [rig.lidar.topic]
-        if rig
-        else [t.name for t in log.topics.values() if is_packet_topic(t.msgtype)]
-    )
-    if rig is None and lidar_topics:
+    guess = None if rig else guess_lidar_topics(log)
+    lidar_topics = [rig.lidar.topic] if rig else guess.topics if guess else []
+    if guess is not None and lidar_topics:
         report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
+    report.warnings.extend(guess.notes if guess else [])
     for topic in lidar_topics:
         try:
             scan = scan_lidar(
@@ -163,6 +161,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
             continue
         row = lidar_row(scan)
         report.lidars.append(row)
+        report.warnings.extend(scan.warnings)
         if row.cropped_sector:
             report.warnings.append(f"{topic}: {row.cropped_sector}")
         if row.outlier_blocks:
