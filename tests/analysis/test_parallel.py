@@ -108,3 +108,40 @@ def test_no_pool_for_a_log_of_one_group(
         assert sum(u.cost for u in units) < collect.GROUP_BYTES  # one group
         items = list(collect.iter_items(log, plan, jobs=2))
     assert len(items) > 100
+
+
+@pytest.mark.parametrize("cut", ["mid-chunk", "before-summary"])
+def test_cut_log_read_in_parallel_equals_serial(
+    chunked_log: tuple[Path, dict[str, object]],
+    tmp_path: Path,
+    cut: str,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A recording cut off (no summary): its chunks, found by the linear scan, are the read
+    units, the partly written last one read up to the cut; the items equal the serial
+    read's, with jobs 1 and 2."""
+    out, truth = chunked_log
+    monkeypatch.setattr(collect, "GROUP_BYTES", 200_000)
+    rig = rig_from_truth(truth)
+    with open_log(out) as log:
+        units = sorted(log.read_units(frozenset(log.topics)) or [], key=lambda u: u.offset)
+    last = units[-1]
+    end = last.offset + last.length * 2 // 3 if cut == "mid-chunk" else last.offset + last.length
+    cut_log = tmp_path / "cut.mcap"
+    cut_log.write_bytes(out.read_bytes()[:end])
+    with open_log(cut_log) as log:
+        assert [w.code for w in log.warnings] == ["mcap-truncated"]
+        plan = _plan(log, rig)
+        found = log.read_units(frozenset(plan.topics))
+        assert found is not None and len(found) >= 3
+        kinds = {u.kind for u in found}
+        assert kinds == ({"mcap-chunk", "mcap-cut-chunk"} if cut == "mid-chunk" else {"mcap-chunk"})
+        chunked = {
+            jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
+            for jobs in (1, 2)
+        }
+        monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
+        plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
+    assert len(plain) > 100
+    assert chunked[1] == plain
+    assert chunked[2] == plain

@@ -541,10 +541,12 @@ class McapLog(LogReader):
         return ChannelInfo(channel.topic, msgtype, channel.message_encoding)
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
-        """The indexed chunks holding any of `topics`; None where the MCAP has no index."""
+        """The chunks holding any of `topics`: from the index, or from the linear scan of a
+        file without one (a cut-off recording: its partly written last chunk is a
+        'mcap-cut-chunk' unit, read up to the cut). None where messages lie outside chunks."""
         summary = self.indexed_summary()
         if summary is None:
-            return None
+            return self._scanned_units(topics)
         wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
         source = str(self.path)
         return [
@@ -560,6 +562,25 @@ class McapLog(LogReader):
             for ci in summary.chunk_indexes
             if _may_hold(ci.message_index_offsets, wanted)
         ]
+
+    def _scanned_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
+        """Units of the chunks the linear scan found (None if some messages are loose)."""
+        if self._indexed or self._scan.loose:
+            return None
+        wanted = {cid for cid, ch in self._channels.items() if ch.topic in topics}
+        source = str(self.path)
+        units = []
+        for span in self._scan.chunks:
+            if not span.channels & wanted:
+                continue
+            full = _RECORD_HEAD.size + span.length
+            whole = span.offset + full <= self._size
+            kind = "mcap-chunk" if whole else "mcap-cut-chunk"
+            length = full if whole else self._size - span.offset
+            units.append(
+                ReadUnit(source, kind, span.offset, length, span.start_ns, span.end_ns, length)
+            )
+        return units
 
     def unit_channels(self, topics: frozenset[str]) -> dict[int, ChannelInfo]:
         """Channel id -> topic, type, encoding of the channels on `topics`."""
@@ -722,3 +743,36 @@ def _parse_records(data: bytes, where: str, *, tolerant: bool) -> list[Any]:
     if pos != len(data) and not tolerant:
         raise LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
     return records
+
+
+class McapCutChunkUnitReader:
+    """Per-worker reader of 'mcap-cut-chunk' units: the complete records of a chunk that
+    the end of the file cut off (a recording interrupted while writing it)."""
+
+    def __init__(self, source: str, *, check_crc: bool = False) -> None:
+        self.source = source
+        self._file = open(source, "rb")  # noqa: SIM115 - closed in close()
+
+    def messages(
+        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
+    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(log time, record index, channel id, payload) of the unit's wanted messages."""
+        where = chunk_where(self.source, unit.offset)
+        if unit.length > MAX_CHUNK_RECORD_BYTES:
+            raise LogReadError(f"{where} is {unit.length} bytes long: over the chunk limit")
+        self._file.seek(unit.offset + _RECORD_HEAD.size)
+        body = self._file.read(max(unit.length - _RECORD_HEAD.size, 0))
+        for index, rec in enumerate(_salvage_chunk(body, where)):
+            if isinstance(rec, Message):
+                info = channels.get(rec.channel_id)
+                if info is not None:
+                    if rec.log_time > MAX_LOG_TIME_NS:
+                        raise LogReadError(
+                            f"{where}: message on {info.topic} has log time {rec.log_time} ns, "
+                            "past the int64 range (year 2262): corrupt time"
+                        )
+                    yield rec.log_time, index, rec.channel_id, rec.data
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()

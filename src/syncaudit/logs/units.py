@@ -23,6 +23,7 @@ from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 UNIT_READERS: dict[str, str] = {
     "mcap-chunk": "syncaudit.logs.mcap_chunks:McapChunkUnitReader",
+    "mcap-cut-chunk": "syncaudit.logs.mcap_log:McapCutChunkUnitReader",
 }
 """Unit kind -> "module:Class" of its per-worker reader."""
 
