@@ -133,3 +133,31 @@ def test_bag_folder_audits_like_the_bare_mcap(
         result = audit_log(folder, rig, jobs=jobs)
         assert _json(result) == _json(reference)
         assert result.frames().equals(reference.frames())
+
+
+def test_split_bag_with_a_cut_last_file(
+    bare: tuple[Path, dict[str, object]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A recording that crashed: the last file of a split bag has no summary and ends
+    inside a chunk. Every file still gives read units; the parallel read equals the serial
+    one and holds every message before the cut."""
+    path, truth = bare
+    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)
+    folder = tmp_path / "bag"
+    files = _to_bag(path, folder, 3)
+    last = files[-1]
+    data = last.read_bytes()
+    last.write_bytes(data[: len(data) * 2 // 3])
+    rig = rig_from_truth(truth)  # type: ignore[arg-type]
+    with open_mcap_bag(folder, files) as bag:
+        assert any(w.code == "mcap-truncated" for w in bag.warnings)
+        units = bag.read_units(frozenset(bag.topics))
+        assert units is not None and str(last) in {u.source for u in units}
+        serial = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
+    with open_log(path) as log:
+        full = [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
+    assert 0 < len(serial) < len(full) and serial == full[: len(serial)]
+    results = [audit_log(folder, rig, jobs=jobs) for jobs in (1, 2)]
+    assert _json(results[0]) == _json(results[1])
+    monkeypatch.setattr(McapBag, "read_units", lambda self, topics: None)
+    assert _json(audit_log(folder, rig, jobs=1)) == _json(results[0])
