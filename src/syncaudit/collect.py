@@ -1,10 +1,13 @@
 """One pass over a log for the audit: each message becomes a small item, in log order.
 
 The extraction of a message (decoding LiDAR packets, reading an image header,
-deserialising an exposure or trigger) is pure, so for an indexed MCAP it runs in
-worker processes, one group of chunks each, on all cores; the parent merges the
-groups back into log-time order (ties broken by chunk and record, as the mcap reader
-does), so the serial and parallel paths yield the same items in the same order.
+deserialising an exposure or trigger) is pure, so for a log that offers read units
+(`LogReader.read_units`: MCAP chunks, ROS 1 chunks, SQLite row ranges) it runs in worker
+processes, one group of units each, on all cores, each unit read by the reader class
+registered for its kind (`logs.units`); the parent merges the groups back into log-time
+order (ties broken by file, unit offset and index in the unit), so the serial and
+parallel paths yield the same items in the same order. A log of one group is read in the
+parent: a pool would only cost.
 """
 
 from __future__ import annotations
