@@ -15,7 +15,7 @@ from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.topics import detect_cameras
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
-from syncaudit.inspect_log import LidarRow, lidar_row
+from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
 from syncaudit.lidar.scan import LidarScanner
 from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
 from syncaudit.lidar.topics import guess_lidar_topics
@@ -263,13 +263,20 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         )
     result_cams: list[CameraAudit] = []
     for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
+        image_missing = (
+            f"image topic {cam.image_topic} is not in the log"
+            if cam.image_topic
+            else "no image topic (set image_topic in the rig)"
+        )
         for what, present in (
-            ("image topic", cam.image_topic in log.topics if cam.image_topic else False),
+            (image_missing, cam.image_topic in log.topics if cam.image_topic else False),
             ("exposure metadata", tables.exposure_source is not None),
             ("trigger records", tables.trigger_source is not None),
         ):
             if not present:
-                missing.append(f"camera {cam.name}: no {what}")
+                missing.append(
+                    f"camera {cam.name}: {what if what is image_missing else 'no ' + what}"
+                )
         sync = analyze_camera(
             scan,
             index,
@@ -285,6 +292,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         result_cams.append(
             CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))
         )
+    warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in log.warnings)
     return AuditResult(
         path=log.summary.path,

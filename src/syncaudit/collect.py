@@ -124,17 +124,14 @@ def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Ite
 
 
 def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
-    """Files of a log in the order they were listed (ties in time across files)."""
-    ranks: dict[str, int] = {}
-    for unit in units:
-        ranks.setdefault(unit.source, len(ranks))
-    return ranks
+    """Files of a log by path (ties in time across files: as the readers' serial merges)."""
+    return {source: rank for rank, source in enumerate(sorted({u.source for u in units}))}
 
 
 # ---- worker side -------------------------------------------------------------------------
 
 Keyed = tuple[int, int, int, int, Item]
-"""(log time, file rank, unit offset, index in unit, item): the merge order."""
+"""(log time, file rank (by path), unit offset, index in unit, item): the merge order."""
 
 
 class _Readers:

@@ -7,51 +7,14 @@ Every model raises `ConfigError` with a one-line message instead of pydantic's m
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-from typing_extensions import Self
+from pydantic import Field, model_validator
 
-from syncaudit.errors import ConfigError, validation_summary
-
-
-def _one_line(exc: ValidationError, model: str) -> str:
-    """First validation error of `exc` as `model: field.path: message (+N more)`."""
-    return f"invalid {model}: {validation_summary(exc)}"
-
-
-class ConfigModel(BaseModel):
-    """Frozen, strict-keys base whose validation failures become `ConfigError`."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    def __init__(self, /, **data: Any) -> None:
-        try:
-            super().__init__(**data)
-        except ValidationError as exc:
-            raise ConfigError(_one_line(exc, type(self).__name__)) from None
-
-    @classmethod
-    def model_validate(cls, *args: Any, **kwargs: Any) -> Self:
-        """pydantic's model_validate, with failures as one-line `ConfigError`s."""
-        try:
-            return super().model_validate(*args, **kwargs)
-        except ValidationError as exc:
-            raise ConfigError(_one_line(exc, cls.__name__)) from None
-
-    @classmethod
-    def from_mapping(cls, data: Any) -> Any:
-        """Validate a mapping (e.g. parsed YAML), raising `ConfigError` on nonsense."""
-        if not isinstance(data, dict):
-            raise ConfigError(
-                f"invalid {cls.__name__}: expected a mapping, got {type(data).__name__}"
-            )
-        return cls(**data)
-
+from syncaudit.config import ConfigModel as ConfigModel
+from syncaudit.config import load_model
 
 # --------------------------------------------------------------------------- simulation
 
@@ -336,20 +299,9 @@ class CalibConfig(ConfigModel):
 
 
 def load_config(path: Path, model: type[ConfigModel]) -> Any:
-    """Read a YAML, JSON (.json) or TOML (.toml) file into `model`; `ConfigError` on
-    unreadable or invalid content."""
-    try:
-        text = path.read_text(encoding="utf-8")
-        if path.suffix == ".json":
-            data = json.loads(text)
-        elif path.suffix == ".toml":
-            try:
-                import tomllib
-            except ImportError:  # Python 3.10
-                raise ConfigError(f"cannot read config {path}: TOML needs Python 3.11+") from None
-            data = tomllib.loads(text)
-        else:
-            data = yaml.safe_load(text)
-    except (OSError, ValueError, yaml.YAMLError) as exc:
-        raise ConfigError(f"cannot read config {path}: {exc}".splitlines()[0]) from None
-    return model.from_mapping(data or {})
+    """Read a YAML, JSON (.json) or TOML (.toml) file into `model` (`syncaudit.config`).
+
+    Raises:
+        ConfigError: `path: key.path: message` for unreadable or invalid content.
+    """
+    return load_model(path, model, what="calibration config")

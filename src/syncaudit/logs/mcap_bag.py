@@ -1,7 +1,7 @@
 """ROS 2 bag folders with MCAP storage: one or many `.mcap` files read as one log.
 
-Each file is an `McapLog`; messages merge across files by log time (ties: the file listed
-first, then file order), and the chunks of every file are the read units of the
+Each file is an `McapLog`; messages merge across files by log time (ties: by file path,
+then file order), and the chunks of every file are the read units of the
 chunk-parallel path, so a bag folder is audited as fast as the bare `.mcap` it holds.
 """
 
@@ -85,8 +85,10 @@ class McapBag(LogReader):
     def _messages(
         self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
     ) -> Iterator[RawMessage]:
-        """Every file's messages merged by log time (ties: earlier file first)."""
-        streams = [log.messages(topics, start_ns, stop_ns) for log in self._logs]
+        """Every file's messages merged by log time (ties: by file path, as the parallel
+        path and the other bag readers order them)."""
+        ordered = sorted(self._logs, key=lambda log: str(log.path))
+        streams = [log.messages(topics, start_ns, stop_ns) for log in ordered]
         yield from heapq.merge(*streams, key=lambda m: m.log_time_ns)
         for log in self._logs:  # warnings found while reading (e.g. undeclared channels)
             for warning in log.warnings:
@@ -137,28 +139,3 @@ class McapBag(LogReader):
     def _close(self) -> None:
         for log in self._logs:
             log.close()
-
-
-def mcap_storage_files(folder: Path) -> list[Path] | None:
-    """The bag's storage files, in metadata order, if every one is an MCAP file; else None.
-
-    A minimal reading of metadata.yaml (`relative_file_paths`) for `open_log`; anything
-    unexpected returns None and leaves the folder to the generic bag reader.
-    """
-    import yaml
-
-    from syncaudit.logs.mcap_log import MAGIC
-
-    try:
-        meta = yaml.safe_load((folder / "metadata.yaml").read_text(encoding="utf-8"))
-        names = meta["rosbag2_bagfile_information"]["relative_file_paths"]
-        files = [folder / str(name) for name in names]
-        if not files:
-            return None
-        for file in files:
-            with file.open("rb") as handle:
-                if handle.read(len(MAGIC)) != MAGIC:
-                    return None
-    except Exception:
-        return None
-    return files

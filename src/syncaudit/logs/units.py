@@ -24,6 +24,8 @@ from syncaudit.logs.model import ChannelInfo, ReadUnit
 UNIT_READERS: dict[str, str] = {
     "mcap-chunk": "syncaudit.logs.mcap_chunks:McapChunkUnitReader",
     "mcap-cut-chunk": "syncaudit.logs.mcap_log:McapCutChunkUnitReader",
+    "rosbag1-chunk": "syncaudit.logs.rosbag1:Rosbag1ChunkReader",
+    "sqlite-rows": "syncaudit.logs.sqlite_rows:SqliteRowsReader",
 }
 """Unit kind -> "module:Class" of its per-worker reader."""
 

@@ -29,6 +29,13 @@ def _fmt(value: float | None, digits: int = 1) -> str:
     return f"{value:,.{digits}f}"
 
 
+def _signed(value: float | None, digits: int) -> str:
+    """A number with its sign always shown (clock offsets: which clock is ahead matters)."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:+,.{digits}f}"
+
+
 def _table(rows: Sequence[tuple[str, str]]) -> str:
     body = "".join(f"<tr><th>{_e(k)}</th><td class=num>{v}</td></tr>" for k, v in rows)
     return f"<table>{body}</table>"
@@ -151,7 +158,7 @@ def render_audit_html(result: AuditResult, extra_sections: Sequence[str] = ()) -
                 "clock",
                 "synchronised"
                 if lidar.clock_synchronised
-                else f"NOT synchronised ({_fmt(lidar.clock_offset_s, 3)} s)",
+                else f"NOT synchronised (host - sensor {_signed(lidar.clock_offset_s, 3)} s)",
             ),
             ("t1 p50 / p99 (us)", f"{_fmt(lidar.t1_p50_us)} / {_fmt(lidar.t1_p99_us)}"),
         ]

@@ -24,8 +24,8 @@ from numpy.typing import NDArray
 from syncaudit.calib import se3
 from syncaudit.calib.config import CalibSceneConfig, LidarSimConfig
 from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_scan
-from syncaudit.writers.atomic import write_text_atomic
-from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
+from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
+from syncaudit.writers.outputs import OutputSet
 
 __all__ = ["CalibSceneConfig", "simulate_calib_session", "truth_path"]
 
@@ -184,20 +184,47 @@ def _tf_msg(
     return writer.new_msg("tf2_msgs/msg/TFMessage", transforms=transforms)
 
 
-def _write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
-    """Write JSON to a temporary file beside `path`, then move it into place."""
-    write_text_atomic(path, json.dumps(payload, indent=2) + "\n")
-
-
 def simulate_calib_session(
-    out: Path, config: CalibSceneConfig, *, fmt: LogFormat | None = "mcap", overwrite: bool = True
+    out: Path,
+    config: CalibSceneConfig,
+    *,
+    fmt: LogFormat | None = "mcap",
+    overwrite: bool = True,
+    outputs: OutputSet | None = None,
 ) -> dict[str, Any]:
     """Write the session's log to `out` and its truth to `<out>.truth.json`; return the truth.
 
     `fmt` is any `open_writer` format ('mcap', 'mcap-ros1', 'db3', 'bag'; None infers it
-    from the suffix). Both outputs are published atomically.
+    from the suffix). Both outputs go through `outputs` (committed by its owner) or, without
+    one, through an own OutputSet committed here: all or nothing.
+
+    Raises:
+        OutputError: an output exists without `overwrite`, or cannot be written.
     """
     out = Path(out)
+    fmt = infer_format(out, fmt)
+    own = outputs is None
+    outputs = (
+        outputs
+        if outputs is not None
+        else OutputSet(overwrite=overwrite, overwrite_hint="pass overwrite=True to replace it")
+    )
+    try:
+        outputs.add(truth_path(out))
+        truth = _simulate(out, config, fmt, outputs)
+    except BaseException:
+        if own:
+            outputs.discard()
+        raise
+    if own:
+        outputs.commit()
+    return truth
+
+
+def _simulate(
+    out: Path, config: CalibSceneConfig, fmt: LogFormat, outputs: OutputSet
+) -> dict[str, Any]:
+    """Write the log and the truth into `outputs`' temporaries; return the truth."""
     scene_rng = np.random.default_rng([config.seed, 0])
     pose_rng = np.random.default_rng([config.seed, 1])
     noise_rng = np.random.default_rng([config.seed, 2])
@@ -216,7 +243,7 @@ def simulate_calib_session(
     }
     period_ns = round(config.scan_period_s * _NS)
     scans: list[dict[str, Any]] = []
-    with open_writer(out, fmt, overwrite=overwrite) as writer:
+    with open_writer(out, fmt, overwrite=outputs.overwrite, outputs=outputs) as writer:
         writer.add_topic(config.tf_topic, "tf2_msgs/msg/TFMessage", latched=True)
         for lidar in config.lidars:
             writer.add_topic(lidar.topic_name, "sensor_msgs/msg/PointCloud2")
@@ -257,7 +284,7 @@ def simulate_calib_session(
                 }
             )
     truth = _truth(config, scene, stops, true_ext, recorded_ext, scans, out)
-    _write_json_atomic(truth_path(out), truth)
+    outputs.write_text(truth_path(out), json.dumps(truth, indent=2) + "\n")
     return truth
 
 

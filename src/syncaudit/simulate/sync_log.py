@@ -32,6 +32,7 @@ import heapq
 import json
 import math
 import struct
+import typing
 import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -41,9 +42,11 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.config import ConfigModel
+from syncaudit.errors import ConfigError
 from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, returns_per_firing
 from syncaudit.lidar.hesai_encode import build_pandar_scan, encode_hesai
 from syncaudit.lidar.velodyne import HOUR_US, RETURN_STRONGEST, velodyne_firing_offsets_ns
@@ -53,8 +56,8 @@ from syncaudit.lidar.velodyne_encode import (
     velodyne_revolution_schedule,
 )
 from syncaudit.simulate import LidarModel
-from syncaudit.writers.atomic import write_text_atomic
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
+from syncaudit.writers.outputs import OutputSet
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
@@ -90,8 +93,7 @@ x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clo
 # ==================================================================================== config
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = ConfigModel
 
 
 class LatencyDist(_Strict):
@@ -453,8 +455,9 @@ def truth_path(out: Path) -> Path:
 class _Simulation:
     """One run of the simulator: arrays first (vectorised), then messages."""
 
-    def __init__(self, config: SyncSimConfig) -> None:
+    def __init__(self, config: SyncSimConfig, outputs: OutputSet) -> None:
         self.cfg = config
+        self.outputs = outputs
         seeds = np.random.SeedSequence(config.seed).spawn(8)
         self.rng_drop, self.rng_t1, self.rng_points = (np.random.default_rng(s) for s in seeds[:3])
         self.camera_seeds = seeds[3]
@@ -999,7 +1002,9 @@ class _Simulation:
         self, out: Path, pk: _Packets, zero_packet: NDArray[np.int64], cams: list[dict[str, Any]]
     ) -> None:
         cfg = self.cfg
-        with open_writer(out, cfg.log_format, overwrite=cfg.overwrite) as writer:
+        with open_writer(
+            out, cfg.log_format, overwrite=cfg.overwrite, outputs=self.outputs
+        ) as writer:
             writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
             writer.add_topic(self.topic, self.msgtype)
             image_type = (
@@ -1036,24 +1041,106 @@ def _jpeg_image(writer: LogWriter, header: Any, size: int, seed: int) -> bytes:
     return writer.serialize(msg)
 
 
-def _write_json_atomic(path: Path, payload: dict[str, Any], overwrite: bool) -> None:
-    """Write JSON to a temporary file beside `path` (normal permissions), then rename."""
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists already; pass overwrite=True to replace it")
-    write_text_atomic(path, json.dumps(payload, indent=1, allow_nan=True) + "\n")
+def simulate_sync_log(
+    out: Path, config: SyncSimConfig, *, outputs: OutputSet | None = None
+) -> dict[str, Any]:
+    """Write a simulated log to `out` (format `config.log_format`) and its truth to `<out>.truth.json`.
 
+    Returns the truth. Both outputs go through `outputs` (committed by its owner) or, without
+    one, through an own OutputSet committed here: all or nothing.
 
-def simulate_sync_log(out: Path, config: SyncSimConfig) -> dict[str, Any]:
-    """Write a simulated log to `out` (format `config.log_format`) and its truth to
-    `<out>.truth.json`; return the truth. Both are written atomically; existing outputs are
-    kept unless `config.overwrite`."""
+    Raises:
+        OutputError: an output exists without `config.overwrite`, or cannot be written.
+    """
     out = Path(out)
-    truth_file = truth_path(out)
-    if not config.overwrite and (out.exists() or truth_file.exists()):
-        raise FileExistsError(f"{out} or its truth file exists already; set overwrite=True")
-    sim = _Simulation(config)
-    truth = sim.run(out)
-    for cam in truth["cameras"].values():
-        cam.pop("_arrays")
-    _write_json_atomic(truth_file, truth, config.overwrite)
+    own = outputs is None
+    outputs = (
+        outputs
+        if outputs is not None
+        else OutputSet(
+            overwrite=config.overwrite, overwrite_hint="set overwrite=True to replace it"
+        )
+    )
+    try:
+        truth_file = truth_path(out)
+        outputs.add(truth_file)
+        sim = _Simulation(config, outputs)
+        truth = sim.run(out)
+        for cam in truth["cameras"].values():
+            cam.pop("_arrays")
+        outputs.write_text(truth_file, json.dumps(truth, indent=1, allow_nan=True) + "\n")
+    except BaseException:
+        if own:
+            outputs.discard()
+        raise
+    if own:
+        outputs.commit()
     return truth
+
+
+_LIDAR_ALIASES: dict[str, LidarModel] = {
+    alias: model
+    for model in typing.get_args(LidarModel)
+    for alias in (
+        model.lower(),
+        model.lower().replace("-", ""),
+        model.lower().removeprefix("pandar"),
+    )
+}
+
+
+def lidar_model(name: str) -> LidarModel:
+    """The simulator's LiDAR model for a name as users write it (`XT32`, `vlp16`, `Pandar40P`).
+
+    Raises:
+        ConfigError: the name is none of the simulated models.
+    """
+    found = _LIDAR_ALIASES.get(name.strip().lower().replace("_", "-")) or _LIDAR_ALIASES.get(
+        name.strip().lower().replace("-", "").replace("_", "")
+    )
+    if found is None:
+        known = ", ".join(typing.get_args(LidarModel))
+        raise ConfigError(f"unknown LiDAR model {name!r}; the simulator writes {known}")
+    return found
+
+
+def sync_sim_config(
+    *,
+    lidar: str = "VLP-16",
+    tunnel: bool = True,
+    delay_error_us: float = 0.0,
+    clock_offset_s: float = 0.0,
+    compressed: bool = False,
+    controller: bool = False,
+    **settings: Any,
+) -> SyncSimConfig:
+    """A SyncSimConfig from the settings `syncaudit simulate sync` offers.
+
+    `lidar` accepts the names users write (`XT32`, `vlp-16`); `tunnel=False` keeps the
+    exposure bright all along; `delay_error_us` offsets every camera's applied delay from the
+    ideal; `clock_offset_s` is the LiDAR clock minus the host clock. Every other keyword is a
+    SyncSimConfig field (`seed`, `duration_s`, `log_format`, `packet_drop_fraction`, ...).
+
+    Raises:
+        ConfigError: naming the first setting out of range.
+    """
+    base = SyncSimConfig()
+    light = (
+        base.light
+        if tunnel
+        else base.light.model_copy(update={"dark_exposure_us": base.light.bright_exposure_us})
+    )
+    return SyncSimConfig.model_validate(
+        {
+            **settings,
+            "lidar_model": lidar_model(lidar),
+            "clock_offset_ns": round(clock_offset_s * 1e9),
+            "light": light,
+            "cameras": [
+                camera.model_copy(update={"delay_error_us": delay_error_us})
+                for camera in base.cameras
+            ],
+            "image_kind": "compressed" if compressed else "raw",
+            "controller": ControllerConfig() if controller else None,
+        }
+    )

@@ -7,7 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from syncaudit.audit import AuditResult
-from syncaudit.writers.log_writer import infer_format, open_writer
+from syncaudit.writers.log_writer import open_writer
+from syncaudit.writers.outputs import OutputSet
 
 PAIRING_TYPE = "syncaudit_msgs/msg/FramePairing"
 
@@ -21,10 +22,18 @@ def _ns(value: Any) -> int:
     return 0 if value is None or not math.isfinite(float(value)) else round(float(value))
 
 
-def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> int:
-    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); returns the count."""
+def write_pairings(
+    result: AuditResult, out: Path, *, overwrite: bool = False, outputs: OutputSet | None = None
+) -> int:
+    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); return the count.
+
+    With `outputs` the log goes into that OutputSet (committed by its owner).
+
+    Raises:
+        OutputError: `out` exists without `overwrite`, or cannot be written.
+    """
     count = 0
-    with open_writer(out, infer_format(out), overwrite=overwrite) as writer:
+    with open_writer(out, None, overwrite=overwrite, outputs=outputs) as writer:
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
