@@ -145,3 +145,37 @@ def test_cut_log_read_in_parallel_equals_serial(
     assert len(plain) > 100
     assert chunked[1] == plain
     assert chunked[2] == plain
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize(
+    ("log_name", "kind"),
+    [("vlp16_short.bag", "rosbag1-chunk"), ("vlp16_short_ros2", "sqlite-rows")],
+)
+def test_bag_units_through_the_registry(
+    log_name: str, kind: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ROS 1 chunks and SQLite row ranges go through the same registry and merge as MCAP
+    chunks: serial, parallel and a plain message-by-message read give the same items."""
+    from syncaudit.rig import load_rig
+
+    sample = REPO / "sample_logs"
+    log_path = sample / log_name
+    rig = load_rig(sample / f"{log_name}.rig.yaml")
+    monkeypatch.setattr(collect, "GROUP_BYTES", 50_000)
+    with open_log(log_path) as log:
+        plan = _plan(log, rig)
+        units = log.read_units(frozenset(plan.topics))
+        assert units is not None and {u.kind for u in units} == {kind}
+        assert len(units) > 1
+        chunked = {
+            jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
+            for jobs in (1, 2)
+        }
+        monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
+        plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
+    assert len(plain) > 50
+    assert chunked[1] == plain
+    assert chunked[2] == plain
