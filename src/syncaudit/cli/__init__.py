@@ -12,7 +12,7 @@ and import the module below.
 
 from __future__ import annotations
 
-from syncaudit.cli import audit, calib, info, simulate
+from syncaudit.cli import audit, calib, info, rig, simulate
 from syncaudit.cli.common import app, main
 
-__all__ = ["app", "audit", "calib", "info", "main", "simulate"]
+__all__ = ["app", "audit", "calib", "info", "main", "rig", "simulate"]
