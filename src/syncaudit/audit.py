@@ -24,6 +24,7 @@ from syncaudit.lidar.stream import (
 )
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
+from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
@@ -204,7 +205,8 @@ def _import_analysis() -> None:
 
 
 def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
-    warnings: list[str] = []
+    # Camera topics in encodings that cannot be read are dropped (warned); see rig_vs_log.
+    rig, warnings = check_rig_against_log(log, rig)
     missing: list[str] = []
     # /tf_static is read (and its types built) only for cameras the rig gives no angle.
     tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
@@ -253,6 +255,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     empty = {c.name: CameraTableBuilder(c) for c, _, _ in located}
     by_camera = {b.camera.name: b for b in builders.values()}
     all_tables = [by_camera.get(c.name, empty[c.name]).build() for c, _, _ in located]
+    warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     packet_ns = [t.triggers["lidar_packet_ns"].dropna().to_numpy(np.int64) for t in all_tables]
     offset, how = host_offset_ns(
         scan, np.concatenate(packet_ns) if packet_ns else np.empty(0, np.int64)

@@ -4,6 +4,12 @@ rosbags deserialises any message but costs ~30 us each; these fixed-layout CDR m
 (ROS 2) arrive once per camera frame, so the audit reads their fields with `struct` in
 a few microseconds. Anything else, or ROS 1 bytes, goes through rosbags. Tests check
 the two give identical rows.
+
+Damaged bytes (a message cut short, a length past its end, an unknown encapsulation)
+never raise: `read_fast` returns a namespace whose `damaged` attribute says what is
+wrong, so the row functions can skip the message with a counted warning (a damaged
+camera message should not stop the audit of everything else). Strings decode leniently
+(bit flips become U+FFFD): the audit does not use their text.
 """
 
 from __future__ import annotations
@@ -21,6 +27,13 @@ _LE = {
     "f": struct.Struct("<f"),
 }
 _BE = {k: struct.Struct(">" + v.format[1:]) for k, v in _LE.items()}
+_CDR_LE_IDS = (b"\x00\x01", b"\x00\x03")
+_CDR_IDS = (b"\x00\x00", *_CDR_LE_IDS, b"\x00\x02")
+"""Encapsulation ids of (PL_)CDR big- and little-endian: what ROS 2 writes."""
+
+
+class _TruncatedError(Exception):
+    """A field reaches past the end of the message (internal to this module)."""
 
 
 class _Cursor:
@@ -30,13 +43,15 @@ class _Cursor:
 
     def __init__(self, data: bytes | memoryview) -> None:
         self.data = data
-        self.fmt = _LE if bytes(data[1:2]) in (b"\x01", b"\x03") else _BE
+        self.fmt = _LE if bytes(data[0:2]) in _CDR_LE_IDS else _BE
         self.pos = 4
 
     def _get(self, code: str, size: int) -> Any:
         rem = (self.pos - 4) % size
         if rem:
             self.pos += size - rem
+        if self.pos + size > len(self.data):
+            raise _TruncatedError(f"a {size}-byte field at byte {self.pos}")
         (value,) = self.fmt[code].unpack_from(self.data, self.pos)
         self.pos += size
         return value
@@ -60,8 +75,11 @@ class _Cursor:
         return int(self._get("h", 2))
 
     def string(self) -> str:
+        start = self.pos
         length = self.u32()
-        text = bytes(self.data[self.pos : self.pos + length - 1]).decode()
+        if length == 0 or self.pos + length > len(self.data):
+            raise _TruncatedError(f"a string of {length} bytes at byte {start}")
+        text = bytes(self.data[self.pos : self.pos + length - 1]).decode(errors="replace")
         self.pos += length
         return text
 
@@ -116,7 +134,22 @@ def has_fast_reader(msgtype: str, encoding: str) -> bool:
 
 
 def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNamespace | None:
-    """The fields the audit needs, or None where this type/encoding has no fast reader."""
+    """The fields the audit needs, or None where this type/encoding has no fast reader.
+
+    Where the bytes do not fit the layout, the namespace holds only `damaged`: what is
+    wrong, e.g. "truncated CameraExposure (7 bytes): a 4-byte field at byte 8 is missing".
+    """
     if not has_fast_reader(msgtype, encoding):
         return None
-    return FAST_READERS[msgtype](_Cursor(data))
+    name = msgtype.rsplit("/", 1)[-1]
+    if len(data) < 4 or bytes(data[0:2]) not in _CDR_IDS:
+        head = bytes(data[0:4]).hex() or "nothing"
+        return SimpleNamespace(
+            damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
+        )
+    try:
+        return FAST_READERS[msgtype](_Cursor(data))
+    except _TruncatedError as exc:
+        return SimpleNamespace(
+            damaged=f"truncated {name} ({len(data)} bytes): {exc} is missing or cut"
+        )
