@@ -68,8 +68,8 @@ def header_stamp_ns(msg: RawMessage) -> int:
     else:
         little = bytes(data[1:2]) in (b"\x01", b"\x03")
         sec, nsec = (_STAMP if little else _STAMP_BE).unpack_from(data, 4)
-    if nsec >= 1_000_000_000:
-        raise LogReadError(_where(msg, f"header stamp nanoseconds {nsec} out of range"))
+    if sec < 0 or nsec >= 1_000_000_000:
+        raise LogReadError(_where(msg, f"header stamp {sec} s {nsec} ns out of range"))
     return int(sec) * 1_000_000_000 + int(nsec)
 
 
@@ -90,10 +90,10 @@ def _duration_ns(seconds: Any, what: str) -> int:
 
 
 def _time_ns(t: Any) -> int:
-    nanosec = int(t.nanosec)
-    if not 0 <= nanosec < 1_000_000_000:
-        raise ValueError(f"time nanoseconds {nanosec} out of range")
-    return int(t.sec) * 1_000_000_000 + nanosec
+    sec, nanosec = int(t.sec), int(t.nanosec)
+    if sec < 0 or not 0 <= nanosec < 1_000_000_000:
+        raise ValueError(f"time {sec} s {nanosec} ns out of range")
+    return sec * 1_000_000_000 + nanosec
 
 
 def _ros1_seq(msg: RawMessage) -> int | None:

@@ -18,7 +18,12 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    return 0 if value is None or not math.isfinite(float(value)) else round(float(value))
+    """A whole number from a table cell; 0 for None, NaN and pandas' NA (TypeError on float)."""
+    try:
+        number = float(value)
+    except TypeError:
+        return 0
+    return round(number) if math.isfinite(number) else 0
 
 
 def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> int:
@@ -36,7 +41,7 @@ def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> i
                     PAIRING_TYPE,
                     header=writer.header(stamp, str(cam.sync.camera)),
                     camera=str(cam.sync.camera),
-                    frame_sequence=int(row.frame_sequence) if row.frame_sequence is not None else 0,
+                    frame_sequence=_ns(row.frame_sequence) or 0,
                     image_stamp=writer.time(_ns(row.header_stamp_ns)),
                     exposure_middle=writer.time(t_l),
                     lidar_at_camera=writer.time(_ns(row.t_estimated_ns)),
