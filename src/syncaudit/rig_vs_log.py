@@ -8,6 +8,11 @@ Two checks run before any message is read:
 - vendor: `lidar.vendor` in the rig must be what the packets are. The message type says
   so for Velodyne, Hesai and Ouster types; Nebula packets are decoded from the first
   scan message. A contradiction is ConfigError (exit 6) naming the key.
+
+And one limit: a rig lists at most `MAX_CAMERAS` cameras (ConfigError otherwise). The
+audit is linear in cameras, but each costs ~10-20 ms of table building and analysis
+(pandas), so a rig of thousands (a generated or corrupted one; real rigs have a dozen)
+would run for minutes; it is refused at once instead.
 """
 
 from __future__ import annotations
@@ -22,6 +27,8 @@ from syncaudit.rig import Rig
 READABLE_ENCODINGS = ("cdr", "ros1")
 """Message encodings syncaudit deserialises (ROS 2 CDR and ROS 1)."""
 CAMERA_TOPIC_FIELDS = ("image_topic", "info_topic", "exposure_topic", "trigger_topic")
+MAX_CAMERAS = 256
+"""Cameras one rig may list (real rigs: up to a few dozen)."""
 
 
 def unreadable_encoding(log: LogReader, topic: str) -> str | None:
@@ -50,8 +57,14 @@ def check_rig_against_log(log: LogReader, rig: Rig) -> tuple[Rig, list[str]]:
     """The rig with the camera topics the log cannot be read for removed, and warnings.
 
     Raises UnknownTypeError where the LiDAR topic's encoding is unreadable and
-    ConfigError where `lidar.vendor` contradicts the packets.
+    ConfigError where `lidar.vendor` contradicts the packets or the rig lists more than
+    `MAX_CAMERAS` cameras.
     """
+    if len(rig.cameras) > MAX_CAMERAS:
+        raise ConfigError(
+            f"cameras: the rig lists {len(rig.cameras)} cameras; syncaudit audits at most "
+            f"{MAX_CAMERAS} per rig (each costs ~10-20 ms of analysis); split the rig"
+        )
     lidar_problem = unreadable_encoding(log, rig.lidar.topic)
     if lidar_problem is not None:
         raise UnknownTypeError(f"LiDAR topic {lidar_problem}")

@@ -574,7 +574,9 @@ KNOWN_OPEN: tuple[OpenCause, ...] = (
         "truncated-bag",
         14,
         "bagio",
-        lambda m, p, d, w: p == "truncation-unread" and BASES[m.base].endswith((".bag", ":db3")),
+        lambda m, p, d, w: (
+            p == "truncation-unread" and BASES[m.base].endswith((".bag", ".db3", ":db3"))
+        ),
     ),
 )
 

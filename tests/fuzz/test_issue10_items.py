@@ -129,3 +129,19 @@ def test_info_and_audit_agree_on_a_damaged_lidar(tmp_path: Path, rig: Rig) -> No
     # Without a rig (LiDAR guessed by type), the same.
     with pytest.raises(type(by_audit.value)):
         inspect_log(log)
+
+
+def test_a_rig_of_thousands_of_cameras_is_refused_at_once(rig: Rig) -> None:
+    """Item 9: past MAX_CAMERAS the rig is a ConfigError before any message is read."""
+    import time
+
+    from syncaudit.rig_vs_log import MAX_CAMERAS
+
+    cams = [
+        rig.cameras[i % 3].model_copy(update={"name": f"cam{i}"}) for i in range(MAX_CAMERAS + 1)
+    ]
+    many = rig.model_copy(update={"cameras": cams})
+    start = time.monotonic()
+    with pytest.raises(ConfigError, match=f"cameras: the rig lists {MAX_CAMERAS + 1} cameras"):
+        audit_log(VLP16, many, jobs=1)
+    assert time.monotonic() - start < 5.0
