@@ -2,8 +2,8 @@
 
 rosbags deserialises any message but costs ~30 us each; these fixed-layout CDR messages
 (ROS 2) arrive once per camera frame, so the audit reads their fields with `struct` in
-a few microseconds. Anything else, or ROS 1 bytes, goes through rosbags. Tests check
-the two give identical rows.
+a few microseconds, in CDR (ROS 2) and ROS 1 serialization alike. Anything else goes
+through rosbags. Tests check the two give identical rows.
 
 Damaged bytes (a message cut short, a length past its end, an unknown encapsulation)
 never raise: `read_fast` returns a namespace whose `damaged` attribute says what is
@@ -37,17 +37,22 @@ class _TruncatedError(Exception):
 
 
 class _Cursor:
-    """Reads CDR primitives in order, aligned relative to after the 4-byte header."""
+    """Reads CDR primitives in order, aligned relative to after the 4-byte header.
 
-    __slots__ = ("data", "fmt", "pos")
+    With `ros1`, reads ROS 1 serialization instead: little-endian, packed (no alignment),
+    strings without terminator, and the std_msgs/Header `seq` before the stamp.
+    """
 
-    def __init__(self, data: bytes | memoryview) -> None:
+    __slots__ = ("data", "fmt", "pos", "ros1")
+
+    def __init__(self, data: bytes | memoryview, *, ros1: bool = False) -> None:
         self.data = data
-        self.fmt = _LE if bytes(data[0:2]) in _CDR_LE_IDS else _BE
-        self.pos = 4
+        self.ros1 = ros1
+        self.fmt = _LE if ros1 or bytes(data[0:2]) in _CDR_LE_IDS else _BE
+        self.pos = 0 if ros1 else 4
 
     def _get(self, code: str, size: int) -> Any:
-        rem = (self.pos - 4) % size
+        rem = 0 if self.ros1 else (self.pos - 4) % size
         if rem:
             self.pos += size - rem
         if self.pos + size > len(self.data):
@@ -77,16 +82,21 @@ class _Cursor:
     def string(self) -> str:
         start = self.pos
         length = self.u32()
-        if length == 0 or self.pos + length > len(self.data):
+        terminator = 0 if self.ros1 else 1
+        if length < terminator or self.pos + length > len(self.data):
             raise _TruncatedError(f"a string of {length} bytes at byte {start}")
-        text = bytes(self.data[self.pos : self.pos + length - 1]).decode(errors="replace")
+        end = self.pos + length - terminator
+        text = bytes(self.data[self.pos : end]).decode(errors="replace")
         self.pos += length
         return text
 
     def time(self) -> SimpleNamespace:
-        return SimpleNamespace(sec=self.i32(), nanosec=self.u32())
+        return SimpleNamespace(sec=self.u32() if self.ros1 else self.i32(), nanosec=self.u32())
 
     def header(self) -> SimpleNamespace:
+        if self.ros1:
+            seq = self.u32()
+            return SimpleNamespace(seq=seq, stamp=self.time(), frame_id=self.string())
         return SimpleNamespace(stamp=self.time(), frame_id=self.string())
 
 
@@ -130,7 +140,7 @@ FAST_READERS = {
 
 def has_fast_reader(msgtype: str, encoding: str) -> bool:
     """True where `read_fast` reads this type and encoding (else rosbags must)."""
-    return encoding == "cdr" and msgtype in FAST_READERS
+    return encoding in ("cdr", "ros1") and msgtype in FAST_READERS
 
 
 def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNamespace | None:
@@ -142,13 +152,14 @@ def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNa
     if not has_fast_reader(msgtype, encoding):
         return None
     name = msgtype.rsplit("/", 1)[-1]
-    if len(data) < 4 or bytes(data[0:2]) not in _CDR_IDS:
+    ros1 = encoding == "ros1"
+    if not ros1 and (len(data) < 4 or bytes(data[0:2]) not in _CDR_IDS):
         head = bytes(data[0:4]).hex() or "nothing"
         return SimpleNamespace(
             damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
         )
     try:
-        return FAST_READERS[msgtype](_Cursor(data))
+        return FAST_READERS[msgtype](_Cursor(data, ros1=ros1))
     except _TruncatedError as exc:
         return SimpleNamespace(
             damaged=f"truncated {name} ({len(data)} bytes): {exc} is missing or cut"
