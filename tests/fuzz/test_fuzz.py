@@ -4,14 +4,17 @@ CI mode runs `CI_MUTANTS` mutants from a fixed seed (every base x mutator pair a
 once, `info` on every other one); `pytest tests/fuzz --fuzz-long` runs `LONG_MUTANTS`.
 A problem whose cause is a known open item of issue 10 (`campaign.KNOWN_OPEN`, fixed on
 another engineer's branch) xfails (not strict: it passes once the fix is merged); any
-other problem fails, and the mutant is saved under the pytest tmp dir for replay with
+other problem fails, and the mutant's replay record is saved under FAILURES, for
 `python benchmarks/fuzz_campaign.py --replay <id>`.
 """
 
 from __future__ import annotations
 
 import os
+import tempfile
 from collections import Counter
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from campaign import (
@@ -43,15 +46,21 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         metafunc.parametrize("mutant", mutants, ids=[m.id for m in mutants])
 
 
+FAILURES = Path(
+    os.environ.get(
+        "SYNCAUDIT_FUZZ_FAILURES", Path(tempfile.gettempdir()) / "syncaudit-fuzz-failures"
+    )
+)
+"""Where failing mutants' replay records go (not pytest's tmp dir: it is pruned)."""
+
+
 @pytest.fixture(scope="session")
-def outcomes(
-    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-) -> dict[str, Outcome]:
+def outcomes(request: pytest.FixtureRequest) -> Iterator[dict[str, Outcome]]:
     """Every mutant's outcome, run two at a time once for the session."""
     mutants = plan(_count(request.config), CI_SEED)
-    root = tmp_path_factory.mktemp("fuzz")
     jobs = max(1, min(2, len(os.sched_getaffinity(0))))
-    return run_campaign(mutants, root, jobs=jobs, info_every=2)
+    with tempfile.TemporaryDirectory(prefix="syncaudit-fuzz-") as root:
+        yield run_campaign(mutants, Path(root), jobs=jobs, info_every=2)
 
 
 def test_plan_covers_every_base_and_mutator() -> None:
@@ -62,14 +71,12 @@ def test_plan_covers_every_base_and_mutator() -> None:
     assert Mutant.parse(mutants[7].id) == mutants[7]
 
 
-def test_mutant(
-    mutant: Mutant, outcomes: dict[str, Outcome], tmp_path_factory: pytest.TempPathFactory
-) -> None:
+def test_mutant(mutant: Mutant, outcomes: dict[str, Outcome]) -> None:
     outcome = outcomes[mutant.id]
     problems = classify(mutant, outcome)
     if not problems:
         return
-    saved = save_failure(outcome, mutant, tmp_path_factory.getbasetemp() / "fuzz-failures")
+    saved = save_failure(outcome, mutant, FAILURES)
     new = [p for p in problems if p[2] is None]
     if new:
         pytest.fail(f"{mutant.id} ({outcome.description}): {new}; replay record {saved}")
