@@ -1,7 +1,10 @@
-"""Per-scan time of the audit's Velodyne hot loop: decode_scan, then packet_samples.
+"""Per-scan time of the audit's packet hot loop: decode_scan, then packet_samples.
 
     python benchmarks/bench_decode.py                    # cached 0.2 GB VLS-128 bench log
     python benchmarks/bench_decode.py LOG TOPIC [LOG TOPIC ...]
+
+Any scan-message packet topic (Velodyne, PandarScan, NebulaPackets): the vendor family
+comes from the topic's message type.
 
 Scans are read once and copied into memory, then each step is timed per scan, `--repeat`
 passes over all scans; the best pass is reported (the least disturbed by other load).
@@ -16,7 +19,7 @@ from pathlib import Path
 
 from syncaudit.errors import SyncauditError
 from syncaudit.lidar.samples import packet_samples
-from syncaudit.lidar.stream import PacketChunk, decode_scan
+from syncaudit.lidar.stream import SCAN_TYPES, PacketChunk, decode_scan
 from syncaudit.logs import RawMessage, open_log
 
 HERE = Path(__file__).resolve().parent
@@ -47,9 +50,15 @@ def best_pass_ms(step: Callable[[], object], scans: int, repeat: int) -> float:
 def bench(path: Path, topic: str, repeat: int) -> None:
     """Print per-scan decode_scan and packet_samples times for one topic."""
     msgs = read_scans(path, topic)
+    if not msgs:
+        print(f"{path.name} {topic}: no messages")
+        return
+    family = SCAN_TYPES.get(msgs[0].msgtype)
+    if family is None or family == "ouster":
+        raise SystemExit(f"error: {topic}: {msgs[0].msgtype} is not a scan-message packet type")
     chunks: list[PacketChunk] = []
     for i, msg in enumerate(msgs):
-        chunk = decode_scan("velodyne", msg, i)
+        chunk = decode_scan(family, msg, i)
         if chunk is not None:
             chunks.append(chunk)
     if not chunks:
@@ -59,7 +68,7 @@ def bench(path: Path, topic: str, repeat: int) -> None:
 
     def decode_all() -> None:
         for i, msg in enumerate(msgs):
-            decode_scan("velodyne", msg, i)
+            decode_scan(family, msg, i)
 
     def samples_all() -> None:
         for c in chunks:

@@ -17,11 +17,8 @@ from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_famil
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row
 from syncaudit.lidar.scan import LidarScanner
-from syncaudit.lidar.stream import (
-    find_ouster_metadata_topic,
-    is_packet_topic,
-    read_ouster_metadata,
-)
+from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
+from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig
 from syncaudit.rig_vs_log import check_rig_against_log
@@ -123,7 +120,7 @@ def _row(row: Any) -> dict[str, Any]:
 
 def _default_rig(log: LogReader) -> tuple[Rig, list[str]]:
     """A rig guessed from the log: the first packet topic and the cameras by type and name."""
-    packet_topics = sorted(t.name for t in log.topics.values() if is_packet_topic(t.msgtype))
+    packet_topics = guess_lidar_topics(log).topics
     if not packet_topics:
         raise NoDataError(
             f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
@@ -243,6 +240,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
+    warnings.extend(scan.warnings)
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     controller = ControllerConfig(

@@ -17,7 +17,7 @@ from typing import Any
 from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.lidar.scan import LidarScan, scan_lidar
-from syncaudit.lidar.stream import is_packet_topic
+from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.rig_vs_log import check_rig_against_log
@@ -159,16 +159,13 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         report.topics.append(TopicRow(info.name, info.msgtype, info.count, rate))
     if summary.message_count == 0:
         raise NoDataError(f"{summary.path}: the log holds no messages")
-    lidar_topics = (
-        [rig.lidar.topic]
-        if rig
-        else [t.name for t in log.topics.values() if is_packet_topic(t.msgtype)]
-    )
-    if rig is None and lidar_topics:
+    guess = None if rig else guess_lidar_topics(log)
+    lidar_topics = [rig.lidar.topic] if rig else guess.topics if guess else []
+    if guess is not None and lidar_topics:
         report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
-    # Without a rig, a topic that fails is a warning as long as another one reads
-    # (e.g. an Ouster IMU packet topic beside the LiDAR's); with one, its topic decides.
-    audited = rig.lidar.topic if rig else None
+    report.warnings.extend(guess.notes if guess else [])
+    # The topic `audit` would use decides: the rig's, else the first guessed by name.
+    audited = rig.lidar.topic if rig else (lidar_topics[0] if lidar_topics else None)
     failure: SyncauditError | None = None
     if rig is not None:
         try:
@@ -204,6 +201,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
             continue
         row = lidar_row(scan)
         report.lidars.append(row)
+        report.warnings.extend(scan.warnings)
         if row.cropped_sector:
             report.warnings.append(f"{topic}: {row.cropped_sector}")
         if row.outlier_blocks:

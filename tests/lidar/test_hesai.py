@@ -20,17 +20,19 @@ from syncaudit.errors import DecodeError
 from syncaudit.lidar.hesai import (
     HESAI_LAYOUTS,
     RosHeader,
-    build_nebula_packets,
-    build_pandar_scan,
     decode_hesai,
     detect_hesai_model,
-    encode_hesai,
     hesai_returns,
-    hesai_revolution_schedule,
     nebula_packets,
     pandar_scan_packets,
     ros_header,
     stack_packets,
+)
+from syncaudit.lidar.hesai_encode import (
+    build_nebula_packets,
+    build_pandar_scan,
+    encode_hesai,
+    hesai_revolution_schedule,
 )
 
 NS = 1_000_000_000
@@ -238,10 +240,13 @@ START_NS = 1_673_400_149_311_270_952  # the 40P recording's first driver stamp
         ("PandarXT32", 0x37, 1080, 250),
         ("PandarXT32", 0x3B, 1080, 500),
         ("PandarXT32M", 0x37, 820, 334),
+        ("PandarXT32M", 0x3C, 820, 667),
         ("PandarXT32M", 0x3D, 820, 1000),
         ("PandarQT128", 0x37, 1095, 450),
         ("PandarQT128", 0x39, 1095, 900),
         ("AT128", 0x37, 1086, 1200),
+        ("Pandar128E4X", 0x37, 861, 900),
+        ("Pandar128E4X", 0x39, 861, 1800),
     ],
 )
 def test_encode_decode_round_trip(model: str, return_mode: int, size: int, n_packets: int) -> None:
@@ -394,7 +399,8 @@ Corruption = Callable[[NDArray[np.uint8], NDArray[np.uint32]], object]
             lambda d, s: d.__setitem__((0, slice(1052 + 19, 1052 + 23)), [0x41, 0x42, 0x0F, 0]),
             "past 1 s",
         ),
-        (lambda d, s: d.__setitem__((slice(None), 10), 3), "return mode"),
+        (lambda d, s: d.__setitem__((slice(None), 1052 + 10), 0x3D), "cannot group 8 blocks"),
+        (lambda d, s: d.__setitem__((slice(None), 1052 + 10), 0x39), "not grouped by 2"),
         (lambda d, s: s.__setitem__(1, 1060), "needs"),
     ],
 )

@@ -25,6 +25,8 @@ from syncaudit.lidar.ouster import (
     ouster_packet_bytes,
     parse_ouster_metadata,
 )
+from syncaudit.lidar.samples import packet_samples
+from syncaudit.lidar.scan import LidarScanner
 
 REPO = Path(__file__).resolve().parents[2]
 BAG = Path("ouster_os1_512x10") / "512x10_raw.bag"
@@ -361,3 +363,20 @@ def test_malformed_packets_raise(rec: Recording, meta: OusterMetadata) -> None:
     wrong_mode = dataclasses.replace(meta, columns_per_frame=256)
     with pytest.raises(DecodeError, match="out of range"):
         decode_ouster(rec.packets, wrong_mode)
+
+
+def test_declared_rate_from_lidar_mode(rec: Recording, meta: OusterMetadata) -> None:
+    """The metadata's lidar_mode is the rate the sensor declares; a mismatch is warned."""
+    scanner = LidarScanner.create("/os_node0/lidar_packets")
+    timing = decode_ouster(rec.packets, meta)
+    assert timing.motor_rpm is not None and (timing.motor_rpm == 600.0).all()
+    scanner.feed(packet_samples(timing, rec.log_time_ns), messages=32)
+    assert scanner.finish().warnings == []
+    # The same packets under metadata claiming 512x20 (1200 RPM): they still turn at 600.
+    wrong = dataclasses.replace(meta, rotation_rate_hz=20, lidar_mode="512x20")
+    scanner = LidarScanner.create("/os_node0/lidar_packets")
+    scanner.feed(packet_samples(decode_ouster(rec.packets, wrong), rec.log_time_ns), messages=32)
+    scan = scanner.finish()
+    assert scan.declared_rpm == 1200.0
+    (warning,) = scan.warnings
+    assert "1200 RPM of the metadata's lidar_mode" in warning

@@ -107,3 +107,29 @@ def test_ouster_single_frame(lidar_data: Path) -> None:
     # Under two zero crossings: the rate comes from the block trajectory.
     assert scan.rpm == pytest.approx(600.5, abs=0.5)
     assert scan.clock is not None and not scan.clock.synchronised
+
+
+@pytest.mark.parametrize(
+    ("folder", "topic", "declared"),
+    [
+        ("hesai_40p", "/pandar_packets", 600.0),
+        ("hesai_xt32", "/pandar_packets", 599.2),
+        ("ouster_os1_512x10", "/os_node0/lidar_packets", 600.0),
+        ("velodyne_vlp16", "/velodyne_packets", None),
+    ],
+)
+def test_declared_rotation_rate_agrees(
+    lidar_data: Path, folder: str, topic: str, declared: float | None
+) -> None:
+    """The packets' own motor-speed field (Hesai tail, Ouster lidar_mode) matches the decode."""
+    bag = next(
+        p for p in sorted((lidar_data / folder).iterdir()) if p.is_dir() or p.suffix == ".bag"
+    )
+    with open_log(bag) as log:
+        scan = scan_lidar(log, topic)
+    if declared is None:  # Velodyne data packets carry no motor speed
+        assert np.isnan(scan.declared_rpm) and np.isnan(scan.rpm_disagreement)
+    else:
+        assert scan.declared_rpm == pytest.approx(declared, abs=0.1)
+        assert abs(scan.rpm_disagreement) < 0.002
+    assert scan.warnings == []

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from syncaudit.errors import DecodeError
 from syncaudit.lidar import velodyne as v
+from syncaudit.lidar import velodyne_encode as ve
 from syncaudit.lidar.packets import PacketTiming
 
 VLP16 = Path("velodyne_vlp16")
@@ -285,13 +286,13 @@ def test_vlp32_pcd_inside_decoded_span(lidar_data: Path, vlp32: list[Scan]) -> N
 def test_scan_bytes_rebuild_identical(vlp16: list[Scan], vlp32: list[Scan]) -> None:
     for scan in [*vlp16, *vlp32]:
         stamp_ns, frame_id = v.velodyne_scan_header(scan.raw, "cdr")
-        rebuilt = v.build_velodyne_scan(stamp_ns, frame_id, scan.stamps_ns, scan.data, "cdr")
+        rebuilt = ve.build_velodyne_scan(stamp_ns, frame_id, scan.stamps_ns, scan.data, "cdr")
         assert rebuilt == scan.raw
         assert len(scan.raw) == 4 + 4 * ((8 + 4 + len(frame_id) + 1 + 3) // 4) + 4 + (
             scan.data.shape[0] * 1216
         )
         for encoding, big in (("cdr", True), ("ros1", False)):
-            other = v.build_velodyne_scan(
+            other = ve.build_velodyne_scan(
                 stamp_ns, frame_id, scan.stamps_ns, scan.data, encoding, big_endian=big, seq=7
             )
             stamps, data = v.velodyne_scan_packets(other, encoding)
@@ -307,7 +308,9 @@ def test_view_is_zero_copy_and_fast(vlp16: list[Scan]) -> None:
     stamps, data = v.velodyne_scan_packets(raw, "cdr")
     assert np.shares_memory(data, np.frombuffer(raw, dtype=np.uint8))
     assert data.strides == (1216, 1) and stamps.dtype == np.int64
-    big = v.build_velodyne_scan(0, "velodyne", np.arange(600), np.tile(vlp16[0].data, (4, 1))[:600])
+    big = ve.build_velodyne_scan(
+        0, "velodyne", np.arange(600), np.tile(vlp16[0].data, (4, 1))[:600]
+    )
     times = []
     for _ in range(200):
         t0 = time.perf_counter()
@@ -334,13 +337,13 @@ ROUND_TRIPS = [
 @pytest.mark.parametrize(("model", "mode", "rpm"), ROUND_TRIPS)
 def test_encode_decode_round_trip(model: str, mode: int, rpm: float) -> None:
     start_ns = 1_700_000_000_123_456_789
-    sched = v.velodyne_revolution_schedule(
+    sched = ve.velodyne_revolution_schedule(
         model, rpm, start_ns, start_azimuth_deg=359.5, return_mode=mode
     )
     n = sched.packet_toh_us.size
     layout_deg = rpm * 6.0 * v._layout(model, mode == v.RETURN_DUAL).packet_ns / 1e9
     assert n * layout_deg >= 360.0 > (n - 1) * layout_deg
-    packets = v.encode_velodyne(
+    packets = ve.encode_velodyne(
         model, sched.block_azimuth_deg, sched.packet_toh_us, mode, rng=np.random.default_rng(1)
     )
     assert packets.shape == (n, 1206)
@@ -373,7 +376,7 @@ def test_encode_explicit_records_and_first_firing() -> None:
     dist = np.linspace(0.0, 120.0, 2 * 12 * 32).reshape(2, 12, 32)
     inten = np.arange(2 * 12 * 32).reshape(2, 12, 32) % 256
     az = np.repeat(np.array([[10.0], [12.4]]), 12, axis=1) + np.arange(12) * 0.2
-    packets = v.encode_velodyne(
+    packets = ve.encode_velodyne(
         "HDL-32E", az, [5_000_000, 5_000_553], distances_m=dist, intensities=inten
     )
     host = np.array([7, 7], dtype=np.int64) * v.HOUR_NS + 5_000_000_000
@@ -438,7 +441,7 @@ def test_malformed_messages_raise(vlp16: list[Scan]) -> None:
         with pytest.raises(DecodeError) as exc:
             v.velodyne_scan_packets(bad, "cdr")
         assert _one_line(exc), name
-    ros1 = v.build_velodyne_scan(0, "velodyne", vlp16[0].stamps_ns, vlp16[0].data, "ros1")
+    ros1 = ve.build_velodyne_scan(0, "velodyne", vlp16[0].stamps_ns, vlp16[0].data, "ros1")
     with pytest.raises(DecodeError) as exc:
         v.velodyne_scan_packets(ros1[:-1], "ros1")
     assert "packets need" in _one_line(exc)
@@ -473,7 +476,7 @@ def test_malformed_packets_raise(vlp16: list[Scan]) -> None:
     with pytest.raises(DecodeError):
         v.decode_velodyne(good[:0], host[:0])
     with pytest.raises(ValueError, match="pairs"):
-        v.encode_velodyne("VLP-16", np.arange(12.0)[None], [0], v.RETURN_DUAL)
+        ve.encode_velodyne("VLP-16", np.arange(12.0)[None], [0], v.RETURN_DUAL)
 
 
 # ----------------------------------------------------------------------------- decode paths
@@ -485,8 +488,10 @@ def _vls128_dual(n: int) -> tuple[NDArray[np.uint8], NDArray[np.int64]]:
     The encoder does not write this mode (layout unverified), so single-return packets are
     rewritten: pair flags, one azimuth per packet, return mode 0x39, junk in the padding.
     """
-    sched = v.velodyne_revolution_schedule("VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=n)
-    packets = v.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us)
+    sched = ve.velodyne_revolution_schedule(
+        "VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=n
+    )
+    packets = ve.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us)
     blocks = packets[:, :1200].reshape(n, 12, 100)
     base = blocks[:, 0, 2].astype(np.int64) | (blocks[:, 0, 3].astype(np.int64) << 8)
     for k, flag in enumerate([0xEEFF, 0xEEFF, 0xDDFF, 0xDDFF, 0xCCFF, 0xCCFF, 0xBBFF, 0xBBFF]):
@@ -531,21 +536,23 @@ def test_mixed_return_modes_decode_packet_by_packet() -> None:
     """A packet's timing depends on its own mode only, however the modes are mixed."""
     rng = np.random.default_rng(3)
     cases = [_vls128_dual(6)]
-    sched = v.velodyne_revolution_schedule("VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=6)
+    sched = ve.velodyne_revolution_schedule(
+        "VLS-128", 600.0, 1_700_000_000_000_000_000, n_packets=6
+    )
     cases.append(
         (
-            v.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us),
+            ve.encode_velodyne("VLS-128", sched.block_azimuth_deg, sched.packet_toh_us),
             sched.packet_stamp_ns,
         )
     )
     for model in ("VLP-16", "HDL-32E"):
         for mode in (v.RETURN_STRONGEST, v.RETURN_DUAL):
-            sched = v.velodyne_revolution_schedule(
+            sched = ve.velodyne_revolution_schedule(
                 model, 600.0, 1_700_000_000_000_000_000, return_mode=mode, n_packets=6
             )
             cases.append(
                 (
-                    v.encode_velodyne(model, sched.block_azimuth_deg, sched.packet_toh_us, mode),
+                    ve.encode_velodyne(model, sched.block_azimuth_deg, sched.packet_toh_us, mode),
                     sched.packet_stamp_ns,
                 )
             )
@@ -576,7 +583,7 @@ def test_packet_views_of_any_layout_decode_alike(vlp16: list[Scan]) -> None:
     wide[:, 3 : 3 + 1206] = scan.data
     for data in (scan.data.copy(), np.asfortranarray(scan.data), wide[:, 3 : 3 + 1206]):
         _same_timing(v.decode_velodyne(data, scan.stamps_ns), want)
-    ros1 = v.build_velodyne_scan(0, "velodyne", scan.stamps_ns, scan.data, "ros1")
+    ros1 = ve.build_velodyne_scan(0, "velodyne", scan.stamps_ns, scan.data, "ros1")
     stamps, data = v.velodyne_scan_packets(ros1, "ros1")  # stride 1214: unaligned fields
     _same_timing(v.decode_velodyne(data, stamps), want)
     assert v.detect_velodyne_model(data[::-1]) == "VLP-16"

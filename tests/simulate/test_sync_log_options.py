@@ -12,9 +12,9 @@ import zstandard
 from syncaudit.lidar.velodyne import (
     decode_velodyne,
     velodyne_firing_offsets_ns,
-    velodyne_revolution_schedule,
     velodyne_scan_packets,
 )
+from syncaudit.lidar.velodyne_encode import velodyne_revolution_schedule
 from syncaudit.logs import open_log
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 

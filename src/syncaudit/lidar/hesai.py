@@ -1,15 +1,14 @@
-"""Hesai LiDAR: zero-copy ROS packet-message views, packet timing decode, packet encoder.
+"""Hesai LiDAR: zero-copy ROS packet-message views and packet timing decode.
 
-Three layers, all vectorised over packets:
+Two layers, all vectorised over packets (the encoders live in `hesai_encode`):
 
 1. ROS messages. `pandar_msgs/msg/PandarScan` (fixed 1500-byte packet buffers) is viewed
    as numpy strided arrays straight over the serialized bytes; `nebula_msgs/msg/NebulaPackets`
-   (variable-length packets) is walked once. Both have exact inverses (`build_*`).
+   (variable-length packets) is walked once. Both have exact inverses
+   (`hesai_encode.build_*`).
 2. Packets. `decode_hesai` detects the model from the bytes and returns `PacketTiming`:
    the packet's sensor time (date-time + microseconds in the tail), each block's azimuth and
    the time of the block's first firing from the user manuals' block timing rules.
-3. Simulation. `encode_hesai` writes real-format packets and `hesai_revolution_schedule`
-   lays out one revolution of packets whose block times follow the same rules.
 
 Byte layouts follow the Hesai user manuals and the packet formats of tier4/nebula and
 HesaiLidar_SDK_2.0 (read, not copied). Units: azimuths in degrees, times in int64 ns.
@@ -19,7 +18,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, NamedTuple
 
 import numpy as np
@@ -32,17 +31,13 @@ __all__ = [
     "HESAI_LAYOUTS",
     "PANDAR_PACKET_BYTES",
     "HesaiLayout",
-    "HesaiRevolution",
     "RosHeader",
-    "build_nebula_packets",
-    "build_pandar_scan",
     "decode_hesai",
     "detect_hesai_model",
-    "encode_hesai",
     "hesai_returns",
-    "hesai_revolution_schedule",
     "nebula_packets",
     "pandar_scan_packets",
+    "returns_per_firing",
     "ros_header",
     "stack_packets",
 ]
@@ -256,71 +251,6 @@ def stack_packets(
     return data, size
 
 
-def _header_bytes(header: RosHeader, encoding: str) -> bytes:
-    """Serialized std_msgs/Header; CDR output includes the encapsulation header."""
-    _check_encoding(encoding)
-    sec, nsec = divmod(int(header.stamp_ns), _NS_PER_S)
-    name = header.frame_id.encode("utf-8")
-    if encoding == "cdr":
-        out = b"\x00\x01\x00\x00" + struct.pack("<iII", sec, nsec, len(name) + 1) + name + b"\0"
-        return out + b"\0" * (-(len(out) - 4) % 4)
-    return struct.pack("<IIII", header.seq, sec, nsec, len(name)) + name
-
-
-def _split_stamps(stamp_ns: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    stamp = np.asarray(stamp_ns, dtype=np.int64)
-    return stamp // _NS_PER_S, stamp % _NS_PER_S
-
-
-def build_pandar_scan(
-    header: RosHeader,
-    packet_stamp_ns: NDArray[np.int64],
-    data: NDArray[np.uint8],
-    size: NDArray[np.uint32],
-    encoding: str = "cdr",
-) -> bytes:
-    """Serialize a `pandar_msgs/msg/PandarScan`; inverse of `pandar_scan_packets`.
-
-    `data` is (n, L) with L <= 1500; bytes past L are written as zeros.
-    """
-    data = np.asarray(data, dtype=np.uint8)
-    n = data.shape[0]
-    if data.ndim != 2 or data.shape[1] > PANDAR_PACKET_BYTES:
-        raise ValueError("data must be (n, L) with L <= 1500")
-    if np.shape(packet_stamp_ns) != (n,) or np.shape(size) != (n,):
-        raise ValueError("packet_stamp_ns and size must be (n,)")
-    if n and int(np.max(size)) > PANDAR_PACKET_BYTES:
-        raise ValueError("size exceeds 1500 bytes")
-    rec = np.zeros(n, dtype=_pandar_dtype("<", encoding == "cdr"))
-    rec["sec"], rec["nsec"] = _split_stamps(packet_stamp_ns)
-    rec["data"][:, : data.shape[1]] = data
-    rec["size"] = size
-    return _header_bytes(header, encoding) + struct.pack("<I", n) + rec.tobytes()
-
-
-def build_nebula_packets(
-    header: RosHeader,
-    packet_stamp_ns: NDArray[np.int64],
-    packets: NDArray[np.uint8] | Sequence[NDArray[np.uint8]],
-    encoding: str = "cdr",
-) -> bytes:
-    """Serialize a `nebula_msgs/msg/NebulaPackets`; inverse of `nebula_packets`."""
-    n = len(packets)
-    if np.shape(packet_stamp_ns) != (n,):
-        raise ValueError("packet_stamp_ns must be (n,)")
-    sec, nsec = _split_stamps(packet_stamp_ns)
-    out = bytearray(_header_bytes(header, encoding))
-    out += struct.pack("<I", n)
-    cdr = encoding == "cdr"
-    for i in range(n):
-        if cdr:
-            out += b"\0" * (-(len(out) - 4) % 4)
-        payload = np.asarray(packets[i], dtype=np.uint8)
-        out += struct.pack("<iII" if cdr else "<III", int(sec[i]), int(nsec[i]), payload.size)
-        out += payload.tobytes()
-    return bytes(out)
-
-
 # ============================================================================ packet layouts
 
 
@@ -371,6 +301,11 @@ class HesaiLayout:
     anchored_last: bool
     valid_sizes: tuple[int, ...] = ()
     """Exact packet sizes accepted when the model has no self-describing header."""
+    unit_bytes_if_confidence: int = 0
+    """Protocol 1.4: channel unit size when header flag bit 4 (confidence) is set."""
+    header_max_returns: int = 0
+    """What the sensor writes in the 12-byte header's Return Number byte when it is the
+    model's maximum rather than the current mode (PandarXT: 2, XT32M2X: 3); 0: the mode's."""
 
     @property
     def block_bytes(self) -> int:
@@ -417,9 +352,11 @@ def _general(
         block_prefix_bytes=int(kw.pop("block_prefix_bytes", 2)),
         azimuth_offset=0,
         fine_azimuth=bool(kw.pop("fine_azimuth", False)),
-        unit_bytes=4,
+        unit_bytes=int(kw.pop("unit_bytes", 4)),
         body_trailer_bytes=int(kw.pop("body_trailer_bytes", 0)),
         fs_bytes_if_flagged=int(kw.pop("fs_bytes_if_flagged", 0)),
+        unit_bytes_if_confidence=int(kw.pop("unit_bytes_if_confidence", 0)),
+        header_max_returns=int(kw.pop("header_max_returns", 0)),
         tail_bytes=tail["len"],
         tail_return_mode=tail["return_mode"],
         tail_motor_rpm=tail["motor"],
@@ -525,13 +462,35 @@ HESAI_LAYOUTS: Final[dict[str, HesaiLayout]] = {
     # Protocol 6.1, 8 blocks; t0 triggers the last round, block start = t0 + 5.632 us
     # - 50 us per later round.
     "PandarXT16": _general(
-        "PandarXT16", (6, 1), 8, 16, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT16",
+        (6, 1),
+        8,
+        16,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=2,
     ),
     "PandarXT32": _general(
-        "PandarXT32", (6, 1), 8, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT32",
+        (6, 1),
+        8,
+        32,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=2,
     ),
+    # XT32M2X: 6 blocks; single (6 rounds), dual (3 x 2) or triple 0x3D (2 x 3) per packet.
     "PandarXT32M": _general(
-        "PandarXT32M", (6, 1), 6, 32, _TAIL_XT, anchor_ns=5_632, period_num_ns=50_000
+        "PandarXT32M",
+        (6, 1),
+        6,
+        32,
+        _TAIL_XT,
+        anchor_ns=5_632,
+        period_num_ns=50_000,
+        header_max_returns=3,
     ),
     # Protocol 3.2 (QT128C2X): body CRC, optional functional safety (17 B), tail with mode
     # flag; block start = t0 + 9 us - 111.11 us per later round (see decode_hesai notes).
@@ -555,6 +514,36 @@ HESAI_LAYOUTS: Final[dict[str, HesaiLayout]] = {
         header_flags=0x05,
         anchor_ns=9_000,
         period_num_ns=111_110,
+    ),
+    # OT128 (Pandar128E4X), protocol 1.4 (OT128 user manual, section 3.1.2; tier4/nebula
+    # Packet128E3X/Pandar128E4X): 2 blocks of azimuth + 128 x (distance, reflectivity)
+    # [+ confidence when flag bit 4], body CRC, functional safety (17 B, flag bit 2), tail
+    # (reserved 9, azimuth state 2, operational state, return mode, motor speed, date,
+    # timestamp, factory), then UDP sequence (bit 0), IMU (22 B, bit 1), tail CRC, digital
+    # signature (32 B, bit 3): 861 bytes with flags 0x07. Block start = t0 + 45.724 us
+    # (nebula: 43.346 us + the earliest channel's 2.378 us) - 55.556 us per later round.
+    "Pandar128E4X": _general(
+        "Pandar128E4X",
+        (1, 4),
+        2,
+        128,
+        {
+            "len": 26,
+            "mode_flag": 11,
+            "return_mode": 12,
+            "motor": 13,
+            "date": 15,
+            "us": 21,
+            "factory": 25,
+        },
+        unit_bytes=3,
+        unit_bytes_if_confidence=4,
+        body_trailer_bytes=4,
+        fs_bytes_if_flagged=17,
+        trailer_bytes=30,
+        header_flags=0x07,
+        anchor_ns=45_724,
+        period_num_ns=55_556,
     ),
     # Protocol 4.1/4.3: uint16 azimuth + uint8 fine azimuth (1/25600 deg), body CRC,
     # Unix-seconds date; block start = t0 - 9.249 us - 41.666 us per round from the last.
@@ -589,6 +578,13 @@ _RETURNS_OF_MODE: Final = {
     0x3E: 2,  # strongest + second strongest
     0x3D: 3,  # first + last + strongest (XT32M)
 }
+
+
+def returns_per_firing(return_mode: int) -> int:
+    """Returns per firing of a Hesai tail Return Mode code (0 for a code the manuals lack)."""
+    return _RETURNS_OF_MODE.get(return_mode, 0)
+
+
 _RETURNS_TABLE: Final = np.zeros(256, dtype=np.int64)
 for _code, _r in _RETURNS_OF_MODE.items():
     _RETURNS_TABLE[_code] = _r
@@ -625,6 +621,7 @@ def _model_codes(data: NDArray[np.uint8], size: NDArray[np.int64]) -> NDArray[np
         "PandarQT64": general & (b2 == 3) & (b3 == 1),
         "PandarQT128": general & (b2 == 3) & (b3 == 2),
         "AT128": general & (b2 == 4) & ((b3 == 1) | (b3 == 3)),
+        "Pandar128E4X": general & (b2 == 1) & (b3 == 4) & (lasers == 128) & (blocks == 2),
         "PandarXT16": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 16),
         "PandarXT32": general & (b2 == 6) & (b3 == 1) & (blocks == 8) & (lasers == 32),
         "PandarXT32M": general & (b2 == 6) & (b3 == 1) & (blocks == 6) & (lasers == 32),
@@ -640,7 +637,8 @@ def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> st
 
     Pandar40P: no pre-header, starts with block flag 0xFFEE, 1262/1266 bytes.
     Pandar64: 0xEEFF, 64 lasers, 6 blocks, 1194/1198 bytes (8-byte header, no version).
-    Others: 0xEEFF + protocol major.minor: 3.1 PandarQT64, 3.2 PandarQT128, 4.1/4.3 AT128,
+    Others: 0xEEFF + protocol major.minor: 1.4 Pandar128E4X (OT128; 128 lasers, 2 blocks),
+    3.1 PandarQT64, 3.2 PandarQT128, 4.1/4.3 AT128,
     6.1 PandarXT (8 blocks: 16 or 32 lasers -> XT16/XT32; 6 blocks -> XT32M).
     """
     arr, sz = _check_packets(data, size)
@@ -662,6 +660,9 @@ def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> st
 
 def _gather(data: NDArray[np.uint8], start: NDArray[np.int64], count: int) -> NDArray[np.int64]:
     """(n, count) bytes starting at a per-packet column, as int64."""
+    first = int(start[0])
+    if (start == first).all():  # one tail position (every model but QT128/OT128 mixes)
+        return data[:, first : first + count].astype(np.int64)
     cols = start[:, None] + np.arange(count, dtype=np.int64)[None, :]
     return np.take_along_axis(data, cols, axis=1).astype(np.int64)
 
@@ -684,21 +685,6 @@ def _days_from_civil(
     doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
     days: NDArray[np.int64] = era * 146_097 + doe - 719_468
     return days
-
-
-def _civil_from_days(
-    days: NDArray[np.int64],
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """Inverse of `_days_from_civil`: (year, month, day)."""
-    z = days + 719_468
-    era = z // 146_097
-    doe = z - era * 146_097
-    yoe = (doe - doe // 1460 + doe // 36_524 - doe // 146_096) // 365
-    doy = doe - (365 * yoe + yoe // 4 - yoe // 100)
-    mp = (5 * doy + 2) // 153
-    day = doy - (153 * mp + 2) // 5 + 1
-    month = np.where(mp < 10, mp + 3, mp - 9)
-    return yoe + era * 400 + (month <= 2), month, day
 
 
 def _epoch_seconds(date: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -730,6 +716,23 @@ def _epoch_seconds(date: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.where(unix, np.where(unix_s == 0, -1, unix_s), cal)
 
 
+def _packet_layout(data: NDArray[np.uint8], size: NDArray[np.int64]) -> HesaiLayout:
+    """The layout of the packets' model, with 4-byte units where the confidence flag is set."""
+    layout = HESAI_LAYOUTS[detect_hesai_model(data, size)]
+    if not layout.unit_bytes_if_confidence:
+        return layout
+    confidence = (data[:, 11] & 0x10) != 0
+    if not confidence.any():
+        return layout
+    if not confidence.all():
+        i = int(np.argmin(confidence))
+        raise DecodeError(
+            f"{layout.model} packet #{i} lacks the confidence flag the others carry "
+            "(channel units of 3 and 4 bytes mixed)"
+        )
+    return replace(layout, unit_bytes=layout.unit_bytes_if_confidence)
+
+
 def _tail_start(layout: HesaiLayout, data: NDArray[np.uint8]) -> NDArray[np.int64]:
     """Per packet, offset of the tail (QT128: depends on the functional-safety flag)."""
     start = np.full(data.shape[0], layout.body_end + layout.body_trailer_bytes, dtype=np.int64)
@@ -740,18 +743,76 @@ def _tail_start(layout: HesaiLayout, data: NDArray[np.uint8]) -> NDArray[np.int6
 
 
 def _n_returns(
-    layout: HesaiLayout, data: NDArray[np.uint8], mode: NDArray[np.int64]
+    layout: HesaiLayout, mode: NDArray[np.int64], azimuth: NDArray[np.int64]
 ) -> NDArray[np.int64]:
-    """Returns per firing: header 'return number' in the general protocol, else from the mode."""
-    r = data[:, 10].astype(np.int64) if layout.header_bytes == 12 else _RETURNS_TABLE[mode]
-    bad = np.flatnonzero((r < 1) | (r > 3) | (layout.n_blocks % np.maximum(r, 1) != 0))
+    """Returns per firing, from the tail's return mode, checked against the block azimuths.
+
+    The manuals define the firing grouping by the tail's Return Mode field: in an r-return
+    mode one firing fills r adjacent blocks that share its azimuth. The 12-byte header's
+    "Return Number"/"Echo Num" byte is not the current mode: the PandarXT manual defines it
+    as the most returns a channel can produce (0x02 on XT16/32 in every mode) and an
+    XT32M2X writes 3 while in a dual mode (0x3c), so it is not used; tier4/nebula
+    (`get_n_returns(tail.return_mode)`) and HesaiLidar_SDK_2.0 (tail `IsDualReturn`) read
+    the tail too. An unknown mode code falls back to the azimuth pattern: the largest r
+    whose block groups all share one azimuth in every packet.
+    """
+    first = int(mode[0])
+    if (mode == first).all() and _RETURNS_TABLE[first]:  # one known mode: the usual case
+        returns = int(_RETURNS_TABLE[first])
+        r = np.full(mode.shape, returns, dtype=np.int64)
+    else:
+        r = _RETURNS_TABLE[mode]
+        unknown = r == 0
+        if unknown.any():
+            r = np.where(unknown, _returns_from_azimuth(layout, azimuth), r)
+    bad = np.flatnonzero(layout.n_blocks % np.maximum(r, 1) != 0)
     if bad.size:
         i = int(bad[0])
         raise DecodeError(
-            f"{layout.model} packet #{i}: unsupported return mode {int(mode[i]):#04x} "
-            f"({int(r[i])} returns for {layout.n_blocks} blocks)"
+            f"{layout.model} packet #{i}: return mode {int(mode[i]):#04x} "
+            f"({int(r[i])} returns) cannot group {layout.n_blocks} blocks"
         )
+    multi = np.flatnonzero(r > 1)
+    if multi.size:
+        _check_shared_azimuth(layout, mode, azimuth, r, multi)
     return r
+
+
+def _returns_from_azimuth(layout: HesaiLayout, azimuth: NDArray[np.int64]) -> NDArray[np.int64]:
+    """(n,) the largest returns-per-firing whose block groups share one azimuth (at least 1)."""
+    n, b = azimuth.shape
+    best = np.ones(n, dtype=np.int64)
+    for r in range(2, b + 1):
+        if b % r:
+            continue
+        groups = azimuth.reshape(n, b // r, r)
+        shared = (groups == groups[:, :, :1]).all(axis=(1, 2))
+        best = np.where(shared, r, best)
+    return best
+
+
+def _check_shared_azimuth(
+    layout: HesaiLayout,
+    mode: NDArray[np.int64],
+    azimuth: NDArray[np.int64],
+    r: NDArray[np.int64],
+    rows: NDArray[np.intp],
+) -> None:
+    """DecodeError where a multi-return firing's blocks do not share one azimuth."""
+    n = azimuth.shape[0]
+    uniform = rows.size == n and (r == r[0]).all()
+    for returns in [int(r[0])] if uniform else np.unique(r[rows]).tolist():
+        sel = rows if uniform else rows[r[rows] == returns]
+        picked = azimuth if uniform else azimuth[sel]
+        groups = picked.reshape(sel.size, layout.n_blocks // returns, returns)
+        split = np.flatnonzero(~(groups == groups[:, :, :1]).all(axis=(1, 2)))
+        if split.size:
+            i = int(sel[split[0]])
+            raise DecodeError(
+                f"{layout.model} packet #{i}: return mode {int(mode[i]):#04x} says "
+                f"{returns} returns per firing, but its blocks' azimuths "
+                f"{azimuth[i].tolist()} are not grouped by {returns}"
+            )
 
 
 def decode_hesai(
@@ -770,7 +831,12 @@ def decode_hesai(
     (QT64 t0 + 25.71 us + 166.67 us * k; XT t0 + 5.632 us - 50 us * later rounds; QT128
     t0 + 9 us - 111.11 us * later rounds, the ordering monotone in azimuth, whereas nebula
     adds 111.11 us to block 1 - unverified without a QT128 recording; AT128 t0 - 50.915 us
-    - 41.666 us * later rounds). In multi-return modes the blocks of one firing share a time.
+    - 41.666 us * later rounds; OT128 t0 + 45.724 us - 55.556 us * later rounds, nebula's
+    numbers). In an r-return mode (r from the tail's return mode, see `_n_returns`) r
+    adjacent blocks hold one firing and share its time: XT32M's 6 blocks are 6 rounds
+    (single), 3 x 2 (dual) or 2 x 3 (triple 0x3D). For the XT32M in a dual mode nebula
+    computes the rounds as if the packet had 8 blocks (last round t0 - 44.4 us); the PandarXT
+    manual's rule (t0 triggers the round in the last blocks) is followed here.
     `block_azimuth_deg` is the packet's azimuth field: 0.01 deg; AT128 adds a fine byte
     (1/25600 deg) and reports the raw mirror-encoder angle, not the corrected field angle.
     """
@@ -778,7 +844,7 @@ def decode_hesai(
     host = np.asarray(host_stamp_ns, dtype=np.int64)
     if host.shape != sz.shape:
         raise DecodeError(f"host_stamp_ns has shape {host.shape}, expected {sz.shape}")
-    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    layout = _packet_layout(arr, sz)
     n = arr.shape[0]
     if layout.header_bytes == 12:
         lasers, blocks = arr[:, 6], arr[:, 7]
@@ -818,8 +884,9 @@ def decode_hesai(
             f"{layout.model} packet #{i}: azimuth {int(azimuth[i].max())} is past 360 deg"
         )
 
-    mode = arr[np.arange(n), tail + layout.tail_return_mode].astype(np.int64)
-    n_ret = _n_returns(layout, arr, mode)
+    mode = _gather(arr, tail + layout.tail_return_mode, 1)[:, 0]
+    n_ret = _n_returns(layout, mode, azimuth)
+    motor_rpm = _le(_gather(arr, tail + layout.tail_motor_rpm, 2))
     us = _le(_gather(arr, tail + layout.tail_timestamp_us, 4))
     if int(us.max()) > 1_000_000:
         i = int(np.argmax(us))
@@ -840,6 +907,7 @@ def decode_hesai(
         block_time_ns=t0_ns[:, None] + layout.block_offset_ns(n_ret),
         return_mode=mode.astype(np.uint8),
         dual_return=n_ret >= 2,
+        motor_rpm=motor_rpm.astype(np.float64),
     )
 
 
@@ -851,7 +919,7 @@ def hesai_returns(
     Shapes (n, B, C); the distance unit is the header's (4 mm; Pandar40P: fixed 4 mm).
     """
     arr, sz = _check_packets(data, size)
-    layout = HESAI_LAYOUTS[detect_hesai_model(arr, sz)]
+    layout = _packet_layout(arr, sz)
     n = arr.shape[0]
     body = arr[:, layout.header_bytes : layout.body_end].reshape(
         n, layout.n_blocks, layout.block_bytes
@@ -865,181 +933,3 @@ def hesai_returns(
     else:
         unit_m = arr[:, 5 if layout.header_bytes == 8 else 9] / 1000.0
     return raw * unit_m[:, None, None], units[..., 2].copy()
-
-
-# ============================================================================ encoder
-
-
-def _layout(model: str) -> HesaiLayout:
-    try:
-        return HESAI_LAYOUTS[model]
-    except KeyError:
-        raise DecodeError(f"unknown Hesai model {model!r}; known: {', '.join(_MODELS)}") from None
-
-
-def encode_hesai(
-    model: str,
-    block_azimuth_deg: NDArray[np.float64],
-    packet_time_ns: NDArray[np.int64],
-    return_mode: int = 0x37,
-    *,
-    distance_m: NDArray[np.float64] | None = None,
-    reflectivity: NDArray[np.uint8] | None = None,
-    rng: np.random.Generator | None = None,
-    motor_rpm: int = 600,
-    udp_sequence_start: int = 1,
-) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
-    """Real-format Hesai packets: (data (n, L) uint8, size (n,)).
-
-    Writes header, blocks (azimuth rounded to the packet's resolution, distances in 4 mm,
-    reflectivity), tail (return mode, motor speed, date-time, microsecond timestamp, factory
-    byte 0x42) and the UDP sequence. Times are floored to the microsecond the packet holds.
-    Without `distance_m`, plausible returns are drawn from `rng` (default seed 0);
-    in multi-return modes the blocks of one firing repeat the azimuth. CRC fields are zero.
-    """
-    layout = _layout(model)
-    az = np.asarray(block_azimuth_deg, dtype=np.float64)
-    t_ns = np.asarray(packet_time_ns, dtype=np.int64)
-    n = t_ns.shape[0]
-    b, c = layout.n_blocks, layout.n_channels
-    if az.shape != (n, b):
-        raise ValueError(f"block_azimuth_deg must be ({n}, {b}) for {model}, got {az.shape}")
-    n_ret = _RETURNS_OF_MODE.get(return_mode, 0)
-    if n_ret == 0 or b % n_ret or (layout.header_bytes != 12 and n_ret > 2):
-        raise ValueError(f"return mode {return_mode:#04x} is not supported by {model}")
-    if distance_m is None:
-        gen = rng if rng is not None else np.random.default_rng(0)
-        first = gen.uniform(0.5, 80.0, (n, b // n_ret, 1, c))
-        extra = gen.uniform(0.0, 10.0, (n, b // n_ret, n_ret, c)) * (
-            gen.random((n, b // n_ret, n_ret, c)) < 0.2
-        )
-        extra[:, :, 0] = 0.0
-        dist = (first + np.cumsum(extra, axis=2)).reshape(n, b, c)
-        dist[gen.random((n, b, c)) < 0.05] = 0.0  # no return
-        refl = gen.integers(0, 256, (n, b, c), dtype=np.uint8)
-    else:
-        dist = np.asarray(distance_m, dtype=np.float64)
-        refl = (
-            np.asarray(reflectivity, dtype=np.uint8)
-            if reflectivity is not None
-            else np.zeros((n, b, c), dtype=np.uint8)
-        )
-    if dist.shape != (n, b, c) or refl.shape != (n, b, c):
-        raise ValueError(f"distance_m and reflectivity must be ({n}, {b}, {c})")
-
-    tail = layout.body_end + layout.body_trailer_bytes
-    if layout.fs_bytes_if_flagged and layout.header_flags & 0x04:
-        tail += layout.fs_bytes_if_flagged
-    size = tail + layout.tail_bytes + layout.trailer_bytes
-    out = np.zeros((n, size), dtype=np.uint8)
-    if layout.header_bytes == 12:
-        major, minor = layout.protocol or (0, 0)
-        lead, flags = (1 if n_ret > 1 else 0), layout.header_flags  # dual: last return leads
-        # 0xEEFF, version, reserved 2, lasers, blocks, first-block return, 4 mm, returns, flags
-        out[:, :12] = (0xEE, 0xFF, major, minor, 0, 0, c, b, lead, 4, n_ret, flags)
-    elif layout.header_bytes == 8:
-        out[:, :8] = (0xEE, 0xFF, c, b, 0, 4, 0, 0)  # 0xEEFF, lasers, blocks, -, 4 mm, -, -
-
-    body = out[:, layout.header_bytes : layout.body_end].reshape(n, b, layout.block_bytes)
-    full_turn = 360 * layout.azimuth_units_per_deg
-    raw_az = np.rint(az * layout.azimuth_units_per_deg).astype(np.int64) % full_turn
-    a = layout.azimuth_offset
-    if layout.model == "Pandar40P":
-        body[:, :, 0], body[:, :, 1] = 0xFF, 0xEE
-    coarse = raw_az >> 8 if layout.fine_azimuth else raw_az
-    body[:, :, a] = coarse & 0xFF
-    body[:, :, a + 1] = coarse >> 8
-    if layout.fine_azimuth:
-        body[:, :, a + 2] = raw_az & 0xFF
-    units = body[:, :, layout.block_prefix_bytes :].reshape(n, b, c, layout.unit_bytes)
-    raw_d = np.clip(np.rint(dist / 0.004), 0, 0xFFFF).astype(np.int64)
-    units[..., 0], units[..., 1], units[..., 2] = raw_d & 0xFF, raw_d >> 8, refl
-
-    seconds, us = t_ns // _NS_PER_S, (t_ns % _NS_PER_S) // 1000
-    rows = out[:, tail : tail + layout.tail_bytes]
-    rows[:, layout.tail_return_mode] = return_mode
-    rows[:, layout.tail_motor_rpm : layout.tail_motor_rpm + 2] = [motor_rpm & 0xFF, motor_rpm >> 8]
-    rows[:, layout.tail_timestamp_us : layout.tail_timestamp_us + 4] = _le_bytes(us, 4)
-    rows[:, layout.tail_factory] = 0x42
-    rows[:, layout.tail_date_time : layout.tail_date_time + 6] = _date_bytes(
-        seconds, layout.year_base
-    )
-    if layout.trailer_bytes:
-        seq = udp_sequence_start + np.arange(n, dtype=np.int64)
-        out[:, tail + layout.tail_bytes : tail + layout.tail_bytes + 4] = _le_bytes(seq, 4)
-    return out, np.full(n, size, dtype=np.uint32)
-
-
-def _le_bytes(values: NDArray[np.int64], count: int) -> NDArray[np.uint8]:
-    """(n, count) little-endian bytes of non-negative integers."""
-    shifts = 8 * np.arange(count, dtype=np.int64)
-    return ((values[:, None] >> shifts) & 0xFF).astype(np.uint8)
-
-
-def _date_bytes(seconds: NDArray[np.int64], year_base: int) -> NDArray[np.uint8]:
-    """(n, 6) date field: calendar with a year offset, or 0 + 5-byte big-endian Unix seconds."""
-    if year_base == 0:
-        out = np.zeros((seconds.shape[0], 6), dtype=np.uint8)
-        out[:, 1:] = _le_bytes(seconds, 5)[:, ::-1]
-        return out
-    days, rest = seconds // 86_400, seconds % 86_400
-    year, month, day = _civil_from_days(days)
-    year_byte = year - year_base
-    if ((year_byte < 0) | (year_byte > 255) | ((year_base == 1900) & (year_byte < 100))).any():
-        raise ValueError(
-            f"packet times outside the years the date field can hold (base {year_base})"
-        )
-    cols = (year_byte, month, day, rest // 3600, rest % 3600 // 60, rest % 60)
-    return np.stack(cols, axis=1).astype(np.uint8)
-
-
-@dataclass(frozen=True, slots=True)
-class HesaiRevolution:
-    """One revolution of packets laid out on the sensor's firing clock."""
-
-    model: str
-    return_mode: int
-    block_azimuth_deg: NDArray[np.float64]
-    """(n, B) azimuth of each block, on the packet's azimuth grid."""
-    packet_time_ns: NDArray[np.int64]
-    """(n,) packet time t0, whole microseconds."""
-    block_time_ns: NDArray[np.int64]
-    """(n, B) first-firing time of each block, as `decode_hesai` computes it."""
-
-
-def hesai_revolution_schedule(
-    model: str,
-    rpm: float,
-    start_time_ns: int,
-    *,
-    return_mode: int = 0x37,
-    start_azimuth_deg: float = 0.0,
-) -> HesaiRevolution:
-    """Packets of one revolution starting at `start_time_ns` and `start_azimuth_deg`.
-
-    Firing rounds follow the model's fixed round period (e.g. 55.56 us Pandar40P, 50 us XT),
-    so the azimuth step per round is rpm * 6 deg/s * period; the packet count is the rounds of
-    one turn divided by rounds per packet (rounded up). Packet times are floored to whole
-    microseconds and block times derived from them by the decoder's rule; azimuths follow
-    the block times exactly (constant angular velocity), rounded to the packet's resolution.
-    """
-    layout = _layout(model)
-    n_ret = _RETURNS_OF_MODE.get(return_mode, 0)
-    if n_ret == 0 or layout.n_blocks % n_ret:
-        raise ValueError(f"return mode {return_mode:#04x} is not supported by {model}")
-    if not rpm > 0:
-        raise ValueError("rpm must be positive")
-    deg_per_ns = rpm * 360.0 / 60e9
-    rounds_per_turn = round(360.0 / (deg_per_ns * layout.round_period_ns))
-    per_packet = layout.n_blocks // n_ret
-    n = -(-rounds_per_turn // per_packet)
-    first_round = np.arange(n, dtype=np.int64) * per_packet
-    first_start = start_time_ns + (layout.period_num_ns * first_round) // layout.period_den
-    returns = np.full(n, n_ret, dtype=np.int64)
-    offsets = layout.block_offset_ns(returns)
-    packet_ns = (first_start - offsets[:, 0]) // 1000 * 1000
-    block_ns = packet_ns[:, None] + offsets
-    azimuth = (start_azimuth_deg + deg_per_ns * (block_ns - start_time_ns)) % 360.0
-    units = layout.azimuth_units_per_deg
-    azimuth = (np.rint(azimuth * units) % (360 * units)) / units
-    return HesaiRevolution(model, return_mode, azimuth, packet_ns, block_ns)

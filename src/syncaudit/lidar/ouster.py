@@ -563,6 +563,7 @@ def timing_from_columns(columns: OusterColumns, meta: OusterMetadata) -> PacketT
         block_time_ns=columns.timestamp_ns,
         return_mode=np.full(n, code, dtype=np.uint8),
         dual_return=np.full(n, meta.udp_profile_lidar in _DUAL_PROFILES, dtype=bool),
+        motor_rpm=np.full(n, meta.rotation_rate_rpm, dtype=np.float64),
     )
 
 

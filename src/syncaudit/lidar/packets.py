@@ -34,6 +34,10 @@ class PacketTiming:
     """(n,) the vendor's return-mode code as found in the packet."""
     dual_return: NDArray[np.bool_]
     """(n,) True where the packet carries two returns per firing (blocks repeat azimuths)."""
+    motor_rpm: NDArray[np.float64] | None = None
+    """(n,) the rotation rate the sensor declares for each packet, RPM (Hesai: the tail's
+    Motor Speed field; Ouster: the metadata's lidar_mode); None where the vendor's packets
+    carry none (Velodyne)."""
 
     @property
     def n_packets(self) -> int:
@@ -48,3 +52,5 @@ class PacketTiming:
             raise ValueError("per-packet columns differ in length")
         if self.dual_return.shape != (n,):
             raise ValueError("dual_return differs in length")
+        if self.motor_rpm is not None and self.motor_rpm.shape != (n,):
+            raise ValueError("motor_rpm differs in length")

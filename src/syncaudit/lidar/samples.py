@@ -47,6 +47,10 @@ class PacketSamples:
     dual_return: bool
     outlier_blocks: int
     """Blocks whose azimuth contradicts the rest of their packet (ignored)."""
+    declared_rpm_sum: float = 0.0
+    """Sum of the packets' own motor-speed fields (RPM), over `declared_rpm_count` packets."""
+    declared_rpm_count: int = 0
+    """Packets that declare a motor speed (0 for vendors whose packets carry none)."""
 
     @property
     def n_packets(self) -> int:
@@ -70,6 +74,7 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
     keep = np.repeat(has, 2)
     keep[1:] &= np.diff(times) > 0  # one block, or dual-return pairs: the first sample only
     keep[0] &= bool(has[0]) if n else False
+    rpm_sum, rpm_count = _declared_rpm(timing.motor_rpm)
     return PacketSamples(
         vendor=timing.vendor,
         model=timing.model,
@@ -81,7 +86,17 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
         return_modes=_distinct(timing.return_mode),
         dual_return=bool(timing.dual_return.any()),
         outlier_blocks=outliers,
+        declared_rpm_sum=rpm_sum,
+        declared_rpm_count=rpm_count,
     )
+
+
+def _declared_rpm(motor_rpm: NDArray[np.float64] | None) -> tuple[float, int]:
+    """Sum and count of the declared motor speeds (finite, positive values only)."""
+    if motor_rpm is None or motor_rpm.size == 0:
+        return 0.0, 0
+    valid = motor_rpm[np.isfinite(motor_rpm) & (motor_rpm > 0)]
+    return float(valid.sum()), int(valid.size)
 
 
 def _sample_blocks(
@@ -160,4 +175,6 @@ def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
         return_modes=frozenset().union(*(p.return_modes for p in parts)),
         dual_return=any(p.dual_return for p in parts),
         outlier_blocks=sum(p.outlier_blocks for p in parts),
+        declared_rpm_sum=sum(p.declared_rpm_sum for p in parts),
+        declared_rpm_count=sum(p.declared_rpm_count for p in parts),
     )

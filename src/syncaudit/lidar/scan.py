@@ -32,6 +32,29 @@ class LidarScan:
     cropped_sector: tuple[float, float, int] | None
     """(angle where recording stops, packets missing per turn, revolutions) of a FOV crop."""
     outlier_blocks: int
+    declared_rpm: float = float("nan")
+    """Mean rotation rate the packets themselves declare (Hesai tail motor speed, Ouster
+    lidar_mode), RPM; NaN where the vendor's packets carry none (Velodyne)."""
+
+    @property
+    def rpm_disagreement(self) -> float:
+        """(measured - declared) / declared rotation rate; NaN when either is unknown."""
+        if not (self.declared_rpm > 0) or not np.isfinite(self.rpm):
+            return float("nan")
+        return (self.rpm - self.declared_rpm) / self.declared_rpm
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the topic's own packets say is wrong with the decoded timing."""
+        off = self.rpm_disagreement
+        if not abs(off) > RPM_TOLERANCE:
+            return []
+        source = _DECLARED_BY.get(self.vendor, "the packets")
+        return [
+            f"{self.topic}: decoded rotation {self.rpm:.2f} RPM disagrees with the "
+            f"{self.declared_rpm:.0f} RPM of {source} ({off:+.1%}): revolutions, "
+            "packets/rev and drops are suspect (wrong return-mode grouping or packet clock?)"
+        ]
 
     @property
     def rpm(self) -> float:
@@ -52,6 +75,14 @@ class LidarScan:
         return int(self.revolutions.dropped_packets.sum())
 
 
+RPM_TOLERANCE = 0.03
+"""Relative disagreement between the decoded and the declared rotation rate that warns:
+motor-speed fields hold whole RPM and the motor hunts by well under 1 %, while a wrong
+block grouping or packet clock is off by tens of percent."""
+
+_DECLARED_BY = {"hesai": "the packets' motor-speed field", "ouster": "the metadata's lidar_mode"}
+"""Where each vendor's declared rotation rate comes from, for the warning."""
+
 FEED_PACKETS = 4096
 """Packets gathered before the tracker and clock run: their numpy work per call is then
 amortised over several scans (or many single-packet messages), memory still bounded."""
@@ -70,6 +101,8 @@ class LidarScanner:
     packets: int = 0
     modes: set[int] = field(default_factory=set)
     dual: bool = False
+    declared_rpm_sum: float = 0.0
+    declared_rpm_count: int = 0
     _pending: list[PacketSamples] = field(default_factory=list)
     _pending_packets: int = 0
 
@@ -98,6 +131,8 @@ class LidarScanner:
         self.packets += samples.n_packets
         self.modes.update(samples.return_modes)
         self.dual = self.dual or samples.dual_return
+        self.declared_rpm_sum += samples.declared_rpm_sum
+        self.declared_rpm_count += samples.declared_rpm_count
         self._pending.append(samples)
         self._pending_packets += samples.n_packets
         if self._pending_packets >= FEED_PACKETS:
@@ -128,6 +163,9 @@ class LidarScanner:
             omega_blocks_deg_s=self.tracker.omega_blocks_deg_s,
             cropped_sector=self.tracker.cropped_sector(),
             outlier_blocks=self.tracker.outlier_blocks,
+            declared_rpm=self.declared_rpm_sum / self.declared_rpm_count
+            if self.declared_rpm_count
+            else float("nan"),
         )
 
 

@@ -2,5 +2,7 @@
 
 from typing import Literal
 
-LidarModel = Literal["VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32"]
+LidarModel = Literal[
+    "VLP-16", "VLP-32C", "VLS-128", "Pandar40P", "PandarXT32", "PandarXT32M", "Pandar128E4X"
+]
 """LiDAR models the sync simulator writes real-format packets for."""

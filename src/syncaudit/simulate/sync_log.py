@@ -44,13 +44,12 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
-from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, build_pandar_scan, encode_hesai
-from syncaudit.lidar.velodyne import (
-    HOUR_US,
-    RETURN_STRONGEST,
+from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, returns_per_firing
+from syncaudit.lidar.hesai_encode import build_pandar_scan, encode_hesai
+from syncaudit.lidar.velodyne import HOUR_US, RETURN_STRONGEST, velodyne_firing_offsets_ns
+from syncaudit.lidar.velodyne_encode import (
     build_velodyne_scan,
     encode_velodyne,
-    velodyne_firing_offsets_ns,
     velodyne_revolution_schedule,
 )
 from syncaudit.simulate import LidarModel
@@ -72,7 +71,12 @@ _VENDOR_OF: dict[str, str] = {
     "VLS-128": "velodyne",
     "Pandar40P": "hesai",
     "PandarXT32": "hesai",
+    "PandarXT32M": "hesai",
+    "Pandar128E4X": "hesai",
 }
+_HESAI_RETURN_MODE: dict[str, int] = {"PandarXT32M": 0x3C}
+"""Tail return mode written per Hesai model (else strongest): the XT32M in the dual
+first + strongest mode of the real capture, 3 firings x 2 returns per packet."""
 _VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-128": 4}
 """Consecutive blocks that carry one azimuth sample: the VLS-128's four banks (0xEEFF ..
 0xBBFF) share the azimuth sampled when their 53.3 us firing sequence starts."""
@@ -293,9 +297,10 @@ def _packet_clock(model: str, rpm: float) -> _PacketClock:
         offsets = first_firing[(np.arange(first_firing.size) // group) * group]
         return _PacketClock(period, 1, offsets, 100)
     layout = HESAI_LAYOUTS[model]
-    offsets = layout.block_offset_ns(np.ones(1, dtype=np.int64))[0].astype(np.int64)
+    returns = returns_per_firing(_HESAI_RETURN_MODE.get(model, HESAI_RETURN_STRONGEST))
+    offsets = layout.block_offset_ns(np.full(1, returns, dtype=np.int64))[0].astype(np.int64)
     return _PacketClock(
-        layout.period_num_ns * layout.n_blocks,
+        layout.period_num_ns * (layout.n_blocks // returns),
         layout.period_den,
         offsets,
         layout.azimuth_units_per_deg,
@@ -852,7 +857,7 @@ class _Simulation:
             cfg.lidar_model,
             azimuth_deg,
             stamp_ns,
-            HESAI_RETURN_STRONGEST,
+            _HESAI_RETURN_MODE.get(cfg.lidar_model, HESAI_RETURN_STRONGEST),
             distance_m=None if distances is None else np.ascontiguousarray(distances),
             reflectivity=reflectivity,
             rng=self.rng_points,
