@@ -454,7 +454,7 @@ def run_mutant(mutant: Mutant, cache: Path, work: Path, *, with_info: bool = Tru
     )
     info = run_cli(["info", str(log), "--rig", str(rig)], cwd=work) if with_info else None
     problems = check(audit, info, out, lidar_topic=_lidar_topic(rig))
-    if mutant.mutator.startswith("truncate") and audit.exit_code == 2:
+    if _cut_past_header(mutant, log) and audit.exit_code == 2:
         problems.append(("truncation-unread", f"a cut log is not read up to the cut: {what}"))
     if (_digest(log), _digest(rig)) != before:
         problems.append(("input-changed", "the log or rig changed"))
@@ -462,6 +462,20 @@ def run_mutant(mutant: Mutant, cache: Path, work: Path, *, with_info: bool = Tru
     if left:
         problems.append(("leftovers", f"files beside the input: {left}"))
     return Outcome(mutant.id, what, audit, info, problems)
+
+
+def _cut_past_header(mutant: Mutant, log: Path) -> bool:
+    """A ROS 1 bag or .db3 cut after its first 4 KiB: should be read up to the cut (item 14).
+
+    (An MCAP cut inside its header record, or any log cut before its first page, holds
+    nothing readable: exit 2 is right there.)
+    """
+    if not mutant.mutator.startswith("truncate") or not BASES[mutant.base].endswith(
+        (".bag", ".db3", ":db3")
+    ):
+        return False
+    data = mu.db3_file(log) if log.is_dir() else log
+    return data.stat().st_size > 4096
 
 
 def _lidar_topic(rig: Path) -> str | None:
