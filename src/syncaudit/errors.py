@@ -1,4 +1,8 @@
-"""Errors of syncaudit, each mapped to one documented CLI exit code."""
+"""Errors of syncaudit, each mapped to one documented CLI exit code.
+
+This module holds the project's one exit-code table (`EXIT_CODES`); the README prints the
+same table, and a test keeps the two equal.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,15 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from pydantic import ValidationError
+
+
+EXIT_OK = 0
+EXIT_USAGE = 64
+"""A usage error: unknown option, bad option value, conflicting options (BSD's EX_USAGE)."""
+EXIT_INTERNAL = 70
+"""A bug: anything not raised on purpose (BSD's EX_SOFTWARE)."""
+EXIT_INTERRUPTED = 130
+"""SIGINT or SIGTERM (128 + SIGINT, as shells report an interrupted command)."""
 
 
 class SyncauditError(Exception):
@@ -38,8 +51,12 @@ class DecodeError(SyncauditError):
     exit_code = 5
 
 
-class ConfigError(SyncauditError):
-    """A rig or analysis configuration is malformed or nonsensical."""
+class ConfigError(SyncauditError, ValueError):
+    """A rig or analysis configuration is malformed or nonsensical.
+
+    Also a ValueError, as pydantic's ValidationError is: code that validated a config and
+    caught ValueError keeps working now that every config model raises ConfigError.
+    """
 
     exit_code = 6
 
@@ -51,7 +68,7 @@ class NoDataError(SyncauditError):
 
 
 class OutputError(SyncauditError):
-    """An output cannot be written: it exists (without --overwrite) or the folder is not writable."""
+    """An output cannot be written: it exists without --overwrite, no permission, disk full."""
 
     exit_code = 8
 
@@ -62,11 +79,60 @@ class GateFailedError(SyncauditError):
     exit_code = 10
 
 
+class UsageError(SyncauditError):
+    """The command line itself is wrong: an unknown option, a bad value, conflicting options."""
+
+    exit_code = EXIT_USAGE
+
+
+class Interrupted(BaseException):
+    """SIGTERM turned into an exception in the main process, so outputs are rolled back."""
+
+
+EXIT_CODES: tuple[tuple[int, str], ...] = (
+    (EXIT_OK, "done"),
+    (
+        LogOpenError.exit_code,
+        "the log cannot be opened (missing, empty, unknown format, directory without metadata)",
+    ),
+    (
+        LogReadError.exit_code,
+        "the log is damaged beyond reading (in `gate`: some log could not be read)",
+    ),
+    (
+        UnknownTypeError.exit_code,
+        "a needed message type or encoding has no definition or cannot be read",
+    ),
+    (DecodeError.exit_code, "vendor packet bytes do not match their layout"),
+    (
+        ConfigError.exit_code,
+        "a config file (rig, calib config, policy) is malformed or nonsensical",
+    ),
+    (NoDataError.exit_code, "the log holds nothing to audit (empty, missing topics)"),
+    (
+        OutputError.exit_code,
+        "an output cannot be written (exists without `--overwrite`, no permission, disk full, is a directory)",
+    ),
+    (
+        GateFailedError.exit_code,
+        "`--gate`: a threshold or policy check failed, or something required was not judged",
+    ),
+    (EXIT_USAGE, "usage error: unknown option, bad option value, conflicting options"),
+    (EXIT_INTERNAL, "internal error (a bug; `SYNCAUDIT_DEBUG=1` shows the traceback)"),
+    (EXIT_INTERRUPTED, "interrupted (SIGINT or SIGTERM); no partial output is left"),
+)
+"""The exit-code table, in the order the README documents it."""
+
+
+def exit_code_table() -> str:
+    """The exit-code table as Markdown, exactly as the README carries it."""
+    rows = ["| code | meaning |", "| --- | --- |"]
+    rows += [f"| {code} | {meaning} |" for code, meaning in EXIT_CODES]
+    return "\n".join(rows)
+
+
 def validation_summary(exc: ValidationError) -> str:
-    """A pydantic ValidationError on one line: `field.path: message (+N more)`."""
-    errors = exc.errors()
-    first = errors[0]
-    where = ".".join(str(part) for part in first["loc"]) or "(top level)"
-    message = " ".join(str(first["msg"]).split())
-    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
-    return f"{where}: {message}{more}"
+    """A pydantic ValidationError on one line (see `syncaudit.config.validation_summary`)."""
+    from syncaudit.config import validation_summary as one_line
+
+    return one_line(exc)

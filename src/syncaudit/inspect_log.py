@@ -130,6 +130,18 @@ def lidar_row(scan: LidarScan) -> LidarRow:
     )
 
 
+def lidar_warnings(row: LidarRow) -> list[str]:
+    """What `info` and `audit` both warn about a LiDAR: a FOV-cropped recording, ignored blocks."""
+    warnings = []
+    if row.cropped_sector:
+        warnings.append(f"{row.topic}: {row.cropped_sector}")
+    if row.outlier_blocks:
+        warnings.append(
+            f"{row.topic}: {row.outlier_blocks} blocks ignored, their azimuth contradicts their packet"
+        )
+    return warnings
+
+
 def inspect_log(path: str | Path, rig: Rig | None = None, *, partial: bool = False) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
@@ -202,12 +214,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         row = lidar_row(scan)
         report.lidars.append(row)
         report.warnings.extend(scan.warnings)
-        if row.cropped_sector:
-            report.warnings.append(f"{topic}: {row.cropped_sector}")
-        if row.outlier_blocks:
-            report.warnings.append(
-                f"{topic}: {row.outlier_blocks} blocks ignored, their azimuth contradicts their packet"
-            )
+        report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
     cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)

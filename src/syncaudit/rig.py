@@ -1,27 +1,26 @@
 """Rig configuration: which topics hold what, where each camera looks, and the thresholds.
 
-Loaded from YAML or TOML and validated by pydantic; `schemas/rig.schema.json` is its JSON
-schema. Angles are degrees; latencies microseconds (`_us`) as people write them in
+Loaded from YAML, TOML or JSON by `syncaudit.config` and validated by pydantic;
+`schemas/rig.schema.json` is its JSON schema. Every number is finite and ranged. Angles are degrees; latencies microseconds (`_us`) as people write them in
 configs; the analysis converts to int64 nanoseconds.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Literal
 
-import tomllib
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, model_validator
 
-from syncaudit.errors import ConfigError, validation_summary
+from syncaudit.config import ConfigModel, load_mapping, validate_mapping
+from syncaudit.errors import ConfigError
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 
+MAX_LATENCY_US = 10_000_000.0
+"""Largest latency, exposure or error limit a rig may state (10 s): anything above is a typo."""
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+_Strict = ConfigModel
 
 
 class LidarConfig(_Strict):
@@ -36,7 +35,7 @@ class LidarConfig(_Strict):
     """Packet azimuth at which a revolution starts and the trigger chain fires."""
     azimuth_increases: bool = True
     """True where the packet azimuth grows as the head spins (Velodyne, Hesai, Ouster)."""
-    azimuth_of_x_axis_deg: float | None = None
+    azimuth_of_x_axis_deg: float | None = Field(None, ge=0.0, lt=360.0)
     """Packet azimuth of the LiDAR frame's +X axis; used to turn camera yaws into azimuths."""
     azimuth_clockwise_from_above: bool = True
     """Whether packet azimuth grows clockwise seen from above (to convert yaws)."""
@@ -54,26 +53,35 @@ class CameraConfig(_Strict):
     """TriggerEvent, builtin_interfaces/Time or sensor_msgs/TimeReference topic."""
     azimuth_deg: float | None = Field(None, ge=0.0, lt=360.0)
     """Centre of the HFOV as a packet azimuth of the LiDAR (what theta is measured in)."""
-    yaw_deg: float | None = None
+    yaw_deg: float | None = Field(None, ge=-360.0, le=360.0)
     """Centre of the HFOV as a yaw in the LiDAR frame (CCW from +X); converted to azimuth."""
     frame_id: str | None = None
     """Camera frame in /tf_static, to take the yaw from the log."""
     hfov_deg: float = Field(90.0, gt=0.0, le=360.0)
     stamp: StampSemantics = "exposure_start"
     """What the image header stamp marks; drivers differ."""
-    assumed_exposure_us: float | None = Field(None, gt=0.0)
+    assumed_exposure_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
     """Exposure to assume where the log has no exposure metadata (marked as assumed)."""
+    optional: bool = False
+    """An optional camera that cannot be judged (too few paired frames) does not fail the
+    gate; a required one does."""
 
 
 class Thresholds(_Strict):
     """Limits of the self-adaptive method; crossing either asks for a delay correction."""
 
-    error_mean_us: float = Field(250.0, gt=0.0)
+    error_mean_us: float = Field(250.0, gt=0.0, le=MAX_LATENCY_US)
     """Eq. 5 limit. Default 250 us = 0.9 deg of rotation at 600 rpm; ordinary trigger-chain
     jitter of tens of microseconds stays well below it, so only a real bias crosses it."""
-    error_var_us2: float = Field(40_000.0, gt=0.0)
+    error_var_us2: float = Field(40_000.0, gt=0.0, le=MAX_LATENCY_US**2)
     """Eq. 6 limit. Default (200 us)^2: the variance of |error| under jitter of std s is
     about 0.36 s^2, so this is crossed by instability, not by ordinary jitter."""
+    min_paired_frames: int = Field(20, ge=1)
+    """A camera with fewer frames paired with the LiDAR is not judged: Eq. 5/6 over a
+    handful of frames say nothing (20 frames = 2 s at 10 Hz, two windows of Eq. 3)."""
+    min_paired_fraction: float = Field(0.5, ge=0.0, le=1.0)
+    """...nor one with fewer than this share of its frames paired: a verdict on the few
+    frames that paired would hide why the rest did not."""
 
 
 class AnalysisConfig(_Strict):
@@ -81,10 +89,10 @@ class AnalysisConfig(_Strict):
 
     window_frames: int = Field(10, ge=2, le=100_000)
     """N of Eq. 3, 5 and 6 (running exposure average and rolling error statistics)."""
-    assumed_t2_us: float | None = Field(None, ge=0.0)
-    assumed_t3_us: float | None = Field(None, ge=0.0)
-    assumed_t4_us: float | None = Field(None, ge=0.0)
-    clock_sync_tolerance_ms: float = Field(50.0, gt=0.0)
+    assumed_t2_us: float | None = Field(None, ge=0.0, le=MAX_LATENCY_US)
+    assumed_t3_us: float | None = Field(None, ge=0.0, le=MAX_LATENCY_US)
+    assumed_t4_us: float | None = Field(None, ge=0.0, le=MAX_LATENCY_US)
+    clock_sync_tolerance_ms: float = Field(50.0, gt=0.0, le=MAX_LATENCY_US / 1000.0)
     """Median driver-minus-sensor time above this (or below -1 ms) = clocks not synchronised."""
     correction: Literal["recompute", "shift"] = "recompute"
 
@@ -106,30 +114,17 @@ class Rig(_Strict):
 
 
 def load_rig(path: str | Path) -> Rig:
-    """Read and validate a rig file (.yaml/.yml/.toml/.json); ConfigError on any problem."""
+    """Read and validate a rig file (.yaml/.yml/.toml/.json).
+
+    Raises:
+        ConfigError: naming the file and the first bad key (with the nearest known key for
+            a typo), for unreadable, oversized, non-UTF-8, too deeply nested or invalid rigs.
+    """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read rig file ({exc.strerror})") from exc
-    try:
-        if path.suffix == ".toml":
-            raw = tomllib.loads(text)
-        elif path.suffix == ".json":
-            raw = json.loads(text)
-        else:
-            raw = yaml.safe_load(text)
-    except (yaml.YAMLError, tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ConfigError(
-            f"{path}: not valid {path.suffix.lstrip('.') or 'YAML'}: {first}"
-        ) from exc
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{path}: a rig file must be a mapping with a 'lidar' key")
-    try:
-        return Rig.model_validate(raw)
-    except ValidationError as exc:
-        raise ConfigError(f"{path}: {validation_summary(exc)}") from exc
+    raw = load_mapping(path, what="rig file")
+    if "lidar" not in raw:
+        raise ConfigError(f"{path}: a rig file needs a 'lidar' mapping (with its 'topic')")
+    return validate_mapping(path, raw, Rig, what="rig file")
 
 
 def rig_json_schema() -> dict[str, object]:

@@ -19,7 +19,7 @@ packets/rev, 852 drops where the sensor turned at 600 RPM).
 from __future__ import annotations
 
 import struct
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 import pytest
@@ -31,7 +31,7 @@ from syncaudit.lidar.scan import LidarScan, LidarScanner
 
 ROUND_NS = 50_000
 BLOCK_START_AFTER_TRIGGER_NS = 5_632
-START = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
+START = datetime(2024, 5, 1, 12, 0, 0, tzinfo=UTC)
 START_NS = int(START.timestamp()) * 1_000_000_000
 FIRST_AZIMUTH = 12_345  # 0.01 deg
 
@@ -55,7 +55,7 @@ def _xt32m_packet(
             unit = struct.pack("<HBB", distance + 25 * ret, 100, 0)
             out += unit * 32
     seconds, ns = divmod(t0_ns, 1_000_000_000)
-    t = datetime.fromtimestamp(seconds, tz=timezone.utc)
+    t = datetime.fromtimestamp(seconds, tz=UTC)
     out += bytes(10) + bytes([return_mode]) + struct.pack("<H", motor_rpm)
     out += bytes([t.year - 1900, t.month, t.day, t.hour, t.minute, t.second])
     out += struct.pack("<I", ns // 1000) + b"\x42"
@@ -179,7 +179,7 @@ def _ot128_packet(
     if flags & 0x04:
         out += bytes(17)  # functional safety
     seconds, ns = divmod(t0_ns, 1_000_000_000)
-    t = datetime.fromtimestamp(seconds, tz=timezone.utc)
+    t = datetime.fromtimestamp(seconds, tz=UTC)
     out += bytes(9) + struct.pack("<H", 0) + bytes([1, return_mode]) + struct.pack("<H", 600)
     out += bytes([t.year - 1900, t.month, t.day, t.hour, t.minute, t.second])
     out += struct.pack("<I", ns // 1000) + b"\x42"

@@ -148,11 +148,11 @@ CASES: dict[str, tuple[Case, type[SyncauditError], str, bool]] = {
     "rosbag-v1.2": (_rosbag_v12, LogOpenError, "version 1.2", False),
     "sqlite-not-a-bag": (_sqlite_not_a_bag, LogOpenError, "ROS 2 bag", False),
     "fifo": (_fifo, LogOpenError, "not a regular file", False),
-    "bag-cut-10%": (_truncated_bag(0.1), LogOpenError, "ROS 1 bag", True),
-    "bag-cut-50%": (_truncated_bag(0.5), LogOpenError, "ROS 1 bag", True),
-    "bag-cut-99%": (_truncated_bag(0.99), LogOpenError, "ROS 1 bag", True),
-    "bag-damaged-record": (_damaged_bag_record, LogReadError, "damaged bag data", True),
-    "db3-cut": (_truncated_db3, LogOpenError, "ROS 2 bag", True),
+    # cut anywhere later, a ROS 1 bag is read up to the cut (tests/logs/test_rosbag1.py)
+    "bag-cut-in-bag-header": (_truncated_bag(0.01), LogReadError, "inside its bag header", True),
+    "bag-damaged-record": (_damaged_bag_record, LogReadError, "ROS 1 chunk at byte 4109", True),
+    # cut where no complete row is left: exit 3 (cuts that leave rows: tests/logs/test_sqlite.py)
+    "db3-cut": (_truncated_db3, LogReadError, "no message can be read", True),
     "metadata-yaml-garbage": (_yaml_garbage, LogOpenError, "metadata", True),
     "metadata-db3-missing": (_metadata_case(_db3_missing), LogOpenError, "missing", True),
     "metadata-version-42": (_metadata_case(_future_version), LogOpenError, "version 42", True),

@@ -207,3 +207,48 @@ def test_messages_is_lazy_generator(lidar_data: Path) -> None:
         first = next(stream)
         assert first.log_time_ns == OUSTER_START
         stream.close()
+
+
+@pytest.mark.parametrize("form", ["directory", "db3"])
+def test_real_bag_with_blank_metadata_fields(lidar_data: Path, tmp_path: Path, form: str) -> None:
+    """Issue 9 item 5: `storage_identifier: ""` and `serialization_format: ""` in the
+    metadata (some rosbag2 versions), and an empty format in the .db3 topics table: the bag
+    reads as the original does, with warnings naming the quirk, never a dependency's text."""
+    import shutil
+    import sqlite3
+
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    source = bag_dir(lidar_data, "velodyne_vlp16")
+    bag = tmp_path / "bag"
+    shutil.copytree(source, bag)
+    for path in bag.iterdir():
+        path.chmod(0o644)
+    doc = yaml.safe_load((bag / "metadata.yaml").read_text())
+    info = doc["rosbag2_bagfile_information"]
+    info["storage_identifier"] = ""
+    for entry in info["topics_with_message_count"]:
+        entry["topic_metadata"]["serialization_format"] = ""
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(doc))
+    (db3,) = bag.glob("*.db3")
+    with sqlite3.connect(db3) as db:
+        db.execute("UPDATE topics SET serialization_format = ''")
+    db.close()
+    with open_log(source) as log:
+        expected = [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
+    path = bag if form == "directory" else db3
+    with open_log(path) as log:
+        assert [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()] == expected
+        assert log.topics["/velodyne_packets"].encoding == "cdr"
+        codes = sorted(w.code for w in log.warnings)
+    if form == "directory":
+        assert codes == ["rosbag2-empty-serialization", "rosbag2-storage-inferred"]
+    else:
+        assert codes == ["rosbag2-empty-serialization"]
+    result = CliRunner().invoke(app, ["info", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["messages"] == 4 and data["lidars"][0]["model"] == "VLP-16"
+    assert "report" not in result.output and "Storage plugin" not in result.output

@@ -11,6 +11,7 @@ import pytest
 from numpy.typing import NDArray
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.errors import ConfigError, OutputError
 from syncaudit.lidar.hesai import decode_hesai, pandar_scan_packets
 from syncaudit.lidar.packets import PacketTiming
 from syncaudit.lidar.velodyne import decode_velodyne, velodyne_scan_packets
@@ -405,7 +406,7 @@ def test_outputs_not_clobbered(tmp_path: Path) -> None:
     config = SyncSimConfig(duration_s=0.6)
     simulate_sync_log(out, config)
     before = out.read_bytes(), truth_path(out).read_bytes()
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputError, match="exists"):
         simulate_sync_log(out, config.model_copy(update={"seed": 5}))
     assert (out.read_bytes(), truth_path(out).read_bytes()) == before
     simulate_sync_log(out, config.model_copy(update={"seed": 5, "overwrite": True}))
@@ -414,9 +415,70 @@ def test_outputs_not_clobbered(tmp_path: Path) -> None:
 
 
 def test_config_validation() -> None:
-    with pytest.raises(ValueError, match="unique"):
+    with pytest.raises(ConfigError, match="unique"):
         SyncSimConfig(cameras=[CameraSim(name="a", yaw_deg=0), CameraSim(name="a", yaw_deg=9)])
-    with pytest.raises(ValueError):
+    with pytest.raises(ConfigError):
         LatencyDist(mean_us=10.0, min_us=20.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ConfigError):
         SyncSimConfig(lidar_model="HDL-64E")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("model", "convention", "offset"),
+    [("VLP-16", "first_after", 0), ("Pandar40P", "containing", 2), ("VLP-32C", "containing", -2)],
+)
+def test_trigger_packet_conventions_name_real_packets(
+    tmp_path: Path, model: str, convention: str, offset: int
+) -> None:
+    """Each TriggerEvent names a packet in the log, chosen by the convention from the
+    decoded azimuths alone (an independent check of the simulator's choice)."""
+    out = tmp_path / "log.mcap"
+    config = SyncSimConfig(
+        duration_s=1.0,
+        seed=9,
+        lidar_model=model,  # type: ignore[arg-type]
+        trigger_packet=convention,  # type: ignore[arg-type]
+        trigger_packet_offset=offset,
+        packet_drop_fraction=0.02,
+    )
+    truth = simulate_sync_log(out, config)
+    with open_log(out) as log:
+        timing, _ = _decode_lidar(log, truth)
+    stamps = timing.sensor_time_ns  # synchronised clock: sensor time = host time
+    zero = truth["lidar"]["zero_azimuth_deg"]
+    # Unwrapped angle past the zero azimuth of every block, in turns.
+    rel = (timing.block_azimuth_deg - zero) % 360.0
+    turn = np.cumsum(np.concatenate(([0], np.diff(rel[:, 0]) < -180.0)))
+    first_block = rel[:, 0] / 360.0 + turn
+    frames = _frames(truth, "front")
+    named = np.searchsorted(stamps, frames["lidar_packet_ns"])
+    assert np.array_equal(stamps[named], frames["lidar_packet_ns"])  # a packet of the log
+    for row in named.tolist():
+        # The packet the convention picks for this crossing, from the decoded azimuths.
+        crossing = np.floor(first_block[row] + 0.5)  # the nearest crossing's turn
+        containing = int(np.searchsorted(first_block, crossing, side="left"))
+        if convention == "containing" and rel[containing - 1, -1] < 180.0:
+            containing -= 1  # the crossing falls inside the previous packet
+        expected = containing + offset
+        assert row == expected
+
+
+def test_sync_sim_config_reads_the_names_users_write() -> None:
+    from syncaudit.errors import ConfigError
+    from syncaudit.simulate.sync_log import lidar_model, sync_sim_config
+
+    assert [lidar_model(n) for n in ("XT32", "xt32", "vlp16", "VLP-32C", "pandar40p")] == [
+        "PandarXT32",
+        "PandarXT32",
+        "VLP-16",
+        "VLP-32C",
+        "Pandar40P",
+    ]
+    with pytest.raises(ConfigError, match="HDL-99"):
+        lidar_model("HDL-99")
+    config = sync_sim_config(lidar="XT32", tunnel=False, delay_error_us=150.0, duration_s=2.0)
+    assert config.lidar_model == "PandarXT32" and config.duration_s == 2.0
+    assert config.light.dark_exposure_us == config.light.bright_exposure_us
+    assert {c.delay_error_us for c in config.cameras} == {150.0}
+    with pytest.raises(ConfigError, match="duration_s"):
+        sync_sim_config(duration_s=float("inf"))

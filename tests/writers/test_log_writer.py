@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from syncaudit.errors import ConfigError, UnknownTypeError
+from syncaudit.errors import ConfigError, OutputError, UnknownTypeError
 from syncaudit.logs import open_log
 from syncaudit.writers.log_writer import FORMATS, LogFormat, LogWriter, open_writer
 
@@ -126,7 +126,7 @@ def test_existing_output_not_clobbered(tmp_path: Path, fmt: LogFormat) -> None:
     with open_writer(path, fmt) as writer:
         writer.add_topic("/a", "std_msgs/msg/String")
         writer.write_msg("/a", 1, writer.new_msg("std_msgs/msg/String", data="first"))
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputError, match="exists"):
         open_writer(path, fmt)
     with open_writer(path, fmt, overwrite=True) as writer:
         writer.add_topic("/b", "std_msgs/msg/String")
@@ -142,7 +142,7 @@ def test_target_appearing_while_writing_is_kept(tmp_path: Path) -> None:
     writer = open_writer(path, "mcap")
     writer.add_topic("/a", "std_msgs/msg/String")
     path.write_bytes(b"someone else's")
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputError, match="appeared while writing"):
         writer.close()
     assert path.read_bytes() == b"someone else's"
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
@@ -160,6 +160,45 @@ def test_overwrite_replaces_other_kinds(tmp_path: Path) -> None:
     with open_log(path) as log:
         assert log.summary.container == "mcap"
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_a_folder_the_tool_did_not_write_is_never_replaced(tmp_path: Path) -> None:
+    path = tmp_path / "X.mcap"
+    (path / "sub").mkdir(parents=True)
+    (path / "sub" / "precious").write_text("mine")
+    for fmt in ("mcap", "mcap-ros1"):
+        with pytest.raises(OutputError, match="not replacing it"):
+            open_writer(path, fmt, overwrite=True)  # type: ignore[arg-type]
+    assert (path / "sub" / "precious").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["X.mcap"]
+
+
+def test_db3_names_and_mismatched_suffixes(tmp_path: Path) -> None:
+    from syncaudit.writers.log_writer import log_target
+
+    assert log_target(tmp_path / "p.db3", "db3") == tmp_path / "p"
+    assert log_target(tmp_path / "p.mcap", "mcap") == tmp_path / "p.mcap"
+    with open_writer(log_target(tmp_path / "p.db3", "db3"), None) as writer:
+        writer.add_topic("/a", "std_msgs/msg/String")
+    assert (tmp_path / "p" / "p.db3").is_file() and not (tmp_path / "p.db3").exists()
+    with pytest.raises(ConfigError, match="format is 'db3'"):
+        open_writer(tmp_path / "x.mcap", "db3")
+    with pytest.raises(ConfigError, match="format is 'mcap'"):
+        open_writer(tmp_path / "x.bag", "mcap")
+
+
+def test_full_disk_names_the_output(tmp_path: Path) -> None:
+    """sqlite's OperationalError (a full disk) becomes an OutputError naming the bag."""
+    import sqlite3
+
+    from syncaudit.writers.outputs import OutputSet
+
+    outputs = OutputSet()
+    target = tmp_path / "bag"
+    full = r"bag: cannot write \(database or disk is full\)"
+    with pytest.raises(OutputError, match=full), outputs, outputs.writing(target):
+        raise sqlite3.OperationalError("database or disk is full")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_misuse_is_refused(tmp_path: Path) -> None:

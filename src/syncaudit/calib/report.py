@@ -256,3 +256,11 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     console.print(table)
     for note in result.notes:
         console.print(f"[dim]note: {note}[/]")
+
+
+def render_calibration_html(result: CalibrationResult) -> str:
+    """A self-contained HTML page of a calibration result (what `calib --html` writes)."""
+    return (
+        "<!doctype html><html lang=en><head><meta charset=utf-8>"
+        f"<title>syncaudit calib</title></head><body>{html_section(result)}</body></html>\n"
+    )

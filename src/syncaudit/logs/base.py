@@ -6,7 +6,14 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
 from types import TracebackType
 
-from syncaudit.logs.model import LogSummary, LogWarning, RawMessage, TopicInfo
+from syncaudit.logs.model import (
+    ChannelInfo,
+    LogSummary,
+    LogWarning,
+    RawMessage,
+    ReadUnit,
+    TopicInfo,
+)
 from syncaudit.logs.typesys import TypeRegistry
 
 
@@ -49,6 +56,17 @@ class LogReader(ABC):
         self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
     ) -> Iterator[RawMessage]:
         """Backend part of `messages`, with the selection already normalised."""
+
+    def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
+        """Pieces of the log holding `topics` that workers can read on their own.
+
+        None (the default): the log cannot be split; read it serially with `messages()`.
+        """
+        return None
+
+    def unit_channels(self, topics: frozenset[str]) -> dict[int, ChannelInfo]:
+        """Channel/connection id -> topic, type, encoding for the units' wanted messages."""
+        return {}
 
     @abstractmethod
     def type_registry(self, encoding: str) -> TypeRegistry:

@@ -57,3 +57,34 @@ class LogSummary:
         if self.start_ns is None or self.end_ns is None:
             return None
         return (self.end_ns - self.start_ns) / 1e9
+
+
+@dataclass(frozen=True, slots=True)
+class ReadUnit:
+    """A piece of a log one worker reads on its own (an MCAP or ROS 1 chunk, SQLite rows)."""
+
+    source: str
+    """Path of the file holding it."""
+    kind: str
+    """'mcap-chunk' | 'rosbag1-chunk' | 'sqlite-rows' (a key of `logs.units.UNIT_READERS`)."""
+    offset: int
+    """Byte offset of the chunk record; first rowid for sqlite-rows."""
+    length: int
+    """Bytes of the chunk record; rowid past the last for sqlite-rows."""
+    start_ns: int
+    """First log time in the unit."""
+    end_ns: int
+    """Last log time in the unit."""
+    cost: int
+    """Bytes to read, for grouping units into tasks."""
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelInfo:
+    """What a worker needs to know of a channel/connection id: picklable, no schema text."""
+
+    topic: str
+    msgtype: str
+    """ROS 2 style type name."""
+    encoding: str
+    """'cdr' or 'ros1'."""

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
+from collections.abc import Callable
 from pathlib import Path
 
 from syncaudit.errors import LogOpenError
@@ -24,6 +27,49 @@ def _rosbags_log(path: Path, ros1: bool) -> LogReader:
     return RosbagsLog(path, ros1=ros1)
 
 
+def _bag_folder(path: Path) -> LogReader:
+    """A rosbag2 folder: its metadata.yaml read here (quirks resolved), then by storage."""
+    from syncaudit.logs.rosbag2_meta import read_metadata
+
+    meta = read_metadata(path)
+    if meta.storage == "sqlite3":
+        from syncaudit.logs.sqlite_log import open_sqlite_log
+
+        return open_sqlite_log(path, meta)
+    opener = _mcap_bag_opener()
+    if opener is not None and not meta.compression_mode:
+        log = opener(path, meta.files)  # the chunk-parallel MCAP path, across every file
+        for warning in meta.warnings:
+            log.warn(warning.code, warning.message)
+        return log
+    # TODO(lead): until the mcapio branch's `mcap_bag.open_mcap_bag` is merged, and for
+    # MCAP bags with rosbag2 compression modes, rosbags reads MCAP folders. rosbags refuses
+    # a blank storage_identifier or serialization_format: such a bag's single MCAP file is
+    # read directly instead (it names its own channels' encodings).
+    if meta.warnings:
+        if len(meta.files) != 1 or meta.compression_mode:
+            raise LogOpenError(
+                f"{path}: metadata.yaml has blank fields ({meta.warnings[0].message}) and "
+                f"the bag is split into {len(meta.files)} files or compressed; pass its "
+                ".mcap files one by one"
+            )
+        mcap = McapLog(meta.files[0])
+        for warning in meta.warnings:
+            mcap.warn(warning.code, warning.message)
+        return mcap
+    return _rosbags_log(path, ros1=False)
+
+
+def _mcap_bag_opener() -> Callable[[Path, list[Path]], LogReader] | None:
+    """`open_mcap_bag(folder, files)` of the mcapio engineer's module, once it is merged."""
+    if importlib.util.find_spec("syncaudit.logs.mcap_bag") is None:
+        return None
+    opener: Callable[[Path, list[Path]], LogReader] = importlib.import_module(
+        "syncaudit.logs.mcap_bag"
+    ).open_mcap_bag
+    return opener
+
+
 def open_log(path: str | Path) -> LogReader:
     """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`) or a ROS 1 `.bag`.
 
@@ -39,7 +85,7 @@ def open_log(path: str | Path) -> LogReader:
                 f"{path}: directory has no metadata.yaml, so it is not a ROS 2 bag "
                 "(pass the .db3/.mcap file itself to read it without metadata)"
             )
-        return _rosbags_log(path, ros1=False)
+        return _bag_folder(path)
     if not path.is_file():
         raise LogOpenError(f"{path}: not a regular file or directory")
     try:
@@ -52,12 +98,16 @@ def open_log(path: str | Path) -> LogReader:
     if head.startswith(MCAP_MAGIC):
         return McapLog(path)
     if head.startswith(ROSBAG1_MAGIC):
-        return _rosbags_log(path, ros1=True)
+        from syncaudit.logs.rosbag1_log import Rosbag1Log
+
+        return Rosbag1Log(path)
     if head.startswith(ROSBAG_ANY_MAGIC):
         version = head[len(ROSBAG_ANY_MAGIC) :].split(b"\n")[0].decode("ascii", "replace")
         raise LogOpenError(f"{path}: ROS 1 bag format version {version} is not supported (2.0 is)")
     if head.startswith(SQLITE_MAGIC):
-        return _rosbags_log(path, ros1=False)
+        from syncaudit.logs.sqlite_log import open_sqlite_log
+
+        return open_sqlite_log(path)
     raise LogOpenError(
         f"{path}: unknown log format (expected MCAP, ROS 2 .db3/.mcap, or ROS 1 .bag)"
     )

@@ -29,6 +29,13 @@ def _fmt(value: float | None, digits: int = 1) -> str:
     return f"{value:,.{digits}f}"
 
 
+def _signed(value: float | None, digits: int) -> str:
+    """A number with its sign always shown (clock offsets: which clock is ahead matters)."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:+,.{digits}f}"
+
+
 def _table(rows: Sequence[tuple[str, str]]) -> str:
     body = "".join(f"<tr><th>{_e(k)}</th><td class=num>{v}</td></tr>" for k, v in rows)
     return f"<table>{body}</table>"
@@ -84,7 +91,9 @@ def error_plot_svg(
 def _camera_section(cam: CameraAudit, limit_us: float) -> str:
     d = cam.to_dict()
     verdict = (
-        '<span class="fail">needs correction</span>'
+        f'<span class="fail">not judged</span> ({_e(str(cam.sync.not_judged_reason))})'
+        if not cam.sync.judged
+        else '<span class="fail">needs correction</span>'
         if cam.sync.needs_correction
         else '<span class="pass">within thresholds</span>'
     )
@@ -135,7 +144,7 @@ def _camera_section(cam: CameraAudit, limit_us: float) -> str:
 def render_audit_html(result: AuditResult, extra_sections: Sequence[str] = ()) -> str:
     """The whole audit as one HTML page; `extra_sections` are appended (e.g. calibration)."""
     lidar = result.lidar
-    verdict = "PASS" if result.passed else ("NO CAMERAS" if not result.cameras else "FAIL")
+    verdict = result.verdict.upper()
     css = "pass" if result.passed else "fail"
     head = _table(
         [
@@ -151,7 +160,7 @@ def render_audit_html(result: AuditResult, extra_sections: Sequence[str] = ()) -
                 "clock",
                 "synchronised"
                 if lidar.clock_synchronised
-                else f"NOT synchronised ({_fmt(lidar.clock_offset_s, 3)} s)",
+                else f"NOT synchronised (host - sensor {_signed(lidar.clock_offset_s, 3)} s)",
             ),
             ("t1 p50 / p99 (us)", f"{_fmt(lidar.t1_p50_us)} / {_fmt(lidar.t1_p99_us)}"),
         ]

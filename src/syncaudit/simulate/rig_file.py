@@ -2,9 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from syncaudit.rig import Rig
+
+
+def rig_path(out: Path) -> Path:
+    """Where the rig of a simulated log goes: `<out>.rig.yaml` (`x.mcap` -> `x.mcap.rig.yaml`).
+
+    The log's whole name is kept, as for `<out>.truth.json`, so that logs differing only in
+    their container (`x.bag`, `x.db3`) get rigs of their own.
+    """
+    return out.with_name(out.name + ".rig.yaml")
 
 
 def rig_from_truth(truth: dict[str, Any]) -> Rig:

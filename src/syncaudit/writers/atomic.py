@@ -1,51 +1,32 @@
-"""Write output files atomically: a temp file beside the target, then `os.replace`."""
+"""One-file atomic writes for library code: an `OutputSet` of one target, replacing it.
+
+Commands route their outputs through `syncaudit.writers.outputs.OutputSet` directly (all
+targets checked first, committed together); these helpers are for library code that
+writes a single file on its own (e.g. `CalibrationResult.save`). Same rules: a temporary
+beside the target, renamed at the end, never a partial file; a folder is never replaced;
+a device (`/dev/null`) is written through.
+"""
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
-from syncaudit.errors import OutputError
+from syncaudit.writers.outputs import OutputSet
 
 
 def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
-    """Create `path` with what `fill` writes, never leaving a partial file behind."""
-    path = Path(path)
-    if path.exists() and not path.is_file():
-        # A device or FIFO (/dev/null, /dev/stdout, a pipe): write through, never replace it.
-        try:
-            with path.open("w", encoding="utf-8", newline="") as handle:
-                fill(handle)
-        except OSError as exc:
-            raise OutputError(f"{path}: cannot write ({exc.strerror or exc})") from exc
-        return
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot write ({exc.strerror or exc})") from exc
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            fill(handle)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the umask
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Create or replace `path` with what `fill` writes, never leaving a partial file behind.
 
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    Raises:
+        OutputError: naming `path`, when it cannot be written.
+    """
+    with OutputSet(overwrite=True) as outputs, outputs.open_text(path) as handle:
+        fill(handle)
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """Atomically write a text file."""
-
-    def fill(handle: IO[str]) -> None:
-        handle.write(text)
-
-    write_atomic(path, fill)
+    """Atomically create or replace a text file."""
+    with OutputSet(overwrite=True) as outputs:
+        outputs.write_text(path, text)

@@ -6,10 +6,12 @@ typestore (`write_msg`). Types come from the same registry the readers use
 everything written here is readable by `syncaudit.logs.open_log`, and every output carries
 its own message definitions.
 
-Outputs are published atomically: the log is written to a hidden temporary path beside the
-target and moved into place only by a successful `close()`. An error (or `abort()`) removes
-the temporary output and leaves the target untouched. An existing target is never
-replaced unless `overwrite=True`.
+Outputs follow `syncaudit.writers.outputs`: the log is written to a hidden temporary path
+beside the target and moved into place by a successful `close()` (or, when the caller
+passes an `OutputSet`, by that set's commit together with the run's other outputs). An
+error (or `abort()`) removes the temporary output and leaves the target untouched. An
+existing target is never replaced unless `overwrite=True`, and a folder that is not a bag
+this tool wrote is never replaced.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import tempfile
 from abc import ABC, abstractmethod
 from pathlib import Path
 from types import TracebackType
@@ -34,6 +35,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from syncaudit.errors import ConfigError, UnknownTypeError
 from syncaudit.logs.typesys import TypeRegistry, normalise_type_name
+from syncaudit.writers.outputs import OutputSet
 
 LogFormat = Literal["mcap", "mcap-ros1", "db3", "bag"]
 """'mcap': MCAP with ROS 2 CDR messages and ros2msg schemas (the default);
@@ -50,19 +52,52 @@ _NS_PER_S = 1_000_000_000
 _MAX_TIME_NS = 2**63 - 1
 
 
-def infer_format(path: Path) -> LogFormat:
-    """Format from the output path: `.mcap`, `.bag`, otherwise a ROS 2 bag directory."""
+_SUFFIX_FORMATS: dict[str, tuple[LogFormat, ...]] = {
+    ".mcap": ("mcap", "mcap-ros1"),
+    ".bag": ("bag",),
+    ".db3": ("db3",),
+}
+
+
+def infer_format(path: Path, fmt: LogFormat | None = None) -> LogFormat:
+    """Format of an output log: `fmt` if given, else from the suffix (.mcap, .bag, .db3/none).
+
+    Raises:
+        ConfigError: the suffix is none of those, or it contradicts `fmt` (a `.mcap` name
+            for a ROS 2 bag folder would make `x.mcap/x.mcap.db3`).
+    """
     suffix = path.suffix.lower()
-    if suffix == ".mcap":
-        return "mcap"
-    if suffix == ".bag":
-        return "bag"
-    if suffix in ("", ".db3"):
+    allowed = _SUFFIX_FORMATS.get(suffix)
+    if fmt is not None:
+        if allowed is not None and fmt not in allowed:
+            raise ConfigError(
+                f"{path}: the name ends in {suffix or 'no suffix'} but the format is {fmt!r}; "
+                f"name it {_suffix_of(fmt)} or choose format {allowed[0]!r}"
+            )
+        return fmt
+    if suffix == "":
         return "db3"
-    raise ConfigError(
-        f"{path}: cannot tell the log format from suffix {suffix!r}; "
-        "name it .mcap, .bag or .db3 (or give the format explicitly)"
-    )
+    if allowed is None:
+        raise ConfigError(
+            f"{path}: cannot tell the log format from suffix {suffix!r}; "
+            "name it .mcap, .bag or .db3 (a ROS 2 bag folder)"
+        )
+    return allowed[0]
+
+
+def _suffix_of(fmt: LogFormat) -> str:
+    return {"mcap": ".mcap", "mcap-ros1": ".mcap", "bag": ".bag", "db3": ".db3"}[fmt]
+
+
+def log_target(path: Path, fmt: LogFormat) -> Path:
+    """The path a log of `fmt` named `path` is written at.
+
+    A ROS 2 bag is a folder holding `<folder>.db3`: `p.db3` becomes the folder `p` (with
+    `p/p.db3` inside), not `p.db3/p.db3.db3`. Every other format is written at `path`.
+    """
+    if fmt == "db3" and path.suffix.lower() == ".db3":
+        return path.with_suffix("")
+    return path
 
 
 def ros_time(stamp_ns: int, store: Any) -> Any:
@@ -78,7 +113,13 @@ class LogWriter(ABC):
     """Serialization of the messages this writer stores."""
     fmt: LogFormat
 
-    def __init__(self, path: Path, overwrite: bool, registry: TypeRegistry) -> None:
+    def __init__(
+        self,
+        path: Path,
+        overwrite: bool,
+        registry: TypeRegistry,
+        outputs: OutputSet | None = None,
+    ) -> None:
         self.path = path
         self.overwrite = overwrite
         self.registry = registry
@@ -87,14 +128,12 @@ class LogWriter(ABC):
         self.topic_types: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         self._closed = True  # nothing to clean up until the temporary output exists
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists already; pass overwrite=True to replace it")
-        if not path.parent.is_dir():
-            raise FileNotFoundError(f"{path.parent}: output directory does not exist")
-        tmp_dir = tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        self._tmp_dir = Path(tmp_dir)
-        self._tmp_path = self._tmp_dir / path.name
-        """The output is built here (same file system as the target) and renamed at close."""
+        self._own_outputs = outputs is None
+        self._outputs = outputs or OutputSet(
+            overwrite=overwrite, overwrite_hint="pass overwrite=True to replace it"
+        )
+        self._tmp_path = self._outputs.add(path, kind="dir" if self.fmt == "db3" else "file")
+        """The output is built here (same file system as the target); the OutputSet moves it."""
         self._closed = False
 
     # -- topics and messages -------------------------------------------------------------
@@ -159,15 +198,20 @@ class LogWriter(ABC):
     # -- life cycle ----------------------------------------------------------------------
 
     def close(self) -> None:
-        """Finish the log and move it into place (atomically); idempotent."""
+        """Finish the log; publish it unless an OutputSet given by the caller commits it."""
         if self._closed:
             return
         self._closed = True
         try:
-            self._finish()
-            self._publish()
-        finally:
-            shutil.rmtree(self._tmp_dir, ignore_errors=True)
+            with self._outputs.writing(self.path):
+                self._finish()
+        except BaseException:
+            with contextlib.suppress(Exception):
+                self._discard()  # close what _finish left open (a full disk stops it midway)
+            self._remove_temporary()
+            raise
+        if self._own_outputs:
+            self._outputs.commit()
 
     def abort(self) -> None:
         """Drop everything written; the target is left as it was."""
@@ -176,7 +220,15 @@ class LogWriter(ABC):
         self._closed = True
         with contextlib.suppress(Exception):
             self._discard()
-        shutil.rmtree(self._tmp_dir, ignore_errors=True)
+        self._remove_temporary()
+
+    def _remove_temporary(self) -> None:
+        if self._own_outputs:
+            self._outputs.discard()
+        elif self._tmp_path.is_dir():
+            shutil.rmtree(self._tmp_path, ignore_errors=True)
+        else:
+            self._tmp_path.unlink(missing_ok=True)
 
     def __enter__(self) -> LogWriter:
         return self
@@ -201,30 +253,6 @@ class LogWriter(ABC):
         if self._closed:
             raise ValueError(f"writer for {self.path} is closed")
 
-    def _publish(self) -> None:
-        """Rename the finished temporary output onto the target."""
-        target = self.path
-        exists = target.exists() or target.is_symlink()
-        if exists and not self.overwrite:
-            raise FileExistsError(f"{target} appeared while writing; not overwriting it")
-        if not exists and self._tmp_path.is_file():
-            # link() never replaces: a file created meanwhile by someone else is kept.
-            try:
-                os.link(self._tmp_path, target)
-            except FileExistsError:
-                raise FileExistsError(
-                    f"{target} appeared while writing; not overwriting it"
-                ) from None
-            except OSError:
-                pass  # no hard links on this file system: fall back to rename below
-            else:
-                return
-        if exists and (target.is_dir() or self._tmp_path.is_dir()) and not target.is_symlink():
-            # A directory cannot be replaced in one rename: move the old output aside first
-            # (it is deleted with the temporary directory).
-            os.rename(target, self._tmp_dir / ".replaced")
-        os.replace(self._tmp_path, target)
-
     @abstractmethod
     def _add_topic(self, topic: str, msgtype: str, latched: bool) -> None: ...
 
@@ -242,10 +270,15 @@ class McapLogWriter(LogWriter):
     """MCAP with zstd chunks; ROS 2 (cdr + ros2msg) or ROS 1 (ros1 + ros1msg) profile."""
 
     def __init__(
-        self, path: Path, overwrite: bool, ros1: bool, chunk_bytes: int = MCAP_CHUNK_BYTES
+        self,
+        path: Path,
+        overwrite: bool,
+        ros1: bool,
+        chunk_bytes: int = MCAP_CHUNK_BYTES,
+        outputs: OutputSet | None = None,
     ) -> None:
-        super().__init__(path, overwrite, writer_registry(ros1))
         self.fmt = "mcap-ros1" if ros1 else "mcap"
+        super().__init__(path, overwrite, writer_registry(ros1), outputs)
         self.encoding = "ros1" if ros1 else "cdr"
         self._ros1 = ros1
         self._file: BinaryIO = self._tmp_path.open("wb")
@@ -307,11 +340,15 @@ class Rosbag2LogWriter(LogWriter):
     fmt: LogFormat = "db3"
     encoding: Literal["cdr", "ros1"] = "cdr"
 
-    def __init__(self, path: Path, overwrite: bool) -> None:
-        super().__init__(path, overwrite, writer_registry(ros1=False))
+    def __init__(self, path: Path, overwrite: bool, outputs: OutputSet | None = None) -> None:
+        super().__init__(path, overwrite, writer_registry(ros1=False), outputs)
         # Built as <tmp>/<name>/<name>.db3 so that the bag keeps its final file names.
         self._bag = Rosbag2Writer(self._tmp_path, version=Rosbag2Writer.VERSION_LATEST)
-        self._bag.open()
+        try:
+            self._bag.open()
+        except BaseException:
+            self.abort()  # a full disk while creating the database: close it, drop it
+            raise
         self._connections: dict[str, Any] = {}
 
     def _add_topic(self, topic: str, msgtype: str, latched: bool) -> None:
@@ -328,7 +365,8 @@ class Rosbag2LogWriter(LogWriter):
 
     def _discard(self) -> None:
         # rosbags has no abort for sqlite3 storage: close its connection, the file goes.
-        conn = getattr(self._bag.storage, "conn", None)
+        storage = getattr(self._bag, "storage", None)
+        conn = getattr(storage, "conn", None)
         if conn is not None:
             conn.close()
 
@@ -339,10 +377,14 @@ class Rosbag1LogWriter(LogWriter):
     fmt: LogFormat = "bag"
     encoding: Literal["cdr", "ros1"] = "ros1"
 
-    def __init__(self, path: Path, overwrite: bool) -> None:
-        super().__init__(path, overwrite, writer_registry(ros1=True))
+    def __init__(self, path: Path, overwrite: bool, outputs: OutputSet | None = None) -> None:
+        super().__init__(path, overwrite, writer_registry(ros1=True), outputs)
         self._bag = Rosbag1Writer(self._tmp_path)
-        self._bag.open()
+        try:
+            self._bag.open()
+        except BaseException:
+            self.abort()
+            raise
         self._connections: dict[str, Any] = {}
 
     def _add_topic(self, topic: str, msgtype: str, latched: bool) -> None:
@@ -367,23 +409,29 @@ def open_writer(
     *,
     overwrite: bool = False,
     mcap_chunk_bytes: int = MCAP_CHUNK_BYTES,
+    outputs: OutputSet | None = None,
 ) -> LogWriter:
     """Start writing a log at `path` in `fmt` (None: infer from the suffix).
 
-    For 'db3' `path` is the bag directory to create. Raises FileExistsError when `path`
-    exists and `overwrite` is False.
+    For 'db3' `path` is the bag directory to create, exactly as given (the CLI names it
+    with `log_target`). With `outputs`
+    the log is written into that OutputSet's temporary and committed with the set's other
+    outputs; without, `close()` publishes it on its own.
+
+    Raises:
+        OutputError: `path` exists and `overwrite` is False, or it is a folder that is not
+            a bag this tool writes, or its folder is missing.
     """
     path = Path(path)
-    if fmt is None:
-        fmt = infer_format(path)
+    fmt = infer_format(path, fmt)
     if fmt == "mcap":
-        return McapLogWriter(path, overwrite, ros1=False, chunk_bytes=mcap_chunk_bytes)
+        return McapLogWriter(path, overwrite, False, mcap_chunk_bytes, outputs)
     if fmt == "mcap-ros1":
-        return McapLogWriter(path, overwrite, ros1=True, chunk_bytes=mcap_chunk_bytes)
+        return McapLogWriter(path, overwrite, True, mcap_chunk_bytes, outputs)
     if fmt == "db3":
-        return Rosbag2LogWriter(path, overwrite)
+        return Rosbag2LogWriter(path, overwrite, outputs)
     if fmt == "bag":
-        return Rosbag1LogWriter(path, overwrite)
+        return Rosbag1LogWriter(path, overwrite, outputs)
     raise ConfigError(f"unknown log format {fmt!r}; expected one of {', '.join(FORMATS)}")
 
 

@@ -6,8 +6,11 @@ import math
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from syncaudit.audit import AuditResult
-from syncaudit.writers.log_writer import infer_format, open_writer
+from syncaudit.writers.log_writer import open_writer
+from syncaudit.writers.outputs import OutputSet
 
 PAIRING_TYPE = "syncaudit_msgs/msg/FramePairing"
 
@@ -18,22 +21,30 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    """A whole number from a table cell; 0 for None, NaN and pandas' NA (TypeError on float)."""
-    try:
-        number = float(value)
-    except TypeError:
-        return 0
-    return round(number) if math.isfinite(number) else 0
+    """An Int64 value as an exact int (0 where missing: builtin Time has no null)."""
+    return 0 if value is None or value is pd.NA else int(value)
 
 
-def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> int:
-    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); returns the count."""
+def write_pairings(
+    result: AuditResult, out: Path, *, overwrite: bool = False, outputs: OutputSet | None = None
+) -> int:
+    """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); return the count.
+
+    With `outputs` the log goes into that OutputSet (committed by its owner).
+
+    Raises:
+        OutputError: `out` exists without `overwrite`, or cannot be written.
+    """
     count = 0
-    with open_writer(out, infer_format(out), overwrite=overwrite) as writer:
+    with open_writer(out, None, overwrite=overwrite, outputs=outputs) as writer:
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
-            rows: Any = cam.sync.frames.itertuples(index=False)  # pandas rows are untyped
+            frames = cam.sync.frames
+            # Stamps stay exact int64 (object Ints, <NA> for missing), never float64.
+            rows: Any = frames.astype(
+                {c: "object" for c in frames.columns if str(frames[c].dtype) == "Int64"}
+            ).itertuples(index=False)  # pandas rows are untyped
             for row in rows:
                 t_l = _ns(row.t_l_ns)
                 stamp = t_l or _ns(row.header_stamp_ns)
@@ -41,7 +52,7 @@ def write_pairings(result: AuditResult, out: Path, overwrite: bool = False) -> i
                     PAIRING_TYPE,
                     header=writer.header(stamp, str(cam.sync.camera)),
                     camera=str(cam.sync.camera),
-                    frame_sequence=_ns(row.frame_sequence) or 0,
+                    frame_sequence=_ns(row.frame_sequence),
                     image_stamp=writer.time(_ns(row.header_stamp_ns)),
                     exposure_middle=writer.time(t_l),
                     lidar_at_camera=writer.time(_ns(row.t_estimated_ns)),

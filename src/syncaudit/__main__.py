@@ -1,0 +1,5 @@
+"""`python -m syncaudit`: the command line."""
+
+from syncaudit.cli import main
+
+main()

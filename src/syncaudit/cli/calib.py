@@ -1,0 +1,120 @@
+"""`syncaudit calib`: calibrate non-overlapping LiDARs and validate recorded extrinsics."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from syncaudit.cli.common import (
+    HtmlOption,
+    JsonFlag,
+    JsonOutOption,
+    OverwriteFlag,
+    app,
+    emit,
+    json_text,
+    output_set,
+    print_json,
+    run,
+    stdout_console,
+)
+from syncaudit.errors import UsageError
+
+
+def _topics(value: str | None) -> list[str] | None:
+    """`--topics A,B` as a list; a usage error for fewer than two or repeated topics."""
+    if value is None:
+        return None
+    topics = [t.strip() for t in value.split(",") if t.strip()]
+    if len(topics) < 2:
+        raise UsageError(f"--topics needs two or more topics separated by commas, got {value!r}")
+    if len(set(topics)) != len(topics):
+        raise UsageError(f"--topics names a topic twice: {value!r}")
+    return topics
+
+
+@app.command()
+def calib(
+    log: Annotated[Path, typer.Argument(help="Log with PointCloud2 of two or more LiDARs.")],
+    config_file: Annotated[
+        Path | None,
+        typer.Option("--config", help="Calibration config (YAML/TOML/JSON; keys in README)."),
+    ] = None,
+    extrinsics: Annotated[
+        Path | None,
+        typer.Option(
+            "--extrinsics",
+            help="Recorded extrinsics file to validate (default: /tf_static in the log).",
+        ),
+    ] = None,
+    topics: Annotated[
+        str | None,
+        typer.Option("--topics", help="Comma-separated PointCloud2 topics (default: all)."),
+    ] = None,
+    as_json: JsonFlag = False,
+    json_out: JsonOutOption = None,
+    html_out: HtmlOption = None,
+    gate: Annotated[
+        bool,
+        typer.Option("--gate", help="Exit 10 when validation fails or calibration is impossible."),
+    ] = False,
+    overwrite: OverwriteFlag = False,
+) -> None:
+    """Calibrate non-overlapping LiDARs and validate the recorded extrinsics (method B)."""
+
+    def job() -> None:
+        topic_list = _topics(topics)
+        with output_set(
+            overwrite=overwrite,
+            inputs=(log, config_file, extrinsics),
+            targets=(json_out, html_out),
+        ) as outputs:
+            result = _calibrate(log, config_file, extrinsics, topic_list)
+            if json_out:
+                outputs.write_text(json_out, json_text(result.to_json_dict()))
+            if html_out:
+                from syncaudit.calib.report import render_calibration_html
+
+                outputs.write_text(html_out, render_calibration_html(result))
+        if as_json:
+            print_json(result.to_json_dict())
+        else:
+            from syncaudit.calib.report import render_calibration
+
+            emit(lambda: render_calibration(result, stdout_console()))
+        if gate and not result.passed:
+            from syncaudit.errors import GateFailedError
+
+            why = result.reason or "recorded extrinsics outside the limits"
+            raise GateFailedError(f"{log}: calibration check failed: {why}")
+
+    run(job)
+
+
+def _calibrate(
+    log: Path, config_file: Path | None, extrinsics: Path | None, topics: list[str] | None
+) -> Any:
+    """Load the config, apply the command-line overrides and run the calibration."""
+    from syncaudit.errors import ConfigError
+
+    try:
+        from syncaudit.calib import CalibConfig, calibrate_log, load_config
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise ConfigError(
+            f"the calibration needs the optional extra: pip install 'syncaudit[calib]' ({exc})"
+        ) from exc
+    config: CalibConfig = load_config(config_file, CalibConfig) if config_file else CalibConfig()
+    updates: dict[str, object] = {}
+    if extrinsics is not None:
+        updates["extrinsics_file"] = extrinsics
+    if topics is not None:
+        updates["lidar_topics"] = topics
+    if updates:
+        try:
+            config = CalibConfig.model_validate({**config.model_dump(), **updates})
+        except ConfigError as exc:
+            flag = "--topics" if topics is not None else "--extrinsics"
+            raise UsageError(f"{flag}: {str(exc).split(': ', 1)[-1]}") from None
+    return calibrate_log(log, config)

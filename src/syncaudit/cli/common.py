@@ -1,0 +1,303 @@
+"""What every command shares: the app, the run wrapper, consoles, outputs and common options.
+
+Kept free of heavy imports (no numpy, pandas, pydantic, rich, the simulator): `syncaudit
+--help` imports only this and typer. A command imports what it needs inside its body.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
+
+import typer
+from typer.core import TyperGroup
+
+try:  # typer >= 0.22 vendors click
+    from typer._click import exceptions as click_errors
+except ImportError:  # pragma: no cover - older typer on the click package
+    from click import exceptions as click_errors  # type: ignore[no-redef,import-not-found,unused-ignore]
+
+
+from syncaudit import __version__
+from syncaudit.errors import (
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_USAGE,
+    Interrupted,
+    OutputError,
+    SyncauditError,
+)
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from syncaudit.writers.outputs import OutputSet
+
+T = TypeVar("T")
+
+PIPE_WIDTH = 100_000
+"""Console width when output is not a terminal: tables full width, lines never wrapped."""
+
+_MAIN_PID = os.getpid()
+
+
+def _on_sigterm(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM in the main process unwinds like Ctrl-C (outputs are rolled back)."""
+    if os.getpid() != _MAIN_PID:  # a forked worker that inherited the handler: just die
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
+    raise Interrupted(f"signal {signum}")
+
+
+@contextlib.contextmanager
+def signals_raise() -> Iterator[None]:
+    """While running a command, SIGTERM raises `Interrupted` (SIGINT already raises).
+
+    The previous handler comes back afterwards (the app may run inside a test or a host
+    program).
+    """
+    global _MAIN_PID
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _MAIN_PID = os.getpid()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _usage_line(exc: click_errors.UsageError) -> str:
+    """A click usage error as one line naming the option, with where to find help."""
+    message = " ".join(exc.format_message().split())
+    where = exc.ctx.command_path if exc.ctx is not None else "syncaudit"
+    return f"error: {message} (see '{where} --help')"
+
+
+_NO_ARGS_IS_HELP: type[click_errors.UsageError] = getattr(
+    click_errors, "NoArgsIsHelpError", click_errors.UsageError
+)
+
+
+class SyncauditGroup(TyperGroup):
+    """The app's click group: usage errors exit 64 with one line, interrupts exit 130."""
+
+    def main(  # type: ignore[override]
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
+        """Run the command line; in standalone mode exit with the documented code."""
+        try:
+            with signals_raise():
+                code = super().main(
+                    args=args,
+                    prog_name=prog_name,
+                    complete_var=complete_var,
+                    standalone_mode=False,
+                    **extra,
+                )
+        except _NO_ARGS_IS_HELP as exc:
+            if exc.ctx is not None:
+                typer.echo(exc.ctx.get_help())
+            code = EXIT_USAGE
+        except click_errors.UsageError as exc:
+            typer.echo(_usage_line(exc), err=True)
+            code = EXIT_USAGE
+        except (typer.Abort, KeyboardInterrupt, Interrupted):
+            typer.echo("error: interrupted", err=True)
+            code = EXIT_INTERRUPTED
+        except click_errors.ClickException as exc:
+            typer.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
+            code = EXIT_USAGE
+        if not standalone_mode:
+            return code
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+app = typer.Typer(
+    name="syncaudit",
+    cls=SyncauditGroup,
+    help="Audit LiDAR-camera synchronisation and LiDAR extrinsics in MCAP, ROS 2 and ROS 1 logs.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"syncaudit {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_show_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """Audit LiDAR-camera synchronisation and LiDAR extrinsics in MCAP, ROS 2 and ROS 1 logs."""
+
+
+# -- options shared by several commands ----------------------------------------------------
+
+LogArgument = Annotated[
+    Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")
+]
+RigOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--rig", help="Rig file (YAML/TOML/JSON); topics and cameras are guessed without it."
+    ),
+]
+JsonFlag = Annotated[
+    bool, typer.Option("--json", help="Print the result as JSON instead of tables.")
+]
+JsonOutOption = Annotated[
+    Path | None, typer.Option("--json-out", help="Also write the full JSON result here.")
+]
+HtmlOption = Annotated[
+    Path | None, typer.Option("--html", help="Write a self-contained HTML report here.")
+]
+GateFlag = Annotated[bool, typer.Option("--gate", help="Exit 10 when the check fails (CI gate).")]
+OverwriteFlag = Annotated[
+    bool, typer.Option("--overwrite", help="Replace outputs that exist (all of them or none).")
+]
+
+
+# -- running a command ---------------------------------------------------------------------
+
+
+def fail(message: str, code: int) -> NoReturn:
+    """Print one `error:` line on stderr and exit with `code`."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def run(job: Callable[[], T]) -> T:
+    """Run a command body: known errors become one line on stderr and their exit code."""
+    try:
+        return job()
+    except SyncauditError as exc:
+        fail(" ".join(str(exc).split()), exc.exit_code)
+    except (KeyboardInterrupt, Interrupted):
+        fail("interrupted", EXIT_INTERRUPTED)
+    except BrokenPipeError:
+        quiet_stdout()
+        raise typer.Exit(0) from None
+    except OSError as exc:  # an output the OutputSet did not name (should not happen)
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        fail(f"{where}{exc.strerror or exc}", OutputError.exit_code)
+    except Exception as exc:
+        if os.environ.get("SYNCAUDIT_DEBUG"):
+            raise
+        fail(
+            f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
+            "(set SYNCAUDIT_DEBUG=1 for a traceback and please report it)",
+            EXIT_INTERNAL,
+        )
+
+
+def quiet_stdout() -> None:
+    """Point stdout at /dev/null after its reader went away (`| head`), so exit is quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass  # not a real file (a test runner's buffer): nothing to silence
+
+
+def emit(show: Callable[[], None]) -> None:
+    """Print a result on stdout; a reader that went away (`| head`) is not an error."""
+    try:
+        show()
+        sys.stdout.flush()
+    except BrokenPipeError:
+        quiet_stdout()
+
+
+def stdout_console() -> Console:
+    """A rich console on stdout: styled on a terminal; plain, unwrapped, full width otherwise."""
+    from rich.console import Console
+
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            """A reader that went away: stop printing (rich's own exits 1)."""
+            self.quiet = True
+            raise BrokenPipeError
+
+    if sys.stdout.isatty():
+        return _Console(highlight=False)
+    return _Console(width=PIPE_WIDTH, soft_wrap=True, highlight=False, no_color=True)
+
+
+def print_json(data: Any) -> None:
+    """The result as indented JSON on stdout."""
+    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+
+    def show() -> None:
+        sys.stdout.write(text)
+
+    emit(show)
+
+
+def json_text(data: Any) -> str:
+    """The result as an indented JSON document (what `--json-out` writes)."""
+    return json.dumps(data, indent=2, allow_nan=False) + "\n"
+
+
+def output_set(
+    *, overwrite: bool, inputs: Iterable[Path | None] = (), targets: Iterable[Path | None] = ()
+) -> OutputSet:
+    """An OutputSet with every (given) target checked now, before any work."""
+    from syncaudit.writers.outputs import OutputSet
+
+    outputs = OutputSet(overwrite=overwrite, inputs=inputs)
+    try:
+        for target in targets:
+            if target is not None:
+                outputs.add(target)
+    except BaseException:
+        outputs.discard()
+        raise
+    return outputs
+
+
+def main() -> None:
+    """Console-script entry point.
+
+    Exits without the interpreter's teardown (~60 ms with numpy and pandas loaded): by
+    then every output file is committed and closed, and the streams are flushed here.
+    """
+    try:
+        app()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if exc.code is not None and not isinstance(exc.code, int):
+            print(exc.code, file=sys.stderr)
+    # A reader that went away (e.g. `| head`) is not an error.
+    with contextlib.suppress(OSError):
+        sys.stdout.flush()
+    with contextlib.suppress(OSError):
+        sys.stderr.flush()
+    os._exit(code)

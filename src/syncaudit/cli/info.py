@@ -1,0 +1,25 @@
+"""`syncaudit info`: what a log holds, measured."""
+
+from __future__ import annotations
+
+from syncaudit.cli.common import JsonFlag, LogArgument, RigOption, app, emit, print_json, run
+
+
+@app.command()
+def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> None:
+    """Summarise a log: topics, each LiDAR (measured RPM, drops, clock) and each camera."""
+
+    def job() -> None:
+        from syncaudit.inspect_log import inspect_log
+        from syncaudit.rig import load_rig
+
+        report = inspect_log(log, load_rig(rig) if rig else None)
+        if as_json:
+            print_json(report.to_dict())
+            return
+        from syncaudit.cli.common import stdout_console
+        from syncaudit.report.console import render_info
+
+        emit(lambda: render_info(report, stdout_console()))
+
+    run(job)

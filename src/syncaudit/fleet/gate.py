@@ -1,0 +1,284 @@
+"""The gate driver: find logs, skip unchanged ones, audit the rest, judge, record, report.
+
+Only this process writes the database and the outputs; workers (local processes or a
+cluster) return plain outcomes. Exit code: 3 when some log could not be read, else 10
+when some log fails the policy, else 0 (an unread log is an unknown verdict, which is
+worse than a known failure, so 3 wins).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from syncaudit import __version__
+from syncaudit.collect import default_jobs
+from syncaudit.errors import GateFailedError, LogReadError, OutputError, SyncauditError
+from syncaudit.fleet.checks import evaluate, verdict
+from syncaudit.fleet.database import ResultsDB
+from syncaudit.fleet.executor import DEFAULT_MAX_TRIES, DEFAULT_TIMEOUT_S, Executor, LocalExecutor
+from syncaudit.fleet.html import render_error_page, render_index, report_name
+from syncaudit.fleet.inputs import LogJob, discover, file_fingerprint, fingerprint
+from syncaudit.fleet.job import JobOptions, LogOutcome
+from syncaudit.fleet.junit import render_junit
+from syncaudit.fleet.policy import Policy
+from syncaudit.fleet.record import JudgedLog, log_key
+from syncaudit.fleet.summary import render_json, render_markdown
+from syncaudit.writers.atomic import write_text_atomic
+
+DB_BATCH_LOGS = 32
+DB_BATCH_S = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class GateOptions:
+    """Where results go and how the audits run."""
+
+    db: Path | None = None
+    junit: Path | None = None
+    summary: Path | None = None
+    json_out: Path | None = None
+    html_dir: Path | None = None
+    jobs: int | None = None
+    timeout_s: float = DEFAULT_TIMEOUT_S
+    max_tries: int = DEFAULT_MAX_TRIES
+    force: bool = False
+    overwrite: bool = False
+
+
+@dataclass(slots=True)
+class GateRun:
+    """The verdicts of a run, sorted by path, and the exit code they make."""
+
+    logs: list[JudgedLog] = field(default_factory=list)
+
+    @property
+    def exit_code(self) -> int:
+        """3 some log unread, 10 some log failed, 0 all passed (or only warnings)."""
+        verdicts = {log.verdict for log in self.logs}
+        if "error" in verdicts:
+            return LogReadError.exit_code
+        if "fail" in verdicts:
+            return GateFailedError.exit_code
+        return 0
+
+
+Progress = Callable[[JudgedLog, int, int], None]
+"""Called for each verdict with (verdict, done so far, total)."""
+
+
+def check_targets(options: GateOptions) -> None:
+    """Refuse outputs that exist (without --overwrite) before any work is done."""
+    for option, target in (
+        ("--junit", options.junit),
+        ("--summary", options.summary),
+        ("--json-out", options.json_out),
+    ):
+        if target is None:
+            continue
+        if target.is_dir():
+            raise OutputError(f"{target}: is a directory ({option} needs a file)")
+        if target.exists() and not options.overwrite and target.is_file():
+            raise OutputError(f"{target}: exists (use --overwrite to replace it)")
+        if not target.parent.is_dir():
+            raise OutputError(f"{target}: folder {target.parent} does not exist")
+    if options.db is not None:
+        if options.db.is_dir():
+            raise OutputError(f"{options.db}: is a directory (--db needs a DuckDB file)")
+        if not options.db.parent.is_dir():
+            raise OutputError(f"{options.db}: folder {options.db.parent} does not exist")
+    html = options.html_dir
+    if html is not None:
+        if html.exists() and not html.is_dir():
+            raise OutputError(f"{html}: exists and is not a directory (--html needs one)")
+        if html.is_dir() and any(html.iterdir()) and not options.overwrite:
+            raise OutputError(f"{html}: exists and is not empty (use --overwrite to update it)")
+
+
+def _judge(
+    outcome: LogOutcome, policy: Policy, fp: str, rig_fp: str | None, policy_fp: str
+) -> JudgedLog:
+    checks = evaluate(outcome, policy, outcome.job.vehicle)
+    return JudgedLog(
+        job=outcome.job,
+        key=log_key(fp, outcome.job.path, __version__, rig_fp, policy_fp),
+        fingerprint=fp,
+        rig_fingerprint=rig_fp,
+        policy_fingerprint=policy_fp,
+        tool_version=__version__,
+        verdict=verdict(outcome, checks),
+        checks=checks,
+        audit=outcome.audit,
+        start_ns=outcome.start_ns,
+        error=outcome.error,
+        error_code=outcome.error_code,
+        attempts=outcome.attempts,
+        elapsed_s=outcome.elapsed_s,
+        html=outcome.html,
+        camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
+    )
+
+
+def _error_log(job: LogJob, error: SyncauditError, policy_fp: str) -> JudgedLog:
+    return JudgedLog(
+        job=job,
+        key=log_key("missing", os.path.abspath(job.path), __version__, None, policy_fp),
+        fingerprint="-",
+        rig_fingerprint=None,
+        policy_fingerprint=policy_fp,
+        tool_version=__version__,
+        verdict="error",
+        error=str(error).splitlines()[0],
+        error_code=error.exit_code,
+    )
+
+
+def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
+    """A local executor sized for `pending` logs, and the chunk jobs each audit gets.
+
+    One worker per core auditing whole logs; only with fewer logs than cores does each
+    audit also read its chunks in parallel (cores shared out between the logs).
+    """
+    cores = options.jobs or default_jobs()
+    workers = max(1, min(cores, pending))
+    audit_jobs = max(1, cores // workers) if pending < cores else 1
+    executor = LocalExecutor(workers, timeout_s=options.timeout_s, max_tries=options.max_tries)
+    return executor, audit_jobs
+
+
+def run_gate(
+    inputs: list[str],
+    policy: Policy,
+    options: GateOptions,
+    *,
+    executor: Executor | None = None,
+    progress: Progress | None = None,
+) -> GateRun:
+    """Judge every log named by `inputs` against `policy`; write the outputs and the DB."""
+    check_targets(options)
+    found = discover(inputs, policy)
+    policy_fp = policy.fingerprint()
+    judged: list[JudgedLog] = []
+    pending: list[tuple[LogJob, str, str | None]] = []
+    for problem in found.problems:
+        item = problem.split(": ", 1)[0]
+        judged.append(_error_log(LogJob(path=item), LogReadError(problem), policy_fp))
+    for job in found.jobs:
+        try:
+            fp = fingerprint(job.path)
+        except SyncauditError as exc:
+            judged.append(_error_log(job, exc, policy_fp))
+            continue
+        except OSError as exc:
+            judged.append(_error_log(job, LogReadError(f"{job.path}: {exc.strerror}"), policy_fp))
+            continue
+        pending.append((job, fp, file_fingerprint(job.rig_path)))
+    db = ResultsDB(options.db) if options.db is not None else None
+    if db is not None and not options.force:
+        keys = {log_key(fp, job.path, __version__, rig, policy_fp): job for job, fp, rig in pending}
+        # Error rows are judged again: a timeout or a dead worker may not recur.
+        known = {k: v for k, v in db.known(keys).items() if v.verdict != "error"}
+        for key, stored in known.items():
+            job = keys[key]
+            stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
+            judged.append(stored)
+        pending = [
+            p
+            for p in pending
+            if log_key(p[1], p[0].path, __version__, p[2], policy_fp) not in known
+        ]
+    total = len(judged) + len(pending)
+    for index, log in enumerate(judged, 1):
+        if progress:
+            progress(log, index, total)
+    calibrate = any(
+        limit is not None and limit.enabled
+        for limit in (
+            policy.defaults.calibration.rotation_deg,
+            policy.defaults.calibration.translation_cm,
+        )
+    )
+    by_path = {job.path: (fp, rig) for job, fp, rig in pending}
+    unsaved: list[JudgedLog] = [log for log in judged if not log.skipped]
+    if pending:
+        own = executor is None
+        if executor is None:
+            executor, audit_jobs = make_executor(options, len(pending))
+        else:
+            audit_jobs = 1
+        job_options = JobOptions(
+            audit_jobs=audit_jobs,
+            calibrate=calibrate,
+            html=options.html_dir is not None,
+            policy=policy,
+        )
+        last_save = time.monotonic()
+        try:
+            for outcome in executor.run([p[0] for p in pending], job_options):
+                fp, rig = by_path[outcome.job.path]
+                log = _judge(outcome, policy, fp, rig, policy_fp)
+                if db is None:
+                    log.audit = None  # only the database needs it: memory flat in the logs
+                judged.append(log)
+                unsaved.append(log)
+                if progress:
+                    progress(log, len(judged), total)
+                if db is not None and (
+                    len(unsaved) >= DB_BATCH_LOGS or time.monotonic() - last_save > DB_BATCH_S
+                ):
+                    _save_reports(unsaved, options.html_dir)
+                    db.write(unsaved)
+                    for saved in unsaved:
+                        saved.audit = None  # in the database now: memory flat in the logs
+                    unsaved, last_save = [], time.monotonic()
+        finally:
+            if own:
+                executor.close()
+    run = GateRun(sorted(judged, key=lambda log: log.path))
+    _save_reports(unsaved, options.html_dir)
+    if db is not None:
+        db.write(unsaved)
+    write_outputs(run, options, policy_fp)
+    return run
+
+
+def _save_reports(logs: list[JudgedLog], html_dir: Path | None) -> None:
+    """Write each new log's HTML report (before its row, which records the report path)."""
+    if html_dir is None:
+        return
+    folder = html_dir / "logs"
+    folder.mkdir(parents=True, exist_ok=True)
+    for log in logs:
+        if log.skipped:
+            continue
+        target = folder / report_name(log)
+        write_text_atomic(target, log.html or render_error_page(log))
+        log.report = str(target.resolve())
+        log.html = None  # keep memory flat in the number of logs
+
+
+def write_outputs(run: GateRun, options: GateOptions, policy_fp: str) -> None:
+    """Every file output of a run, each through a temporary beside it and a rename.
+
+    The one place outputs are written, so they can be routed through the CLI's
+    OutputSet when it lands.
+    """
+    texts: list[tuple[Path, str]] = []
+    if options.junit is not None:
+        texts.append((options.junit, render_junit(run.logs)))
+    if options.summary is not None:
+        texts.append((options.summary, render_markdown(run.logs)))
+    if options.json_out is not None:
+        texts.append((options.json_out, render_json(run.logs, policy_fp)))
+    if options.html_dir is not None:
+        options.html_dir.mkdir(parents=True, exist_ok=True)
+        links = {}
+        for log in run.logs:
+            if log.report and Path(log.report).is_file():
+                links[log.key] = os.path.relpath(log.report, options.html_dir)
+        texts.append((options.html_dir / "index.html", render_index(run.logs, links)))
+    for path, text in texts:
+        write_text_atomic(path, text)

@@ -1,0 +1,256 @@
+"""Finding the logs to judge: files, ROS 2 bag folders, directories, globs and manifests.
+
+Each log becomes a `LogJob` with its vehicle id and rig file. The vehicle comes from, in
+order: the manifest, the log's own metadata (an MCAP metadata record or a ROS 2 bag's
+`custom_data` with key `vehicle_id` or `vehicle`), the policy's `vehicle_pattern` on the
+path. The rig comes from the manifest, a `<log>.rig.yaml` beside the log, the policy's
+`rigs` for the vehicle, then its `default_rig`; without any the audit guesses topics.
+"""
+
+from __future__ import annotations
+
+import csv
+import glob
+import hashlib
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from syncaudit.errors import ConfigError, LogOpenError
+from syncaudit.fleet.policy import Policy
+
+LOG_SUFFIXES = (".mcap", ".bag", ".db3")
+MANIFEST_SUFFIXES = (".csv", ".jsonl")
+VEHICLE_KEYS = ("vehicle_id", "vehicle")
+SAMPLE_BYTES = 1 << 20
+SAMPLE_COUNT = 8
+
+
+@dataclass(frozen=True, slots=True)
+class LogJob:
+    """One log to judge: where it is and what describes it."""
+
+    path: str
+    vehicle: str | None = None
+    rig_path: str | None = None
+    tags: tuple[str, ...] = ()
+    source: str = "path"
+    """Where the job came from: 'path' or the manifest file."""
+
+
+@dataclass(slots=True)
+class Discovery:
+    """The jobs found, and inputs that named nothing (reported, judged as errors)."""
+
+    jobs: list[LogJob] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def is_bag_dir(path: Path) -> bool:
+    """A ROS 2 bag folder: a directory with metadata.yaml."""
+    return path.is_dir() and (path / "metadata.yaml").is_file()
+
+
+def _is_log_file(path: Path) -> bool:
+    if path.suffix == ".mcap" and path.parent.joinpath("metadata.yaml").is_file():
+        return False  # a ROS 2 bag's storage file: the bag folder is the log
+    if path.suffix == ".db3" and path.parent.joinpath("metadata.yaml").is_file():
+        return False
+    return path.is_file() and path.suffix in (".mcap", ".bag", ".db3")
+
+
+def _walk(root: Path) -> list[Path]:
+    """Logs under a directory, recursively: files and ROS 2 bag folders (not their insides)."""
+    found: list[Path] = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        if is_bag_dir(here):
+            found.append(here)
+            dirnames.clear()
+            continue
+        dirnames.sort()
+        found.extend(here / n for n in sorted(filenames) if _is_log_file(here / n))
+    return found
+
+
+def _expand(item: str) -> list[Path] | None:
+    """Paths named by one input (None: a manifest, handled by the caller)."""
+    path = Path(item)
+    if path.suffix in MANIFEST_SUFFIXES and path.is_file():
+        return None
+    if is_bag_dir(path):
+        return [path]
+    if path.is_dir():
+        return _walk(path)
+    if path.exists():
+        return [path]
+    if glob.has_magic(item):
+        out: list[Path] = []
+        for match in sorted(glob.glob(item, recursive=True)):
+            p = Path(match)
+            if is_bag_dir(p) or _is_log_file(p):
+                out.append(p)
+            elif p.is_dir():
+                out.extend(_walk(p))
+        return out
+    return [path]  # missing: becomes that log's error row
+
+
+def read_manifest(path: Path) -> list[LogJob]:
+    """A CSV (header: path, vehicle, rig, tags) or JSONL manifest; relative paths are
+    relative to the manifest. Tags are `;`-separated in CSV, a list in JSONL."""
+    base = path.resolve().parent
+    rows: list[dict[str, object]] = []
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read manifest ({exc.strerror or exc})") from exc
+    if path.suffix == ".csv":
+        reader = csv.DictReader(text.splitlines())
+        if reader.fieldnames is None or "path" not in reader.fieldnames:
+            raise ConfigError(f"{path}: a CSV manifest needs a header with a 'path' column")
+        unknown = set(reader.fieldnames) - {"path", "vehicle", "rig", "tags"}
+        if unknown:
+            raise ConfigError(f"{path}: unknown manifest column(s) {sorted(unknown)}")
+        rows = [dict(r) for r in reader]
+    else:
+        for number, line in enumerate(text.splitlines(), 1):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise ConfigError(f"{path}:{number}: not JSON ({exc.msg})") from exc
+            if not isinstance(row, dict) or "path" not in row:
+                raise ConfigError(f"{path}:{number}: each line needs an object with 'path'")
+            rows.append(row)
+    jobs = []
+    for number, row in enumerate(rows, 2 if path.suffix == ".csv" else 1):
+        log = str(row.get("path") or "").strip()
+        if not log:
+            raise ConfigError(f"{path}:{number}: empty path")
+        tags_raw = row.get("tags") or ()
+        items: list[object] = (
+            list(tags_raw.split(";"))
+            if isinstance(tags_raw, str)
+            else list(tags_raw)
+            if isinstance(tags_raw, (list, tuple))
+            else [tags_raw]
+        )
+        tags = tuple(str(t) for t in items if t)
+        rig = row.get("rig") or None
+        jobs.append(
+            LogJob(
+                path=str(base / log) if not os.path.isabs(log) else log,
+                vehicle=str(row["vehicle"]) if row.get("vehicle") else None,
+                rig_path=str(base / str(rig)) if rig and not os.path.isabs(str(rig)) else rig,  # type: ignore[arg-type]
+                tags=tuple(str(t) for t in tags),
+                source=str(path),
+            )
+        )
+    return jobs
+
+
+def log_metadata_vehicle(path: Path) -> str | None:
+    """The vehicle id recorded in the log itself, if any (cheap: index/metadata only)."""
+    try:
+        if path.is_dir():
+            meta = yaml.safe_load((path / "metadata.yaml").read_text(encoding="utf-8"))
+            info = (meta or {}).get("rosbag2_bagfile_information", {})
+            custom = info.get("custom_data") or {}
+            return next((str(custom[k]) for k in VEHICLE_KEYS if custom.get(k)), None)
+        if path.suffix == ".mcap":
+            from mcap.reader import make_reader
+
+            with path.open("rb") as handle:
+                for record in make_reader(handle).iter_metadata():
+                    value = next(
+                        (record.metadata[k] for k in VEHICLE_KEYS if record.metadata.get(k)), None
+                    )
+                    if value:
+                        return str(value)
+    except Exception:  # metadata is optional: a damaged log is reported by its audit
+        return None
+    return None
+
+
+def discover(inputs: list[str], policy: Policy) -> Discovery:
+    """Every log named by `inputs`, deduplicated, with vehicle and rig resolved."""
+    found = Discovery()
+    raw: list[LogJob] = []
+    for item in inputs:
+        paths = _expand(item)
+        if paths is None:
+            raw.extend(read_manifest(Path(item)))
+            continue
+        if not paths:
+            found.problems.append(f"{item}: matches no log")
+        raw.extend(LogJob(path=str(p)) for p in paths)
+    pattern = re.compile(policy.vehicle_pattern) if policy.vehicle_pattern else None
+    seen: set[str] = set()
+    for job in raw:
+        key = os.path.abspath(job.path)
+        if key in seen:
+            continue
+        seen.add(key)
+        path = Path(job.path)
+        vehicle = job.vehicle or log_metadata_vehicle(path)
+        if vehicle is None and pattern is not None:
+            match = pattern.search(path.as_posix())
+            vehicle = match.group("vehicle") if match else None
+        rig = job.rig_path
+        beside = Path(str(path) + ".rig.yaml")
+        if rig is None and beside.is_file():
+            rig = str(beside)
+        if rig is None and vehicle is not None:
+            rig = policy.rigs.get(vehicle)
+        rig = rig or policy.default_rig
+        found.jobs.append(
+            LogJob(path=job.path, vehicle=vehicle, rig_path=rig, tags=job.tags, source=job.source)
+        )
+    found.jobs.sort(key=lambda j: j.path)
+    return found
+
+
+def fingerprint(path: str | Path) -> str:
+    """A content fingerprint read cheaply: size, and 1 MiB at the head, the tail and
+    evenly spaced offsets of each file (a bag folder: every file, by relative name).
+
+    MCAP and ROS bag tails hold the index (chunk offsets, CRCs, counts), so any rewrite
+    changes them; hashing every byte of a fleet's terabytes would cost more than the
+    audit. Raises LogOpenError when nothing is there.
+    """
+    path = Path(path)
+    digest = hashlib.blake2b(digest_size=16)
+    if path.is_dir():
+        files = sorted(p for p in path.rglob("*") if p.is_file())
+    elif path.is_file():
+        files = [path]
+    else:
+        raise LogOpenError(f"{path}: no such log")
+    for file in files:
+        size = file.stat().st_size
+        digest.update(f"{file.relative_to(path) if path.is_dir() else ''}:{size}".encode())
+        with file.open("rb") as handle:
+            if size <= SAMPLE_BYTES * (SAMPLE_COUNT + 2):
+                digest.update(handle.read())
+                continue
+            step = (size - SAMPLE_BYTES) // (SAMPLE_COUNT + 1)
+            for index in range(SAMPLE_COUNT + 2):
+                handle.seek(min(index * step, size - SAMPLE_BYTES))
+                digest.update(handle.read(SAMPLE_BYTES))
+    return digest.hexdigest()
+
+
+def file_fingerprint(path: str | Path | None) -> str | None:
+    """Hash of a small config file's bytes (rig), None when there is none."""
+    if path is None:
+        return None
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+    except OSError:
+        return None

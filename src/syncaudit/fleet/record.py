@@ -1,0 +1,65 @@
+"""`JudgedLog`: one log's verdict with everything the outputs and the database need."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from syncaudit.fleet.checks import CheckResult
+from syncaudit.fleet.inputs import LogJob
+
+
+def log_key(
+    fingerprint: str, path: str, tool_version: str, rig_fp: str | None, policy_fp: str
+) -> str:
+    """The database key of a verdict: same content at the same place, tool, rig and policy
+    = same key (skipped). The path is part of it: two copies of one log are two rows."""
+    where = display_path(path) if "://" in path else os.path.abspath(path)
+    text = "|".join((fingerprint, where, tool_version, rig_fp or "-", policy_fp))
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def display_path(path: str) -> str:
+    """A path or URL as stored: URLs lose their query string and fragment (credentials)."""
+    if "://" in path:
+        return path.split("?", 1)[0].split("#", 1)[0]
+    return path
+
+
+@dataclass(slots=True)
+class JudgedLog:
+    """A log's verdict, its checks and the audit it came from (None for error rows)."""
+
+    job: LogJob
+    key: str
+    fingerprint: str
+    rig_fingerprint: str | None
+    policy_fingerprint: str
+    tool_version: str
+    verdict: str
+    checks: list[CheckResult] = field(default_factory=list)
+    audit: dict[str, Any] | None = None
+    start_ns: int | None = None
+    error: str | None = None
+    error_code: int | None = None
+    attempts: int = 1
+    elapsed_s: float = 0.0
+    skipped: bool = False
+    """Unchanged since an earlier run with the same tool, rig and policy: read from the DB."""
+    report: str | None = None
+    html: str | None = None
+    camera_count: int | None = None
+    """Cameras the audit judged (None for error rows and rows read from the database)."""
+
+    @property
+    def path(self) -> str:
+        """Where the log is, as stored and shown."""
+        return display_path(self.job.path)
+
+    @property
+    def failed_checks(self) -> list[CheckResult]:
+        """Checks that did not pass, fail severity first."""
+        bad = [c for c in self.checks if not c.passed]
+        return sorted(bad, key=lambda c: (c.severity != "fail", c.scope, c.subject, c.check))

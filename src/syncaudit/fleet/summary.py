@@ -1,0 +1,106 @@
+"""Markdown and JSON summaries of a gate run.
+
+The JSON summary is deterministic: logs sorted by path, checks by scope/subject/check,
+keys sorted, no timings or timestamps, so two runs over the same logs with the same tool,
+rigs and policy (locally or on a cluster) give byte-identical files.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from typing import Any
+
+from syncaudit import __version__
+from syncaudit.fleet.record import JudgedLog
+
+VERDICTS = ("fail", "error", "warn", "pass")
+SUMMARY_VERSION = 1
+
+
+def summary_dict(logs: list[JudgedLog], policy_fingerprint: str) -> dict[str, Any]:
+    """The JSON summary as a dict."""
+    counts = Counter(log.verdict for log in logs)
+    return {
+        "summary_version": SUMMARY_VERSION,
+        "tool_version": __version__,
+        "policy_fingerprint": policy_fingerprint,
+        "counts": {v: counts.get(v, 0) for v in VERDICTS},
+        "logs": [
+            {
+                "path": log.path,
+                "vehicle": log.job.vehicle,
+                "tags": sorted(log.job.tags),
+                "fingerprint": log.fingerprint,
+                "rig_fingerprint": log.rig_fingerprint,
+                "verdict": log.verdict,
+                "error": log.error,
+                "error_code": log.error_code,
+                "checks": [c.to_dict() for c in log.checks],
+            }
+            for log in sorted(logs, key=lambda item: item.path)
+        ],
+    }
+
+
+def render_json(logs: list[JudgedLog], policy_fingerprint: str) -> str:
+    """The JSON summary text (sorted keys, 2-space indent, trailing newline)."""
+    return (
+        json.dumps(
+            summary_dict(logs, policy_fingerprint), indent=2, sort_keys=True, allow_nan=False
+        )
+        + "\n"
+    )
+
+
+def _md(text: object) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def render_markdown(logs: list[JudgedLog]) -> str:
+    """A Markdown page for a CI job summary: counts, then failing logs and checks first."""
+    counts = Counter(log.verdict for log in logs)
+    icon = {"fail": "❌", "error": "💥", "warn": "⚠️", "pass": "✅"}
+    lines = [
+        "# syncaudit gate",
+        "",
+        " · ".join(f"{icon[v]} **{counts.get(v, 0)}** {v}" for v in VERDICTS)
+        + f" — {len(logs)} log(s)",
+        "",
+    ]
+    order = {v: i for i, v in enumerate(VERDICTS)}
+    ranked = sorted(logs, key=lambda log: (order[log.verdict], log.path))
+    bad = [log for log in ranked if log.verdict in ("fail", "error")]
+    if bad:
+        lines += ["## Failing logs", "", "| log | vehicle | verdict | check | measured | limit |"]
+        lines.append("| --- | --- | --- | --- | --- | --- |")
+        for log in bad:
+            if log.error is not None:
+                lines.append(
+                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | error | audit | "
+                    f"{_md(log.error)} | |"
+                )
+                continue
+            failed = log.failed_checks or []
+            if not failed:
+                lines.append(
+                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | cameras | no camera judged | |"
+                )
+            for check in failed:
+                value = "not measured" if check.value is None else f"{check.value:.6g} {check.unit}"
+                lines.append(
+                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {check.severity} | "
+                    f"{_md(check.subject)}: {check.check} | {_md(value.strip())} | "
+                    f"{_md(check.limit)} {_md(check.unit)} |"
+                )
+        lines.append("")
+    lines += ["## All logs", "", "| log | vehicle | verdict | checks failed | note |"]
+    lines.append("| --- | --- | --- | --- | --- |")
+    for log in ranked:
+        note = "unchanged, verdict from the database" if log.skipped else ""
+        n_failed = len(log.failed_checks)
+        lines.append(
+            f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {icon[log.verdict]} {log.verdict} | "
+            f"{n_failed} of {len(log.checks)} | {note} |"
+        )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,564 @@
+"""ROS 1 bag format 2.0: records, the index, a chunk scan for bags without one, chunk reading.
+
+Format (wiki.ros.org/Bags/Format/2.0): after the line `#ROSBAG V2.0\\n` come records, each
+`<header_len u32><header><data_len u32><data>`; a header is a run of
+`<field_len u32><name>=<value>` fields, `op` (u8) naming the record:
+
+- 0x03 bag header: `index_pos` (u64), `conn_count`, `chunk_count` (u32); padded to 4 KiB.
+- 0x05 chunk: `compression` ('none', 'bz2', 'lz4'), `size` (uncompressed, u32); its data
+  holds message data (0x02: `conn`, `time`) and connection (0x07) records.
+- 0x04 index data after each chunk: per connection, (time, offset in chunk) entries.
+- 0x07 connection (`conn`, `topic`; data: a header with `type`, `md5sum`,
+  `message_definition`, optional `callerid`, `latching`), then 0x06 chunk info
+  (`chunk_pos`, `start_time`, `end_time`, `count`; data: (conn, count) pairs) — the index
+  section at `index_pos`, written when the recording closes.
+
+`lz4` chunks are LZ4 *frames* (roslz4 writes the frame format; rosbags and Embag read them
+with the LZ4F frame decoder). A bag whose recorder died has `index_pos` 0 or an index cut
+off: it is then read by scanning the chunks from the start, as `rosbag reindex` does.
+"""
+
+from __future__ import annotations
+
+import bz2
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+import lz4.frame
+
+from syncaudit.errors import LogReadError
+from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.typesys import normalise_type_name, one_line
+
+MAGIC = b"#ROSBAG V2.0\n"
+OP_MSG_DATA = 0x02
+OP_BAG_HEADER = 0x03
+OP_INDEX_DATA = 0x04
+OP_CHUNK = 0x05
+OP_CHUNK_INFO = 0x06
+OP_CONNECTION = 0x07
+UNIT_KIND = "rosbag1-chunk"
+COMPRESSIONS = ("none", "bz2", "lz4")
+MAX_CHUNK_BYTES = 1 << 30
+"""Largest uncompressed chunk accepted (rosbag's default chunk is 768 KiB; a chunk grows past
+that only by one message bigger than it). Bounds what a hostile `size` field can allocate."""
+MAX_RATIO = 1000
+"""Largest uncompressed/compressed ratio accepted for chunks over 16 MiB (decompression bombs)."""
+
+MAX_HEADER_BYTES = 1 << 20
+"""Largest record header accepted: headers hold a few short fields (a topic, a type name);
+a larger length is damage, not a record cut off by the end of the file."""
+
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_TIME = struct.Struct("<II")
+
+
+class BagFormatError(Exception):
+    """A record that does not follow the format, at a byte offset of the file."""
+
+    def __init__(self, offset: int, problem: str) -> None:
+        super().__init__(f"{problem} at byte {offset}")
+        self.offset = offset
+        self.problem = problem
+
+
+class BagEncryptedError(BagFormatError):
+    """A bag written with rosbag's encryption plugin (its chunks cannot be read)."""
+
+
+class BagCutError(BagFormatError):
+    """A record whose bytes run past the end of the file (or of its chunk)."""
+
+
+def parse_header(buf: bytes | memoryview, start: int, end: int) -> dict[str, bytes]:
+    """The fields of a record header `buf[start:end]` by name (raises ValueError)."""
+    fields: dict[str, bytes] = {}
+    pos = start
+    while pos < end:
+        if pos + 4 > end:
+            raise ValueError("header field length cut off")
+        (size,) = _U32.unpack_from(buf, pos)
+        pos += 4
+        if pos + size > end:
+            raise ValueError("header field overruns its header")
+        raw = bytes(buf[pos : pos + size])
+        name, sep, value = raw.partition(b"=")
+        if not sep:
+            raise ValueError("header field without '='")
+        fields[name.decode("ascii", "replace")] = value
+        pos += size
+    return fields
+
+
+def _op(fields: dict[str, bytes]) -> int:
+    value = fields.get("op")
+    if value is None or len(value) != 1:
+        raise ValueError("record header has no one-byte 'op'")
+    return value[0]
+
+
+def _u32(fields: dict[str, bytes], name: str) -> int:
+    value = fields.get(name)
+    if value is None or len(value) != 4:
+        raise ValueError(f"record header field {name!r} is not a uint32")
+    return int(_U32.unpack(value)[0])
+
+
+def _u64(fields: dict[str, bytes], name: str) -> int:
+    value = fields.get(name)
+    if value is None or len(value) != 8:
+        raise ValueError(f"record header field {name!r} is not a uint64")
+    return int(_U64.unpack(value)[0])
+
+
+def _time(fields: dict[str, bytes], name: str) -> int:
+    value = fields.get(name)
+    if value is None or len(value) != 8:
+        raise ValueError(f"record header field {name!r} is not a time")
+    sec, nsec = _TIME.unpack(value)
+    return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def _text(fields: dict[str, bytes], name: str) -> str:
+    value = fields.get(name)
+    if value is None:
+        raise ValueError(f"record header has no {name!r}")
+    return value.decode("utf-8", "replace")
+
+
+def normalise_topic(name: str) -> str:
+    """Collapse repeated slashes as rosbags does ('//a//b/' -> '/a/b'), for identical topics."""
+    return ("/" if name.startswith("/") else "") + "/".join(x for x in name.split("/") if x)
+
+
+@dataclass(frozen=True, slots=True)
+class Connection:
+    """One connection record: a topic as published by one node, with its type definition."""
+
+    conn_id: int
+    topic: str
+    msgtype: str
+    """ROS 2 style name ('sensor_msgs/msg/Image'), as rosbags and schemas/ spell it."""
+    md5sum: str
+    definition: str
+    callerid: str | None
+    latching: bool
+
+
+def parse_connection(fields: dict[str, bytes], data: bytes | memoryview) -> Connection:
+    """A Connection from a connection record's header fields and data (raises ValueError)."""
+    conn_id = _u32(fields, "conn")
+    topic = normalise_topic(_text(fields, "topic"))
+    inner = parse_header(data, 0, len(data))
+    latching = inner.get("latching", b"0").strip() not in (b"", b"0")
+    return Connection(
+        conn_id=conn_id,
+        topic=topic,
+        msgtype=normalise_type_name(_text(inner, "type")),
+        md5sum=inner.get("md5sum", b"").decode("ascii", "replace"),
+        definition=inner.get("message_definition", b"").decode("utf-8", "replace"),
+        callerid=inner["callerid"].decode("utf-8", "replace") if "callerid" in inner else None,
+        latching=latching,
+    )
+
+
+@dataclass(slots=True)
+class ChunkSpan:
+    """What the index (or the scan) knows of one chunk record."""
+
+    offset: int
+    length: int
+    """Bytes of the chunk record (to the cut for the chunk a recording was cut inside)."""
+    compressed_bytes: int
+    start_ns: int
+    end_ns: int
+    counts: dict[int, int] = field(default_factory=dict)
+    """Messages per connection id."""
+
+
+@dataclass(slots=True)
+class BagIndex:
+    """Connections and chunks of a bag, from its index or from scanning its chunks."""
+
+    connections: dict[int, Connection]
+    chunks: list[ChunkSpan]
+    cut_at: int | None = None
+    """Byte offset where the file ends inside a record (None: the file is whole)."""
+    damage: str | None = None
+    """Why the index was not used (None: it was)."""
+
+
+class BagFile:
+    """A file read at offsets, with its size."""
+
+    def __init__(self, handle: BinaryIO, size: int) -> None:
+        self.handle = handle
+        self.size = size
+
+    def read(self, offset: int, length: int) -> bytes:
+        """Up to `length` bytes at `offset` (fewer at the end; none past it, whatever the
+        offset a damaged field names)."""
+        length = min(length, self.size - offset)
+        if offset < 0 or length <= 0:
+            return b""
+        self.handle.seek(offset)
+        return self.handle.read(length)
+
+    def record_at(self, offset: int) -> tuple[dict[str, bytes], int, int]:
+        """(header fields, data offset, data length) of the record at `offset`.
+
+        Raises BagCutError where the file ends inside the record, BagFormatError where the
+        header is unreadable.
+        """
+        head = self.read(offset, 4)
+        if len(head) < 4:
+            raise BagCutError(offset, "record header length cut off")
+        (hlen,) = _U32.unpack(head)
+        if hlen > MAX_HEADER_BYTES:
+            raise BagFormatError(offset, f"record header length {hlen} is not plausible")
+        raw = self.read(offset + 4, hlen + 4)
+        if len(raw) < hlen + 4:
+            raise BagCutError(offset, "record header cut off")
+        try:
+            fields = parse_header(raw, 0, hlen)
+        except ValueError as exc:
+            raise BagFormatError(offset, f"unreadable record header ({exc})") from None
+        (dlen,) = _U32.unpack_from(raw, hlen)
+        data_at = offset + 8 + hlen
+        return fields, data_at, dlen
+
+
+def read_bag_header(bag: BagFile) -> tuple[int, int, int, int]:
+    """(index_pos, conn_count, chunk_count, offset of the first record after it)."""
+    fields, data_at, dlen = bag.record_at(len(MAGIC))
+    try:
+        if _op(fields) != OP_BAG_HEADER:
+            raise ValueError("first record is not the bag header")
+        index_pos = _u64(fields, "index_pos")
+        conn_count = _u32(fields, "conn_count")
+        chunk_count = _u32(fields, "chunk_count")
+    except ValueError as exc:
+        raise BagFormatError(len(MAGIC), str(exc)) from None
+    encryptor = fields.get("encryptor", b"").decode("utf-8", "replace")
+    if encryptor:
+        raise BagEncryptedError(len(MAGIC), encryptor)
+    return index_pos, conn_count, chunk_count, data_at + dlen
+
+
+def read_index(bag: BagFile, index_pos: int, conn_count: int, chunk_count: int) -> BagIndex:
+    """The index section: connections, chunk infos, each chunk's record length.
+
+    Raises BagFormatError (or BagCutError) where any of it is unreadable: the caller scans.
+    """
+    connections: dict[int, Connection] = {}
+    chunks: list[ChunkSpan] = []
+    pos = index_pos
+    for number in range(conn_count + chunk_count):
+        fields, data_at, dlen = bag.record_at(pos)
+        if data_at + dlen > bag.size:
+            raise BagCutError(pos, "index record cut off")
+        data = bag.read(data_at, dlen)
+        try:
+            op = _op(fields)
+            if number < conn_count:
+                if op != OP_CONNECTION:
+                    raise ValueError(f"expected a connection record, found op {op:#04x}")
+                conn = parse_connection(fields, data)
+                connections[conn.conn_id] = conn
+            else:
+                if op != OP_CHUNK_INFO:
+                    raise ValueError(f"expected a chunk info record, found op {op:#04x}")
+                if _u32(fields, "ver") != 1:
+                    raise ValueError("chunk info version is not 1")
+                count = _u32(fields, "count")
+                if len(data) != 8 * count:
+                    raise ValueError("chunk info data does not hold its count")
+                pairs = struct.unpack(f"<{2 * count}I", data)
+                span = ChunkSpan(
+                    offset=_u64(fields, "chunk_pos"),
+                    length=0,
+                    compressed_bytes=0,
+                    start_ns=_time(fields, "start_time"),
+                    end_ns=_time(fields, "end_time"),
+                    counts=dict(zip(pairs[::2], pairs[1::2], strict=True)),
+                )
+                chunks.append(span)
+        except ValueError as exc:
+            raise BagFormatError(pos, f"bad index record ({exc})") from None
+        pos = data_at + dlen
+    for span in chunks:
+        fields, data_at, dlen = bag.record_at(span.offset)
+        try:
+            if _op(fields) != OP_CHUNK:
+                raise ValueError("chunk info points at a record that is not a chunk")
+        except ValueError as exc:
+            raise BagFormatError(span.offset, str(exc)) from None
+        if data_at + dlen > index_pos:
+            raise BagFormatError(span.offset, "chunk overruns the index section")
+        span.length = data_at + dlen - span.offset
+        span.compressed_bytes = dlen
+        unknown = set(span.counts) - set(connections)
+        if unknown:
+            raise BagFormatError(span.offset, f"chunk holds unknown connection {min(unknown)}")
+    return BagIndex(connections, chunks)
+
+
+def scan_chunks(bag: BagFile, first: int) -> BagIndex:
+    """Walk the records from `first`, decompressing each chunk, as `rosbag reindex` does.
+
+    Stops at the end of the file or at the first record that is cut off or unreadable; a
+    chunk cut off keeps the complete messages before the cut (streamed decompression).
+    """
+    index = BagIndex({}, [])
+    pos = first
+    while pos < bag.size:
+        try:
+            fields, data_at, dlen = bag.record_at(pos)
+            op = _op_at(fields, pos)
+        except BagCutError:
+            index.cut_at = bag.size
+            break
+        except BagFormatError as exc:
+            index.damage = one_line(exc)
+            break
+        end = data_at + dlen
+        cut = end > bag.size
+        if op == OP_CHUNK:
+            length = min(end, bag.size) - pos
+            span = ChunkSpan(pos, length, min(dlen, bag.size - data_at), 0, 0)
+            if not _scan_chunk(bag, span, index.connections, partial=cut):
+                if cut:
+                    index.cut_at = bag.size
+                    break
+                index.damage = f"chunk at byte {pos} unreadable"
+                break
+            if span.counts:
+                index.chunks.append(span)
+        elif op == OP_CONNECTION and not cut:
+            try:
+                conn = parse_connection(fields, bag.read(data_at, dlen))
+            except ValueError:
+                pass  # the copy inside a chunk already named it, or nothing needs it
+            else:
+                index.connections.setdefault(conn.conn_id, conn)
+        if cut:
+            index.cut_at = bag.size
+            break
+        pos = end
+    return index
+
+
+def _op_at(fields: dict[str, bytes], offset: int) -> int:
+    try:
+        return _op(fields)
+    except ValueError as exc:
+        raise BagFormatError(offset, str(exc)) from None
+
+
+def _scan_chunk(
+    bag: BagFile, span: ChunkSpan, connections: dict[int, Connection], *, partial: bool
+) -> bool:
+    """Fill `span` (counts, times) and `connections` from the chunk's records.
+
+    `partial`: the chunk is cut off by the end of the file. False where the chunk is
+    damaged (a whole one) or not one record of it could be read (a cut one).
+    """
+    try:
+        body = chunk_body(bag.read(span.offset, span.length), span.offset, partial=partial)
+        records = list(walk_records(body, span.offset, partial=partial))
+    except LogReadError:
+        return False
+    start: int | None = None
+    end: int | None = None
+    found = False
+    for op, fields, data in records:
+        found = True
+        try:
+            if op == OP_CONNECTION:
+                conn = parse_connection(fields, data)
+                connections.setdefault(conn.conn_id, conn)
+            elif op == OP_MSG_DATA:
+                conn_id = _u32(fields, "conn")
+                t = _time(fields, "time")
+                span.counts[conn_id] = span.counts.get(conn_id, 0) + 1
+                start = t if start is None else min(start, t)
+                end = t if end is None else max(end, t)
+        except ValueError:
+            break
+    span.start_ns = start or 0
+    span.end_ns = end or 0
+    return found
+
+
+def chunk_body(record: bytes, offset: int, *, partial: bool = False) -> bytes | memoryview:
+    """The uncompressed records of the chunk record `record` (at `offset` in its file).
+
+    `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
+    """
+    where = f"ROS 1 chunk at byte {offset}"
+    if len(record) < 8:
+        raise LogReadError(f"{where}: record cut off")
+    (hlen,) = _U32.unpack_from(record, 0)
+    if 8 + hlen > len(record):
+        raise LogReadError(f"{where}: record header cut off")
+    try:
+        fields = parse_header(record, 4, 4 + hlen)
+        compression = _text(fields, "compression")
+        size = _u32(fields, "size")
+    except ValueError as exc:
+        raise LogReadError(f"{where}: unreadable chunk header ({exc})") from None
+    (dlen,) = _U32.unpack_from(record, 4 + hlen)
+    data = memoryview(record)[8 + hlen : 8 + hlen + dlen]
+    if len(data) < dlen and not partial:
+        raise LogReadError(f"{where}: chunk data cut off ({len(data)} of {dlen} bytes)")
+    if size > MAX_CHUNK_BYTES or (size > 1 << 24 and size > MAX_RATIO * max(dlen, 1)):
+        raise LogReadError(
+            f"{where}: chunk claims {size} uncompressed bytes from {dlen} (refused as a "
+            "decompression bomb or a damaged size field)"
+        )
+    try:
+        body: bytes | memoryview
+        if compression == "none":
+            body = data  # a view of the record: no copy
+        elif compression == "bz2":
+            body = bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
+        elif compression == "lz4":
+            body = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+        else:
+            raise LogReadError(
+                f"{where}: chunk compression {compression!r} is not one of {COMPRESSIONS}"
+            )
+    except LogReadError:
+        raise
+    except Exception as exc:  # bz2 OSError, lz4 RuntimeError on damaged streams
+        raise LogReadError(f"{where}: {compression} data damaged: {one_line(exc)}") from None
+    if len(body) != size and not partial:
+        raise LogReadError(
+            f"{where}: chunk decompresses to {len(body)} bytes, its header says {size}"
+        )
+    return body
+
+
+def walk_records(
+    body: bytes | memoryview, offset: int, *, partial: bool = False
+) -> Iterator[tuple[int, dict[str, bytes], memoryview]]:
+    """(op, header fields, data) of each record in an uncompressed chunk body.
+
+    `partial`: the body is the decompressed start of a cut-off chunk; stop quietly at the
+    first incomplete record. Otherwise a record overrunning the body raises LogReadError.
+    """
+    view = memoryview(body)
+    size = len(body)
+    pos = 0
+    while pos < size:
+        problem = ""
+        if pos + 4 > size:
+            problem = "record cut off"
+        else:
+            (hlen,) = _U32.unpack_from(body, pos)
+            dlen_at = pos + 4 + hlen
+            if dlen_at + 4 > size:
+                problem = "record header overruns the chunk"
+            else:
+                (dlen,) = _U32.unpack_from(body, dlen_at)
+                end = dlen_at + 4 + dlen
+                if end > size:
+                    problem = "record data overruns the chunk"
+        if problem:
+            if partial:
+                return
+            raise LogReadError(
+                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
+            )
+        try:
+            fields = parse_header(body, pos + 4, dlen_at)
+            op = _op(fields)
+        except ValueError as exc:
+            if partial:
+                return
+            raise LogReadError(
+                f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the chunk: "
+                f"{exc})"
+            ) from None
+        yield op, fields, view[dlen_at + 4 : end]
+        pos = end
+
+
+def open_bag_file(path: Path) -> BagFile:
+    """Open a bag file for reading at offsets (caller closes `.handle`)."""
+    handle = path.open("rb")
+    handle.seek(0, 2)
+    size = handle.tell()
+    return BagFile(handle, size)
+
+
+class Rosbag1ChunkReader:
+    """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused.
+
+    `source` (optional) is the file the worker will read (`logs.units` builds one reader per
+    worker and file); units of other files are read too.
+    """
+
+    def __init__(self, source: str | None = None) -> None:
+        self._files: dict[str, BagFile] = {}
+        del source  # files are opened when their first unit is read
+
+    def messages(
+        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
+    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(log_time_ns, index_in_unit, connection id, payload) of wanted messages, file order.
+
+        A unit shorter than its chunk record is the chunk a recording was cut inside (the
+        scan made it so): its complete messages are read. Damage raises LogReadError.
+        """
+        bag = self._files.get(unit.source)
+        if bag is None:
+            try:
+                bag = open_bag_file(Path(unit.source))
+            except OSError as exc:
+                raise LogReadError(f"{unit.source}: cannot read: {one_line(exc)}") from exc
+            self._files[unit.source] = bag
+        record = bag.read(unit.offset, unit.length)
+        if len(record) < unit.length:
+            raise LogReadError(
+                f"{unit.source}: ROS 1 chunk at byte {unit.offset} cut off "
+                f"({len(record)} of {unit.length} bytes; file changed since it was opened?)"
+            )
+        partial = _declared_length(record) > unit.length
+        try:
+            body = chunk_body(record, unit.offset, partial=partial)
+            index = 0
+            for op, fields, data in walk_records(body, unit.offset, partial=partial):
+                if op != OP_MSG_DATA:
+                    continue
+                conn_id = _u32(fields, "conn")
+                if conn_id in channels:
+                    yield _time(fields, "time"), index, conn_id, data
+                index += 1
+        except LogReadError as exc:
+            raise LogReadError(f"{unit.source}: {exc}") from None
+        except ValueError as exc:
+            raise LogReadError(
+                f"{unit.source}: ROS 1 chunk at byte {unit.offset}: bad message record ({exc})"
+            ) from None
+
+    def close(self) -> None:
+        """Close the files opened so far."""
+        for bag in self._files.values():
+            bag.handle.close()
+        self._files.clear()
+
+
+def _declared_length(record: bytes) -> int:
+    """Length the chunk record says it has (header and data lengths), or 0 if unreadable."""
+    if len(record) < 4:
+        return 0
+    (hlen,) = _U32.unpack_from(record, 0)
+    if len(record) < 8 + hlen:
+        return 0
+    (dlen,) = _U32.unpack_from(record, 4 + hlen)
+    return int(8 + hlen + dlen)

@@ -1,0 +1,206 @@
+"""`fleet report`: the dashboard rendered in a real headless Chromium, and the exports."""
+
+from __future__ import annotations
+
+import csv
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import duckdb
+import pytest
+
+from syncaudit.fleet.checks import CheckResult
+from syncaudit.fleet.dashboard import write_report
+from syncaudit.fleet.database import ResultsDB
+from syncaudit.fleet.inputs import LogJob
+from syncaudit.fleet.job import LogOutcome
+from syncaudit.fleet.record import JudgedLog
+
+DAY_NS = 86_400 * 10**9
+ARTIFACTS = Path(tempfile.gettempdir()) / "syncaudit-test-artifacts" / "fleet"
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def _fleet_db(tmp_path: Path, outcome: LogOutcome) -> Path:
+    """Five days of one real audit per vehicle, Eq. 5 drifting up on car2 (last day fails 3000 us)."""
+    db = tmp_path / "fleet.duckdb"
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    logs = []
+    now_ns = time.time_ns() - 3600 * 10**9
+    for vehicle in ("car1", "car2"):
+        for day in range(5):
+            audit = dict(outcome.audit or {})
+            drift = 1.0 + (0.25 * day if vehicle == "car2" else 0.0)
+            audit["cameras"] = [
+                {**cam, "error_mean_us": cam["error_mean_us"] * drift} for cam in audit["cameras"]
+            ]
+            key = f"{vehicle}-{day}"
+            report = reports / f"{key}.html"
+            report.write_text(f"<html><body>{key}</body></html>")
+            checks = [
+                CheckResult(
+                    "camera",
+                    cam["camera"],
+                    "error_mean_us",
+                    cam["error_mean_us"],
+                    "<= 3000",
+                    "us",
+                    "fail",
+                    cam["error_mean_us"] <= 3000,
+                    "",
+                    None,
+                    3000.0,
+                )
+                for cam in audit["cameras"]
+            ]
+            failed = not all(c.passed for c in checks)
+            logs.append(
+                JudgedLog(
+                    job=LogJob(path=f"/uploads/{vehicle}/day{day}.mcap", vehicle=vehicle),
+                    key=key,
+                    fingerprint=key,
+                    rig_fingerprint=None,
+                    policy_fingerprint="p",
+                    tool_version="t",
+                    verdict="fail" if failed else "pass",
+                    checks=checks,
+                    audit=audit,
+                    start_ns=now_ns - (4 - day) * DAY_NS,
+                    report=str(report),
+                )
+            )
+    ResultsDB(db).write(logs)
+    return db
+
+
+def test_exports_hold_the_same_rows(tmp_path: Path, three_cameras_outcome: LogOutcome) -> None:
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    write_report(db, parquet=tmp_path / "fleet.parquet", csv=tmp_path / "fleet.csv")
+    rows = list(csv.DictReader((tmp_path / "fleet.csv").open()))
+    assert len(rows) == 2 * 5 * 3
+    with duckdb.connect() as con:
+        parquet = con.execute(
+            f"SELECT count(*), max(error_mean_us) FROM '{tmp_path / 'fleet.parquet'}'"
+        ).fetchone()
+    assert parquet is not None and parquet[0] == 30
+    assert parquet[1] == pytest.approx(max(float(r["error_mean_us"]) for r in rows))
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.skipif(
+    shutil.which("chromium") is None,
+    reason="chromium is not installed (.ci/run installs Debian's chromium package as root; "
+    "apt-get was unavailable here)",
+)
+def test_dashboard_renders_in_headless_chromium(
+    tmp_path: Path, three_cameras_outcome: LogOutcome
+) -> None:
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    out = tmp_path / "dashboard"
+    write_report(db, html_dir=out)
+    page = (out / "index.html").read_text()
+    assert "http://" not in page.replace('xmlns="http://www.w3.org/2000/svg"', "")
+    assert "https://" not in page and "<link" not in page and " src=" not in page  # self-contained
+    url = (out / "index.html").resolve().as_uri()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shot = ARTIFACTS / "dashboard.png"
+    with tempfile.TemporaryDirectory() as profile:
+        dom = subprocess.run(
+            [
+                "chromium",
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                "--enable-logging=stderr",
+                "--v=0",
+                "--dump-dom",
+                url,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+        )
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run(
+            [
+                "chromium",
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                f"--screenshot={shot}",
+                "--window-size=1280,2400",
+                url,
+            ],
+            capture_output=True,
+            timeout=60,
+            check=True,
+        )
+    print(f"dashboard screenshot: {shot}")
+    console = [line for line in dom.stderr.splitlines() if ":CONSOLE" in line]
+    assert console == [], console
+    html = dom.stdout
+    assert 'data-ready="yes"' in html  # the inline script ran to its end
+    assert len(re.findall(r'<section class="vehicle"', html)) == 2
+    assert len(re.findall(r'<svg class="plot"', html)) == 2 * 3 * 3
+    assert len(re.findall(r'class="limit"', html)) == 2 * 3  # Eq. 5 limit on each camera
+    failing = re.findall(r'<a class="fail" href="([^"]+)"', html)
+    assert len(failing) == 3 and all(f.endswith("car2-4.html") for f in failing)
+    assert (out / failing[0]).resolve().is_file()
+    assert shot.stat().st_size > 10_000 and shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_documented_queries_answer_on_a_fleet_database(
+    tmp_path: Path, three_cameras_outcome: LogOutcome
+) -> None:
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "fleet.md").read_text()
+    queries = [block.split("\n```", 1)[0] for block in docs.split("```sql\n")[1:]]
+    assert len(queries) == 3
+    with duckdb.connect(str(db), read_only=True) as con:
+        worst, drift, failing = (con.execute(q).fetchall() for q in queries)
+    # Worst cameras this week: car2's cameras first (their error grows 25 % a day).
+    assert len(worst) == 6 and all(row[0] == "car2" for row in worst[:3])
+    # Delay drift: one row per vehicle, camera and day; the first day has no change.
+    assert len(drift) == 2 * 3 * 5 and drift[0][4] is None
+    # Logs failing Eq. 5: the last day of car2, one row per camera.
+    assert {(row[0], row[1]) for row in failing} == {("/uploads/car2/day4.mcap", "car2")}
+    assert len(failing) == 3
+
+
+def test_fleet_report_exit_codes(tmp_path: Path, three_cameras_outcome: LogOutcome) -> None:
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    runner = CliRunner()
+    missing = runner.invoke(
+        app,
+        ["fleet", "report", "--db", str(tmp_path / "no.duckdb"), "--csv", str(tmp_path / "x.csv")],
+    )
+    assert missing.exit_code == 8 and "no such results database" in missing.output
+    assert (
+        runner.invoke(app, ["fleet", "report", "--db", str(tmp_path / "no.duckdb")]).exit_code == 64
+    )
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    (tmp_path / "x.csv").write_text("keep")
+    exists = runner.invoke(
+        app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv")]
+    )
+    assert exists.exit_code == 8 and (tmp_path / "x.csv").read_text() == "keep"
+    done = runner.invoke(
+        app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv"), "--overwrite"]
+    )
+    assert done.exit_code == 0 and len((tmp_path / "x.csv").read_text().splitlines()) == 31

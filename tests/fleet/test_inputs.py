@@ -1,0 +1,81 @@
+"""Finding logs: folders (ROS 2 bag folders as one log), globs, manifests, vehicle and rig."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mcap.writer import Writer
+
+from syncaudit.errors import ConfigError
+from syncaudit.fleet.inputs import discover, fingerprint, read_manifest
+from syncaudit.fleet.policy import parse_policy
+
+from .conftest import SAMPLES
+
+
+def test_directories_globs_and_bag_folders() -> None:
+    policy = parse_policy({}, "p")
+    found = discover([str(SAMPLES)], policy)
+    names = [Path(j.path).name for j in found.jobs]
+    # The .db3 bag folder is one log (not its inner .db3 file); rigs found beside each log.
+    assert names == [
+        "pandar40p_adaptive.mcap",
+        "vlp16_short.bag",
+        "vlp16_short_ros2",
+        "vlp16_three_cameras.mcap",
+    ]
+    assert all(j.rig_path == j.path + ".rig.yaml" for j in found.jobs)
+    globbed = discover([str(SAMPLES / "vlp16_*"), str(SAMPLES / "vlp16_short.bag")], policy)
+    assert [Path(j.path).name for j in globbed.jobs] == [
+        "vlp16_short.bag",
+        "vlp16_short_ros2",
+        "vlp16_three_cameras.mcap",
+    ]
+    assert discover([str(SAMPLES / "nothing*.mcap")], policy).problems
+
+
+def test_manifests_and_vehicle_sources(tmp_path: Path) -> None:
+    log = SAMPLES / "vlp16_three_cameras.mcap"
+    (tmp_path / "m.csv").write_text(
+        f"path,vehicle,rig,tags\n{log},car7,{log}.rig.yaml,night;rain\n"
+    )
+    (job,) = read_manifest(tmp_path / "m.csv")
+    assert (job.vehicle, job.rig_path, job.tags) == ("car7", f"{log}.rig.yaml", ("night", "rain"))
+    (tmp_path / "m.jsonl").write_text(json.dumps({"path": str(log), "tags": ["a"]}) + "\n")
+    policy = parse_policy({"vehicle_pattern": r"wt/(?P<vehicle>[a-z]+)/sample_logs"}, "p")
+    (job,) = discover([str(tmp_path / "m.jsonl")], policy).jobs
+    assert job.vehicle == "gate" and job.tags == ("a",)  # from the path pattern
+    (tmp_path / "bad.csv").write_text("log,car\nx,y\n")
+    with pytest.raises(ConfigError, match="'path' column"):
+        read_manifest(tmp_path / "bad.csv")
+    (tmp_path / "bad.jsonl").write_text("{not json\n")
+    with pytest.raises(ConfigError, match=r"bad.jsonl:1: not JSON"):
+        read_manifest(tmp_path / "bad.jsonl")
+
+
+def test_vehicle_from_mcap_metadata_wins_over_the_pattern(tmp_path: Path) -> None:
+    path = tmp_path / "car9" / "drive.mcap"
+    path.parent.mkdir()
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        writer.add_metadata("vehicle", {"vehicle_id": "VIN123"})
+        writer.finish()
+    policy = parse_policy({"vehicle_pattern": r"/(?P<vehicle>car\d+)/"}, "p")
+    (job,) = discover([str(path)], policy).jobs
+    assert job.vehicle == "VIN123"
+
+
+def test_fingerprint_follows_content(tmp_path: Path) -> None:
+    a = tmp_path / "a.mcap"
+    data = bytearray((SAMPLES / "vlp16_three_cameras.mcap").read_bytes())
+    a.write_bytes(data)
+    first = fingerprint(a)
+    assert fingerprint(a) == first
+    data[-100] ^= 1
+    a.write_bytes(data)
+    assert fingerprint(a) != first
+    bag = fingerprint(SAMPLES / "vlp16_short_ros2")
+    assert len(bag) == 32 and bag != first
