@@ -44,7 +44,7 @@ LONG_MUTANTS = 2000
 BASES: dict[str, str] = {
     "vlp16_mcap": "vlp16_three_cameras.mcap",
     "pandar_mcap": "pandar40p_adaptive.mcap",
-    "vlp16_db3": "vlp16_short.db3",
+    "vlp16_db3": "vlp16_short_ros2",
     "vlp16_bag": "vlp16_short.bag",
     "xt32_ros1_mcap": "sim:PandarXT32:mcap-ros1",
     "vlp32c_db3": "sim:VLP-32C:db3",
@@ -84,14 +84,19 @@ BAG_MUTATORS = (
 )
 
 
-def mutators_for(base: str) -> tuple[str, ...]:
-    """The mutators that apply to a base log."""
+def base_kind(base: str) -> str:
+    """'bag', 'db3' (a rosbag2 sqlite directory) or 'mcap'."""
     name = BASES[base]
     if name.endswith(".bag"):
-        return BAG_MUTATORS
-    if name.endswith(".db3") or name.endswith(":db3"):
-        return DB3_MUTATORS
-    return MCAP_MUTATORS
+        return "bag"
+    if name.endswith((".mcap", ":mcap", ":mcap-ros1")):
+        return "mcap"
+    return "db3"
+
+
+def mutators_for(base: str) -> tuple[str, ...]:
+    """The mutators that apply to a base log."""
+    return {"bag": BAG_MUTATORS, "db3": DB3_MUTATORS, "mcap": MCAP_MUTATORS}[base_kind(base)]
 
 
 @dataclass(frozen=True, slots=True)
@@ -470,9 +475,7 @@ def _cut_past_header(mutant: Mutant, log: Path) -> bool:
     (An MCAP cut inside its header record, or any log cut before its first page, holds
     nothing readable: exit 2 is right there.)
     """
-    if not mutant.mutator.startswith("truncate") or not BASES[mutant.base].endswith(
-        (".bag", ".db3", ":db3")
-    ):
+    if not mutant.mutator.startswith("truncate") or base_kind(mutant.base) == "mcap":
         return False
     data = mu.db3_file(log) if log.is_dir() else log
     return data.stat().st_size > 4096
@@ -617,9 +620,7 @@ KNOWN_OPEN: tuple[OpenCause, ...] = (
         "truncated-bag",
         14,
         "bagio",
-        lambda m, p, d, w: (
-            p == "truncation-unread" and BASES[m.base].endswith((".bag", ".db3", ":db3"))
-        ),
+        lambda m, p, d, w: p == "truncation-unread" and base_kind(m.base) != "mcap",
     ),
 )
 
