@@ -144,14 +144,14 @@ def base_paths(base: str, cache: Path) -> tuple[Path, Path]:
     if not name.startswith("sim:"):
         return SAMPLES / name, SAMPLES / f"{name}.rig.yaml"
     _, lidar, fmt = name.split(":")
-    suffix = ".db3" if fmt == "db3" else ".mcap"
-    out = cache / f"{base}{suffix}"
-    rig = cache / f"{base}{suffix}.rig.yaml"
+    out = cache / (base if fmt == "db3" else f"{base}.mcap")  # a .db3 bag is a directory
+    rig = cache / f"{out.name}.rig.yaml"
     if not rig.exists():
         subprocess.run(
             [
                 *syncaudit_cmd(),
                 "simulate",
+                "sync",
                 str(out),
                 "--lidar",
                 lidar,
