@@ -3,7 +3,10 @@
 The fast subset runs one seed of every case of the simulator's `MATRIX` (turntable and
 driving sessions: translation between stops, motion-distorted scans, roof/bumper/diagonal
 mounts, 16-128 beams, organised clouds, two-level tf chains, odometry) plus the refusals.
-`benchmarks/bench_calib.py` runs 10 seeds per case. Tolerances per beam class are the
+Each matrix session is simulated and calibrated once per module, two at a time in
+spawned workers, with 8 stops and 2-4 moving scans per move (`FAST_STOPS`,
+`FAST_MOVING_SCANS`); `benchmarks/bench_calib.py` runs 12 stops, 10-18 moving scans and
+10 seeds per case. Tolerances per beam class are the
 issue's: 16 beams 0.3 deg / 2 cm (sparse rings), 32 and 64 beams 0.1 deg / 1 cm,
 128 beams 0.05 deg / 0.5 cm.
 """

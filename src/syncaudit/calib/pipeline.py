@@ -13,9 +13,11 @@
    the nearest earlier stop whose motion verifies, so one weak link does not drop the rest;
 4. per LiDAR, align every pair of stops whose views should overlap with GICP; accept on
    point-to-plane error and conditioning (planar directions for a planar graph), with
-   overlap judged against the share the two views allow at the seed pose;
+   overlap judged against the share the two views allow at the seed pose; reject one that
+   moved far from the vehicle's coarse motion along a barely constrained direction (slid);
 5. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
-   stops the accepted alignments connect (loop closures included), anchored at a stop
+   stops the firm accepted alignments connect (weaker ones only close loops inside a
+   group, so a lone weak link cannot carry a slide into the map), anchored at a stop
    shared with the other LiDARs: every scan lands in that LiDAR's frame at the anchor
    stop -- its local map;
 6. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
