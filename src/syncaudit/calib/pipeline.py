@@ -498,6 +498,30 @@ def _moved_information(alignment: Alignment, shift_m: F64) -> float:
     return float(direction @ alignment.after.hessian[3:, 3:] @ direction)
 
 
+def _unless_slid(result: Alignment, seed: F64, seed_name: str) -> Alignment:
+    """`result`, rejected when it moved more than `_MAX_SEED_CORRECTION_M` from `seed`
+    along a barely constrained direction (it slid rather than converged)."""
+    if not result.accepted:
+        return result
+    # Where the source's origin lands in the target's frame, versus the seed's prediction.
+    shift = result.target_from_source[:3, 3] - seed[:3, 3]
+    moved_m = float(np.linalg.norm(shift))
+    if moved_m <= _MAX_SEED_CORRECTION_M:
+        return result
+    info = _moved_information(result, shift)
+    if info >= _MIN_MOVED_INFORMATION:
+        return result
+    x, y, z = (float(v) / moved_m for v in shift)
+    return dataclasses.replace(
+        result,
+        accepted=False,
+        reason=(
+            f"slid {moved_m * 100:.0f} cm from {seed_name} along ({x:.2f}, {y:.2f}, {z:.2f}), "
+            f"a direction barely constrained ({info:.3f} < {_MIN_MOVED_INFORMATION})"
+        ),
+    )
+
+
 def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
     """GICP of stop `b` onto stop `a` from `initial`, judged on its own quality and then on
     how far, and along how well constrained a direction, it moved from the vehicle's coarse
@@ -518,24 +542,7 @@ def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig
     if not result.accepted or a not in lidar.chain or b not in lidar.chain:
         return result
     coarse = se3.invert(lidar.chain[a]) @ lidar.chain[b]
-    # Where stop b's origin lands in stop a's frame, versus the coarse motion's prediction.
-    shift = result.target_from_source[:3, 3] - coarse[:3, 3]
-    moved_m = float(np.linalg.norm(shift))
-    if moved_m <= _MAX_SEED_CORRECTION_M:
-        return result
-    info = _moved_information(result, shift)
-    if info >= _MIN_MOVED_INFORMATION:
-        return result
-    x, y, z = (float(v) / moved_m for v in shift)
-    return dataclasses.replace(
-        result,
-        accepted=False,
-        reason=(
-            f"slid {moved_m * 100:.0f} cm from the vehicle's coarse motion along "
-            f"({x:.2f}, {y:.2f}, {z:.2f}), a direction barely constrained ({info:.3f} < "
-            f"{_MIN_MOVED_INFORMATION})"
-        ),
-    )
+    return _unless_slid(result, coarse, "the vehicle's coarse motion")
 
 
 def _edge(a: int, b: int, alignment: Alignment) -> posegraph.Edge:
@@ -914,6 +921,7 @@ def _extrinsic(
             max_iterations=config.registration.max_iterations,
             threads=config.registration.num_threads,
         )
+        m2m = _unless_slid(m2m, rec, "the recorded extrinsic")
         first = first or m2m
         pairs.append(
             MapPairOut(
