@@ -145,3 +145,19 @@ def test_a_rig_of_thousands_of_cameras_is_refused_at_once(rig: Rig) -> None:
     with pytest.raises(ConfigError, match=f"cameras: the rig lists {MAX_CAMERAS + 1} cameras"):
         audit_log(VLP16, many, jobs=1)
     assert time.monotonic() - start < 5.0
+
+
+def test_info_command_prints_what_it_read_then_exits_as_audit(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    log = _damaged_lidar(tmp_path)
+    runner = CliRunner()
+    audited = runner.invoke(app, ["audit", str(log), "--rig", f"{VLP16}.rig.yaml"])
+    shown = runner.invoke(app, ["info", str(log), "--rig", f"{VLP16}.rig.yaml"])
+    assert audited.exit_code in (3, 5)
+    assert shown.exit_code == audited.exit_code, shown.output
+    assert LIDAR in shown.stdout and "/cameras/front" in shown.stdout  # the table is printed
+    assert shown.stderr.startswith("error: ") and shown.stderr.count("\n") == 1
+    assert "Traceback" not in shown.output
