@@ -60,6 +60,7 @@ _OPTION_OF_FIELD: dict[str, str] = {
     "beams": "--beams",
     "recorded_rotation_error_deg": "--rotation-error-deg",
     "recorded_translation_error_cm": "--translation-error-cm",
+    "range_noise_m": "--range-noise-m",
 }
 """Simulator config fields and the options that set them, for messages in the user's words."""
 
@@ -213,6 +214,22 @@ def _format(out: Path, fmt: str | None) -> LogFormat:
         raise UsageError(f"--format: {exc}" if fmt else str(exc)) from None
 
 
+MOUNTS = ("roof_front_rear", "roof_left_right", "bumper_front_rear", "diagonal")
+MOTIONS = ("turntable", "drive")
+ORGANIZED = ("none", "second", "both")
+TF_CHAINS = ("direct", "sensor_kit")
+ODOMETRY = ("none", "odometry", "tf", "both")
+SCENES = ("yard", "ground_and_wall", "corridor")
+BEAMS = (16, 32, 64, 128)
+
+
+def _choice(option: str, value: str, allowed: tuple[str, ...]) -> str:
+    """`value` if it is one of `allowed` (case-insensitive), else a usage error naming the option."""
+    if value.lower() not in allowed:
+        raise UsageError(f"{option} must be one of {'|'.join(allowed)}, got {value!r}")
+    return value.lower()
+
+
 @simulate_app.command("calib")
 def simulate_calib(
     out: OutArgument,
@@ -220,21 +237,68 @@ def simulate_calib(
         int,
         typer.Option(
             "--beams",
-            min=2,
-            max=512,
-            help="Beams per LiDAR: up to 32 a VLP-32C-like pattern, more an OS1-128-like one.",
+            help="Beams per LiDAR: 16 (VLP-16-like), 32 (VLP-32C-like), 64 or 128 (OS1-like).",
         ),
     ] = 32,
     stops: Annotated[
-        int, typer.Option("--stops", min=2, max=720, help="Turntable stops (2 or more).")
+        int, typer.Option("--stops", min=2, max=720, help="Stops of the session (2 or more).")
     ] = 12,
+    mount: Annotated[
+        str, typer.Option("--mount", help=f"Where the two LiDARs sit: {'|'.join(MOUNTS)}.")
+    ] = "roof_front_rear",
+    motion: Annotated[
+        str,
+        typer.Option(
+            "--motion",
+            help="turntable (pure turns about a pivot) or drive (25-45 deg turns and 0.3-1.1 m "
+            "moves between short stops, motion-distorted scans while moving).",
+        ),
+    ] = "turntable",
+    organized: Annotated[
+        str,
+        typer.Option(
+            "--organized",
+            help="Which LiDARs publish organised beam x column clouds (zeros for no return): "
+            f"{'|'.join(ORGANIZED)}.",
+        ),
+    ] = "none",
+    tf_chain: Annotated[
+        str,
+        typer.Option(
+            "--tf-chain",
+            help="/tf_static as base_link -> lidar (direct) or base_link -> sensor_kit_base_link "
+            "-> lidar (sensor_kit).",
+        ),
+    ] = "direct",
+    odometry: Annotated[
+        str,
+        typer.Option(
+            "--odometry",
+            help="The vehicle's drifting odometry: none, odometry (nav_msgs/Odometry on /odom), "
+            "tf (/tf odom -> base_link) or both.",
+        ),
+    ] = "none",
+    scene: Annotated[
+        str,
+        typer.Option(
+            "--scene",
+            help="yard (walls, boxes, poles), ground_and_wall or corridor (both degenerate: "
+            "not calibratable).",
+        ),
+    ] = "yard",
+    range_noise_m: Annotated[
+        float,
+        typer.Option(
+            "--range-noise-m", min=0.0, max=0.5, help="Range noise of every LiDAR (m, 1 sigma)."
+        ),
+    ] = 0.01,
     rotation_error_deg: Annotated[
         float,
         typer.Option(
             "--rotation-error-deg",
             min=0.0,
             max=45.0,
-            help="Rotation error of the rear LiDAR's recorded extrinsic (deg).",
+            help="Rotation error of the second LiDAR's recorded extrinsic (deg).",
         ),
     ] = 0.05,
     translation_error_cm: Annotated[
@@ -243,59 +307,82 @@ def simulate_calib(
             "--translation-error-cm",
             min=0.0,
             max=100.0,
-            help="Translation error of the rear LiDAR's recorded extrinsic (cm).",
+            help="Translation error of the second LiDAR's recorded extrinsic (cm).",
         ),
     ] = 0.3,
     degenerate: Annotated[
         bool,
-        typer.Option(
-            "--degenerate", help="A scene of ground and one wall only (not calibratable)."
-        ),
+        typer.Option("--degenerate", help="Alias of --scene ground_and_wall."),
     ] = False,
     scans_per_stop: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--scans-per-stop",
             min=1,
             max=50,
-            help="Scans each LiDAR records per stop (2 or more lets calib find the stops).",
+            help="Turntable: scans each LiDAR records per stop (default 1; 2 or more lets "
+            "calib find the stops). drive sessions stand 0.45-0.8 s per stop.",
         ),
-    ] = 1,
+    ] = None,
     turning_scans: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--turning-scans",
             min=0,
             max=50,
-            help="Scans recorded while turning between stops (needs --scans-per-stop >= 2).",
+            help="Turntable: scans recorded while turning between stops (needs "
+            "--scans-per-stop >= 2). drive sessions record 10-18 per move.",
         ),
-    ] = 0,
+    ] = None,
     seed: SeedOption = 0,
     fmt: FormatOption = None,
     overwrite: OverwriteFlag = False,
 ) -> None:
-    """Write a turntable session of two non-overlapping LiDARs and its truth (OUT.truth.json)."""
+    """Write a calibration session of two non-overlapping LiDARs and its truth (OUT.truth.json)."""
 
     def job() -> None:
-        from syncaudit.calib.config import CalibSceneConfig, SceneConfig, rig_preset
+        from syncaudit.calib.config import calib_scene_config
         from syncaudit.simulate.calib_session import simulate_calib_session, truth_path
         from syncaudit.writers.log_writer import log_target
 
+        if beams not in BEAMS:
+            raise UsageError(f"--beams must be one of {'|'.join(map(str, BEAMS))}, got {beams}")
+        chosen = {
+            "mount": _choice("--mount", mount, MOUNTS),
+            "motion": _choice("--motion", motion, MOTIONS),
+            "organized": _choice("--organized", organized, ORGANIZED),
+            "tf_chain": _choice("--tf-chain", tf_chain, TF_CHAINS),
+            "odometry": _choice("--odometry", odometry, ODOMETRY),
+            "scene": _choice("--scene", scene, SCENES),
+        }
+        if degenerate:
+            if chosen["scene"] not in ("yard", "ground_and_wall"):
+                raise UsageError(f"--degenerate conflicts with --scene {chosen['scene']}")
+            chosen["scene"] = "ground_and_wall"
+        turntable_only = {"--scans-per-stop": scans_per_stop, "--turning-scans": turning_scans}
+        given = [name for name, value in turntable_only.items() if value is not None]
+        if chosen["motion"] == "drive" and given:
+            raise UsageError(f"{' and '.join(given)} only apply to --motion turntable")
         log_format = _format(out, fmt)
         target = log_target(out, log_format)
         try:
-            config = CalibSceneConfig(
-                seed=seed,
+            config = calib_scene_config(
+                beams=beams,
                 n_stops=stops,
-                scans_per_stop=scans_per_stop,
-                turning_scans=turning_scans,
-                scene=SceneConfig(kind="ground_and_wall" if degenerate else "yard"),
-                lidars=rig_preset(
-                    beams,
-                    rear_rotation_error_deg=rotation_error_deg,
-                    rear_translation_error_cm=translation_error_cm,
-                ),
+                seed=seed,
+                range_noise_m=range_noise_m,
+                rear_rotation_error_deg=rotation_error_deg,
+                rear_translation_error_cm=translation_error_cm,
+                **chosen,  # type: ignore[arg-type]
             )
+            if chosen["motion"] == "turntable":
+                config = type(config).model_validate(
+                    {
+                        **config.model_dump(),
+                        "scans_per_stop": 1 if scans_per_stop is None else scans_per_stop,
+                        "turning_scans": 0 if turning_scans is None else turning_scans,
+                    }
+                )
         except ConfigError as exc:
             raise _usage(exc) from None
         with output_set(overwrite=overwrite) as outputs:
@@ -306,7 +393,10 @@ def simulate_calib(
                 overwrite=overwrite,
                 outputs=outputs,
             )
-        line = f"wrote {target} ({stops} stops, {beams}-beam LiDARs), truth {truth_path(target)}"
+        line = (
+            f"wrote {target} ({chosen['motion']}, {stops} stops, {beams}-beam LiDARs "
+            f"{chosen['mount']}, {chosen['scene']}), truth {truth_path(target)}"
+        )
         emit(lambda: print(line))
 
     run(job)
