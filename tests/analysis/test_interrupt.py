@@ -17,7 +17,7 @@ import yaml
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
-# The real CLI, with one chunk per task and each task held 0.3 s in the worker, so that the
+# The real CLI, with one chunk per task and each task held 1 s in the worker, so that the
 # worker phase lasts seconds on any machine (the signal must arrive while it runs).
 RUN = """
 import sys, time
@@ -28,7 +28,7 @@ _extract = c._extract_group
 
 
 def slow(*args):
-    time.sleep(0.3)
+    time.sleep(1.0)
     return _extract(*args)
 
 

@@ -464,10 +464,17 @@ def test_a_signal_leaves_no_partial_output(tmp_path: Path, signum: int) -> None:
         stderr=subprocess.PIPE,
         text=True,
     )
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline and not any(tmp_path.glob(".syncaudit-*")):
+    # Wait for the write phase (its temporary) however loaded the machine: the arrays of a
+    # 120 s log take seconds to compute first, and the writing takes longer still.
+    deadline = time.monotonic() + 120
+    while (
+        time.monotonic() < deadline
+        and process.poll() is None
+        and not any(tmp_path.glob(".syncaudit-*"))
+    ):
         time.sleep(0.05)
     time.sleep(0.3)
+    assert process.poll() is None, "the simulation ended before it could be interrupted"
     process.send_signal(signum)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
