@@ -12,15 +12,14 @@ import numpy as np
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.topics import detect_cameras
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
-from syncaudit.lidar.scan import LidarScanner
+from syncaudit.lidar.scan import LidarScan, LidarScanner
 from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
-from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
-from syncaudit.rig import CameraConfig, LidarConfig, Rig
+from syncaudit.rig import CameraConfig, Rig
+from syncaudit.rig_guess import guess_rig
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
@@ -28,8 +27,18 @@ if TYPE_CHECKING:
 
     from syncaudit.analysis.replay import ReplayResult
     from syncaudit.analysis.sync import CameraSync
+    from syncaudit.camera.extract import CameraTables
 
 SCHEMA_VERSION = 1
+MIN_ZERO_CROSSINGS = 2
+"""A LiDAR is judged only with a whole revolution: two zero crossings."""
+
+
+def _no_revolution(lidar: LidarRow) -> str:
+    return (
+        f"{lidar.revolutions} zero crossing(s) in {lidar.packets} packets: "
+        "no complete revolution to measure"
+    )
 
 
 @dataclass(slots=True)
@@ -78,12 +87,33 @@ class AuditResult:
     warnings: list[str] = field(default_factory=list)
 
     @property
+    def not_judged(self) -> list[str]:
+        """What the audit could not judge and must: required cameras and the LiDAR."""
+        reasons = [
+            f"camera {c.sync.camera}: {c.sync.not_judged_reason}"
+            for c in self.cameras
+            if not c.sync.judged and not c.sync.optional
+        ]
+        if self.lidar.revolutions < MIN_ZERO_CROSSINGS:
+            reasons.insert(0, f"LiDAR topic {self.lidar.topic}: {_no_revolution(self.lidar)}")
+        return reasons
+
+    @property
+    def verdict(self) -> str:
+        """'pass', 'fail' (a judged camera crossed a threshold), 'not judged' or 'no cameras'."""
+        if not self.cameras:
+            return "no cameras"
+        if any(c.sync.judged and c.sync.needs_correction for c in self.cameras):
+            return "fail"
+        return "not judged" if self.not_judged else "pass"
+
+    @property
     def passed(self) -> bool:
-        """No camera crossed a threshold and the audit had cameras to judge."""
-        return bool(self.cameras) and not any(c.sync.needs_correction for c in self.cameras)
+        """Every required camera was judged and none crossed a threshold."""
+        return self.verdict == "pass"
 
     def frames(self) -> pd.DataFrame:
-        """Per-frame table of every camera (what --csv writes)."""
+        """Per-frame table of every camera (what --csv writes); stamps are Int64 ns."""
         import pandas as pd
 
         tables = [c.sync.frames for c in self.cameras]
@@ -97,9 +127,8 @@ class AuditResult:
                 "path": self.path,
                 "container": self.container,
                 "duration_s": self.duration_s,
-                "verdict": "pass"
-                if self.passed
-                else ("no cameras" if not self.cameras else "fail"),
+                "verdict": self.verdict,
+                "not_judged": self.not_judged,
                 "lidar": _row(self.lidar),
                 "clock_offset_s": self.clock_offset_ns / 1e9,
                 "thresholds": self.rig.thresholds.model_dump(),
@@ -117,24 +146,8 @@ def _row(row: Any) -> dict[str, Any]:
     return {name: getattr(row, name) for name in row.__slots__}
 
 
-def _default_rig(log: LogReader) -> tuple[Rig, list[str]]:
-    """A rig guessed from the log: the first packet topic and the cameras by type and name."""
-    packet_topics = guess_lidar_topics(log).topics
-    if not packet_topics:
-        raise NoDataError(
-            f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
-        )
-    cameras = detect_cameras(log.topics)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)"]
-    if cameras:
-        guessed.append(
-            "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
-        )
-    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
-
-
 def audit_log(
-    path: str | Path, rig: Rig | None = None, jobs: int | None = None, check_crc: bool = False
+    path: str | Path, rig: Rig | None = None, *, jobs: int | None = None, check_crc: bool = False
 ) -> AuditResult:
     """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics.
 
@@ -143,13 +156,17 @@ def audit_log(
     `check_crc` verifies every MCAP chunk's CRC (as the mcap reader, off by default: a
     damaged zstd/lz4 chunk fails to decompress anyway, and CRCs cost about as much CPU as
     the decompression).
+
+    Raises:
+        LogOpenError, LogReadError, UnknownTypeError, DecodeError: the log cannot be read.
+        NoDataError: the log holds nothing to audit (no messages, no LiDAR packets).
     """
     with open_log(path) as log:
         if log.summary.message_count == 0:
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
         guessed: list[str] = []
         if rig is None:
-            rig, guessed = _default_rig(log)
+            rig, guessed = guess_rig(log)
         elif rig.lidar.topic not in log.topics:
             raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
         jobs = default_jobs() if jobs is None else max(1, jobs)
@@ -200,18 +217,29 @@ def _import_analysis() -> None:
     importlib.import_module("syncaudit.analysis.replay")
 
 
-def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
-    warnings: list[str] = []
-    missing: list[str] = []
+Located = tuple[CameraConfig, float, str]
+"""A camera the audit can place: its config, centre azimuth and where that came from."""
+
+
+def _locate_cameras(log: LogReader, rig: Rig, warnings: list[str]) -> list[Located]:
+    """Cameras with a known centre azimuth (rig, or /tf_static with the vendor's +X)."""
     # /tf_static is read (and its types built) only for cameras the rig gives no angle.
     tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
-    located: list[tuple[CameraConfig, float, str]] = []
+    vendor = lidar_family(log.topics[rig.lidar.topic].msgtype)
+    located: list[Located] = []
     for cam in rig.cameras:
-        azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws)
+        azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws, vendor)
         if azimuth is None:
             warnings.append(f"camera {cam.name} skipped: {source}")
             continue
         located.append((cam, azimuth, source))
+    return located
+
+
+def _read(
+    log: LogReader, rig: Rig, located: list[Located], *, jobs: int, check_crc: bool
+) -> tuple[LidarScan, list[CameraTables]]:
+    """One pass over the log: the LiDAR's reduced timing and every camera's tables."""
     lidar_cfg = rig.lidar
     scanner = LidarScanner.create(
         lidar_cfg.topic,
@@ -232,15 +260,67 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
             builders[topic].exposures.append(payload)
         else:
             builders[topic].triggers.append(payload)
-    from syncaudit.analysis.replay import replay_controller
-    from syncaudit.analysis.sync import analyze_camera, host_offset_ns
-
     scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
+    by_camera = {b.camera.name: b for b in builders.values()}
+    tables = [by_camera.get(c.name, CameraTableBuilder(c)).build() for c, _, _ in located]
+    return scan, tables
+
+
+def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[str]) -> int:
+    """Host minus sensor clock from every camera's triggers (a property of the LiDAR)."""
+    from syncaudit.analysis.offset import host_offset_ns
+
+    packet, driver = [], []
+    for t in tables:
+        both = t.triggers.dropna(subset=["lidar_packet_ns"])
+        both = both[both["lidar_packet_ns"] > 0]  # 0: the driver left it unset
+        packet.append(both["lidar_packet_ns"].to_numpy(np.int64))
+        if both["lidar_driver_ns"].notna().all():
+            driver.append(both["lidar_driver_ns"].to_numpy(np.int64))
+    packet_ns = np.concatenate(packet) if packet else np.empty(0, np.int64)
+    driver_ns = np.concatenate(driver) if len(driver) == len(packet) and driver else packet_ns[:0]
+    offset, how = host_offset_ns(scan, packet_ns, driver_ns)
+    if scan.clock is not None and not scan.clock.synchronised:
+        warnings.append(
+            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
+            f"(not synchronised): offset {offset / 1e9:+.6f} s {how}; t1 reported as "
+            "spread above the minimum"
+        )
+    return offset
+
+
+def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[str]:
+    """What one camera's log lacks."""
+    checks = (
+        (
+            f"image topic {cam.image_topic} is not in the log"
+            if cam.image_topic
+            else "no image topic (set image_topic in the rig)",
+            cam.image_topic in log.topics if cam.image_topic else False,
+        ),
+        ("no exposure metadata", tables.exposure_source is not None),
+        ("no trigger records", tables.trigger_source is not None),
+    )
+    return [f"camera {cam.name}: {what}" for what, present in checks if not present]
+
+
+def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
+    """Locate the cameras, read the log once, find the clock offset, analyse each camera."""
+    from syncaudit.analysis.replay import replay_controller
+    from syncaudit.analysis.sync import analyze_camera
+
+    warnings: list[str] = []
+    missing: list[str] = []
+    located = _locate_cameras(log, rig, warnings)
+    scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc)
     warnings.extend(scan.warnings)
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
+    if scan.revolutions.count < MIN_ZERO_CROSSINGS:
+        missing.append(f"LiDAR topic {rig.lidar.topic}: {_no_revolution(lidar_row(scan))}")
+    offset = _clock_offset(scan, all_tables, warnings)
     controller = ControllerConfig(
         window_frames=rig.analysis.window_frames,
         mean_error_threshold_ns=round(rig.thresholds.error_mean_us * 1e3),
@@ -248,46 +328,19 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
         mode=rig.analysis.correction,
         min_frames=rig.analysis.window_frames,
     )
-    empty = {c.name: CameraTableBuilder(c) for c, _, _ in located}
-    by_camera = {b.camera.name: b for b in builders.values()}
-    all_tables = [by_camera.get(c.name, empty[c.name]).build() for c, _, _ in located]
-    packet_ns = [t.triggers["lidar_packet_ns"].dropna().to_numpy(np.int64) for t in all_tables]
-    offset, how = host_offset_ns(
-        scan, np.concatenate(packet_ns) if packet_ns else np.empty(0, np.int64)
-    )
-    if scan.clock is not None and not scan.clock.synchronised:
-        warnings.append(
-            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
-            f"(not synchronised): offset {offset / 1e9:+.6f} s {how}; t1 reported as "
-            "spread above the minimum"
-        )
     result_cams: list[CameraAudit] = []
     for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
-        image_missing = (
-            f"image topic {cam.image_topic} is not in the log"
-            if cam.image_topic
-            else "no image topic (set image_topic in the rig)"
-        )
-        for what, present in (
-            (image_missing, cam.image_topic in log.topics if cam.image_topic else False),
-            ("exposure metadata", tables.exposure_source is not None),
-            ("trigger records", tables.trigger_source is not None),
-        ):
-            if not present:
-                missing.append(
-                    f"camera {cam.name}: {what if what is image_missing else 'no ' + what}"
-                )
+        missing.extend(_missing(log, cam, tables))
         sync = analyze_camera(
             scan,
-            index,
-            cam,
-            azimuth,
             tables,
-            offset,
-            lidar_cfg.zero_azimuth_deg,
-            lidar_cfg.azimuth_increases,
-            rig.analysis,
-            rig.thresholds,
+            camera=cam,
+            target_index=index,
+            camera_azimuth_deg=azimuth,
+            offset_ns=offset,
+            lidar=rig.lidar,
+            analysis=rig.analysis,
+            thresholds=rig.thresholds,
         )
         result_cams.append(
             CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))

@@ -62,6 +62,9 @@ class CameraConfig(_Strict):
     """What the image header stamp marks; drivers differ."""
     assumed_exposure_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
     """Exposure to assume where the log has no exposure metadata (marked as assumed)."""
+    optional: bool = False
+    """An optional camera that cannot be judged (too few paired frames) does not fail the
+    gate; a required one does."""
 
 
 class Thresholds(_Strict):
@@ -73,6 +76,12 @@ class Thresholds(_Strict):
     error_var_us2: float = Field(40_000.0, gt=0.0, le=MAX_LATENCY_US**2)
     """Eq. 6 limit. Default (200 us)^2: the variance of |error| under jitter of std s is
     about 0.36 s^2, so this is crossed by instability, not by ordinary jitter."""
+    min_paired_frames: int = Field(20, ge=1)
+    """A camera with fewer frames paired with the LiDAR is not judged: Eq. 5/6 over a
+    handful of frames say nothing (20 frames = 2 s at 10 Hz, two windows of Eq. 3)."""
+    min_paired_fraction: float = Field(0.5, ge=0.0, le=1.0)
+    """...nor one with fewer than this share of its frames paired: a verdict on the few
+    frames that paired would hide why the rest did not."""
 
 
 class AnalysisConfig(_Strict):

@@ -423,6 +423,46 @@ def test_config_validation() -> None:
         SyncSimConfig(lidar_model="HDL-64E")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(
+    ("model", "convention", "offset"),
+    [("VLP-16", "first_after", 0), ("Pandar40P", "containing", 2), ("VLP-32C", "containing", -2)],
+)
+def test_trigger_packet_conventions_name_real_packets(
+    tmp_path: Path, model: str, convention: str, offset: int
+) -> None:
+    """Each TriggerEvent names a packet in the log, chosen by the convention from the
+    decoded azimuths alone (an independent check of the simulator's choice)."""
+    out = tmp_path / "log.mcap"
+    config = SyncSimConfig(
+        duration_s=1.0,
+        seed=9,
+        lidar_model=model,  # type: ignore[arg-type]
+        trigger_packet=convention,  # type: ignore[arg-type]
+        trigger_packet_offset=offset,
+        packet_drop_fraction=0.02,
+    )
+    truth = simulate_sync_log(out, config)
+    with open_log(out) as log:
+        timing, _ = _decode_lidar(log, truth)
+    stamps = timing.sensor_time_ns  # synchronised clock: sensor time = host time
+    zero = truth["lidar"]["zero_azimuth_deg"]
+    # Unwrapped angle past the zero azimuth of every block, in turns.
+    rel = (timing.block_azimuth_deg - zero) % 360.0
+    turn = np.cumsum(np.concatenate(([0], np.diff(rel[:, 0]) < -180.0)))
+    first_block = rel[:, 0] / 360.0 + turn
+    frames = _frames(truth, "front")
+    named = np.searchsorted(stamps, frames["lidar_packet_ns"])
+    assert np.array_equal(stamps[named], frames["lidar_packet_ns"])  # a packet of the log
+    for row in named.tolist():
+        # The packet the convention picks for this crossing, from the decoded azimuths.
+        crossing = np.floor(first_block[row] + 0.5)  # the nearest crossing's turn
+        containing = int(np.searchsorted(first_block, crossing, side="left"))
+        if convention == "containing" and rel[containing - 1, -1] < 180.0:
+            containing -= 1  # the crossing falls inside the previous packet
+        expected = containing + offset
+        assert row == expected
+
+
 def test_sync_sim_config_reads_the_names_users_write() -> None:
     from syncaudit.errors import ConfigError
     from syncaudit.simulate.sync_log import lidar_model, sync_sim_config

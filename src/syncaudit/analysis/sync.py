@@ -17,15 +17,32 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from syncaudit.analysis.pairing import (
+    PAIR_TOLERANCE_NS,
+    PHASE_FROM_TRACKER,
+    PHASE_FROM_TRIGGER,
+    RevolutionPairing,
+    pair_revolutions,
+    pair_triggers,
+)
+from syncaudit.analysis.stamps import (
+    MISSING_NS,
+    delta_ns,
+    nullable,
+    present,
+    stamps_ns,
+    values_ns,
+)
 from syncaudit.analysis.stats import error_mean, error_variance, rolling_mean, rolling_variance
 from syncaudit.camera.extract import CameraTables
+from syncaudit.lidar.clock import ClockReport
 from syncaudit.lidar.scan import LidarScan
-from syncaudit.rig import AnalysisConfig, CameraConfig, Thresholds
+from syncaudit.rig import AnalysisConfig, CameraConfig, LidarConfig, Thresholds
 from syncaudit.units import finite_or_none, ns_to_us
 
+__all__ = ["CameraSync", "LatencyStats", "analyze_camera", "pair_triggers", "theta_deg"]
+
 FULL_TURN_DEG = 360.0
-PAIR_TOLERANCE_NS = 50_000_000
-"""A trigger belongs to a frame when it precedes the exposure by less than this."""
 LATENCIES = ("t1", "t2", "t3", "t4")
 
 
@@ -60,7 +77,11 @@ class CameraSync:
     omega_deg_s: float
     t_rotate_ns: float
     packet_phase_ns: float
-    """Mean time from the trigger packet's stamp to the zero crossing it carries."""
+    """Mean time from the stamp of the packet the trigger fired from to the zero crossing
+    of the frame's revolution."""
+    packet_phase_source: str
+    """Which packet the phases were measured from: 'trigger packet' (the packet the
+    trigger names), 'tracker zero packet' (the trigger names none), 'mixed: ...' or 'none'."""
     latencies: dict[str, LatencyStats]
     t5_mean_ns: float
     delay_applied_ns: float
@@ -81,12 +102,24 @@ class CameraSync:
     mean_exceeded: bool
     var_exceeded: bool
     frames: pd.DataFrame = field(repr=False)
+    judged: bool = True
+    """Whether enough frames paired for Eq. 5/6 to be a verdict (rig thresholds)."""
+    not_judged_reason: str | None = None
+    optional: bool = False
+    """The rig marks the camera optional: not judged does not fail the audit."""
     warnings: list[str] = field(default_factory=list)
 
     @property
     def needs_correction(self) -> bool:
         """Whether Eq. 5 or Eq. 6 crossed its threshold over the whole log."""
         return self.mean_exceeded or self.var_exceeded
+
+    @property
+    def verdict(self) -> str:
+        """'pass', 'fail' (a threshold crossed) or 'not judged' (too few paired frames)."""
+        if not self.judged:
+            return "not judged"
+        return "fail" if self.needs_correction else "pass"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (times in microseconds, see schemas/audit.schema.json)."""
@@ -96,6 +129,7 @@ class CameraSync:
             "omega_deg_s": finite_or_none(self.omega_deg_s),
             "t_rotate_us": ns_to_us(self.t_rotate_ns),
             "packet_phase_us": ns_to_us(self.packet_phase_ns),
+            "packet_phase_source": self.packet_phase_source,
             "latencies": {k: v.to_dict() for k, v in self.latencies.items()},
             "t5_mean_us": ns_to_us(self.t5_mean_ns),
             "delay_applied_us": ns_to_us(self.delay_applied_ns),
@@ -114,6 +148,10 @@ class CameraSync:
             "mean_threshold_exceeded": self.mean_exceeded,
             "var_threshold_exceeded": self.var_exceeded,
             "needs_correction": self.needs_correction,
+            "judged": self.judged,
+            "not_judged_reason": self.not_judged_reason,
+            "optional": self.optional,
+            "verdict": self.verdict,
             "warnings": list(self.warnings),
         }
 
@@ -124,71 +162,65 @@ def theta_deg(camera_azimuth_deg: float, zero_azimuth_deg: float, azimuth_increa
     return (delta if azimuth_increases else -delta) % FULL_TURN_DEG
 
 
-def host_offset_ns(scan: LidarScan, packet_ns: NDArray[np.int64]) -> tuple[int, str]:
-    """Host minus sensor clock: 0 when synchronised, else from triggers or the clock floor.
+@dataclass(frozen=True, slots=True)
+class _Rotation:
+    """Eq. 1 for one camera: theta, the mean angular velocity, t_rotate."""
 
-    `packet_ns` are the triggers' checkpoint-240 stamps (the zero-crossing packet in host
-    time) of every camera; it is a property of the LiDAR, computed once per log.
-    """
-    clock = scan.clock
-    if clock is None or clock.synchronised:
-        return 0, "synchronised"
-    packet = packet_ns
-    zero_pkt = scan.revolutions.zero_packet_sensor_ns
-    if packet.size and zero_pkt.size:
-        # The trigger's 240 stamp is the zero-crossing packet in host time: pair by the
-        # floor estimate, then take the median residual as the offset.
-        guess = packet - clock.offset_ns
-        idx = _nearest(zero_pkt, guess)
-        return int(np.median(packet - zero_pkt[idx])), "from trigger packet stamps"
-    return clock.offset_ns, "minimum filter (absolute errors uncertain by the t1 floor)"
+    theta_deg: float
+    omega_deg_s: float
+    t_rotate_ns: float
+
+    @property
+    def period_ns(self) -> float:
+        """One revolution (NaN where the rate is unknown)."""
+        return 1e9 * FULL_TURN_DEG / self.omega_deg_s if self.omega_deg_s else math.nan
 
 
-def _nearest(sorted_values: NDArray[np.int64], query: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Index of the nearest element of a sorted array for each query."""
-    idx = np.searchsorted(sorted_values, query)
-    idx = np.clip(idx, 1, max(sorted_values.size - 1, 1))
-    left = sorted_values[idx - 1]
-    right = sorted_values[np.minimum(idx, sorted_values.size - 1)]
-    choose_left = np.abs(query - left) <= np.abs(right - query)
-    return np.where(choose_left, idx - 1, idx).astype(np.int64)
+def _rotation(scan: LidarScan, camera_azimuth_deg: float, lidar: LidarConfig) -> _Rotation:
+    """Eq. 1 from the camera azimuth and the revolutions' measured rate."""
+    theta = theta_deg(camera_azimuth_deg, lidar.zero_azimuth_deg, lidar.azimuth_increases)
+    omega = scan.revolutions.omega_deg_s
+    omega = omega[np.isfinite(omega)]
+    omega_mean = float(omega.mean()) if omega.size else math.nan
+    t_rotate = theta / omega_mean * 1e9 if omega_mean else math.nan
+    return _Rotation(theta, omega_mean, t_rotate)
 
 
-def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> pd.DataFrame:
-    """Frames with their trigger's checkpoints: by frame sequence, else by time."""
-    checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
-    if triggers.empty:
-        out = frames.copy()
-        for col in checkpoint_cols:
-            out[f"trig_{col}"] = pd.array([pd.NA] * len(out), dtype="Int64")
-        return out
-    trig = triggers[["frame_sequence", *checkpoint_cols]].add_prefix("trig_")
-    if frames["frame_sequence"].notna().all() and triggers["frame_sequence"].notna().all():
-        trig = trig.drop_duplicates("trig_frame_sequence", keep="last")
-        merged = frames.merge(
-            trig, left_on="frame_sequence", right_on="trig_frame_sequence", how="left"
-        )
-        return merged.drop(columns="trig_frame_sequence")
-    key = (
-        "trig_exposure_start_ns"
-        if trig["trig_exposure_start_ns"].notna().any()
-        else "trig_camera_sensor_ns"
+def _t_l_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
+    """Mid-exposure per frame, exposure start + t5_i // 2, int64 (`MISSING_NS` if unknown)."""
+    start = stamps_ns(frames, "exposure_start_ns")
+    duration = stamps_ns(frames, "exposure_duration_ns")
+    ok = present(start) & present(duration)
+    return np.where(ok, start + np.where(ok, duration, 0) // 2, MISSING_NS)
+
+
+@dataclass(frozen=True, slots=True)
+class _Errors:
+    """Eq. 4 per frame, signed, and why frames stayed unpaired."""
+
+    signed_ns: NDArray[np.float64]
+    """t_l - t_estimated where paired, else NaN."""
+    paired: NDArray[np.bool_]
+    unpaired: dict[str, int]
+
+
+def _errors(
+    t_l_ns: NDArray[np.int64], t_estimated_ns: NDArray[np.int64], *, period_ns: float
+) -> _Errors:
+    """Signed error per frame; beyond a quarter revolution a frame is not paired."""
+    signed = delta_ns(t_l_ns, t_estimated_ns)
+    quarter = 0.25 * period_ns if math.isfinite(period_ns) else math.inf
+    has_t_l = present(t_l_ns)
+    far = np.isfinite(signed) & (np.abs(np.nan_to_num(signed)) > quarter)
+    unpaired = {
+        "no exposure metadata": int(np.sum(~has_t_l)),
+        "no LiDAR revolution": int(np.sum(has_t_l & ~present(t_estimated_ns))),
+        "error beyond a quarter revolution": int(np.sum(far)),
+    }
+    paired = np.isfinite(signed) & ~far
+    return _Errors(
+        np.where(paired, signed, np.nan), paired, {k: v for k, v in unpaired.items() if v}
     )
-    # Frames without exposure metadata pair by their header stamp instead.
-    when = frames["exposure_start_ns"].fillna(frames["header_stamp_ns"]).astype("float64")
-    left = frames.assign(_t=when, _row=np.arange(len(frames)))
-    timed = left.dropna(subset=["_t"]).sort_values("_t")
-    right = trig.assign(_t=trig[key].astype("float64")).dropna(subset=["_t"]).sort_values("_t")
-    merged = pd.merge_asof(
-        timed,
-        right.drop(columns="trig_frame_sequence"),
-        on="_t",
-        direction="backward",
-        tolerance=PAIR_TOLERANCE_NS,
-    )
-    untimed = left[left["_t"].isna()]
-    merged = pd.concat([merged, untimed], ignore_index=True).sort_values("_row")
-    return merged.drop(columns=["_t", "_row"]).reset_index(drop=True)
 
 
 def _latency(
@@ -209,94 +241,27 @@ def _latency(
     return values, LatencyStats("not observed", math.nan, math.nan, math.nan, 0)
 
 
-def _col(df: pd.DataFrame, name: str) -> NDArray[np.float64]:
-    """A column as float64 with NaN for missing values (all NaN where the column is absent)."""
-    if name not in df:
-        return np.full(len(df), np.nan, dtype=np.float64)
-    values: NDArray[np.float64] = np.asarray(
-        df[name].astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan), dtype=np.float64
-    )
-    return values
+def _latencies(
+    frames: pd.DataFrame, clock: ClockReport | None, analysis: AnalysisConfig
+) -> tuple[dict[str, NDArray[np.float64]], dict[str, LatencyStats]]:
+    """t1..t4 per frame from the trigger checkpoints (t3 without the applied delay).
 
-
-def analyze_camera(
-    scan: LidarScan,
-    target_index: int,
-    camera: CameraConfig,
-    camera_azimuth_deg: float,
-    tables: CameraTables,
-    offset: int,
-    zero_azimuth_deg: float,
-    azimuth_increases: bool,
-    analysis: AnalysisConfig,
-    thresholds: Thresholds,
-) -> CameraSync:
-    """Eq. 1-6 for one camera over the whole log; `offset` is host minus sensor clock (ns)."""
-    warnings: list[str] = []
-    revs = scan.revolutions
-    theta = theta_deg(camera_azimuth_deg, zero_azimuth_deg, azimuth_increases)
-    omega = revs.omega_deg_s[np.isfinite(revs.omega_deg_s)]
-    omega_mean = float(omega.mean()) if omega.size else math.nan
-    t_rotate = theta / omega_mean * 1e9 if omega_mean else math.nan
-    frames = pair_triggers(tables.frames, tables.triggers)
-    n = len(frames)
-    start = _col(frames, "exposure_start_ns")
-    duration = _col(frames, "exposure_duration_ns")
-    t_l = start + duration / 2.0
-
-    # Revolution of each frame: the trigger's packet where recorded, else the nearest crossing.
-    crossing = revs.crossing_sensor_ns[:, target_index] if revs.count else np.empty(0, np.int64)
-    crossing_host = np.where(crossing >= 0, crossing + offset, -1)
-    pkt = _col(frames, "trig_lidar_packet_ns")
-    rev_idx = np.full(n, -1, dtype=np.int64)
-    if revs.count:
-        zero_host = revs.zero_packet_sensor_ns + offset
-        has_pkt = np.isfinite(pkt)
-        if has_pkt.any():
-            q = pkt[has_pkt].astype(np.int64)
-            idx = _nearest(zero_host, q)
-            close = np.abs(zero_host[idx] - q) < PAIR_TOLERANCE_NS
-            rev_idx[np.flatnonzero(has_pkt)[close]] = idx[close]
-        no_pkt = ~has_pkt & np.isfinite(t_l)
-        valid_cross = np.flatnonzero(crossing_host >= 0)
-        if no_pkt.any() and valid_cross.size:
-            idx = _nearest(crossing_host[valid_cross], t_l[no_pkt].astype(np.int64))
-            rev_idx[no_pkt] = valid_cross[idx]
-    t_est = np.full(n, np.nan)
-    has_rev = rev_idx >= 0
-    t_est[has_rev] = crossing_host[rev_idx[has_rev]]
-    t_est[t_est < 0] = np.nan
-    revolution_start = np.full(n, np.nan)
-    if revs.count:
-        revolution_start[has_rev] = revs.zero_crossing_sensor_ns[rev_idx[has_rev]] + offset
-    packet_phase = np.full(n, np.nan)
-    if revs.count:
-        zc = (revs.zero_crossing_sensor_ns - revs.zero_packet_sensor_ns).astype(np.float64)
-        packet_phase[has_rev] = zc[rev_idx[has_rev]]
-
-    signed = t_l - t_est
-    half_period = 0.25 * 1e9 * FULL_TURN_DEG / omega_mean if omega_mean else math.inf
-    unpaired = {
-        "no exposure metadata": int(np.sum(~np.isfinite(t_l))),
-        "no LiDAR revolution": int(np.sum(np.isfinite(t_l) & ~np.isfinite(t_est))),
-        "error beyond a quarter revolution": int(np.sum(np.abs(signed) > half_period)),
-    }
-    paired = np.isfinite(signed) & (np.abs(signed) <= half_period)
-    signed = np.where(paired, signed, np.nan)
-    t_error = np.abs(signed)
-
-    # Latencies from the trigger checkpoints (t3 has the applied delay removed).
-    applied = _col(frames, "trig_applied_delay_ns")
+    Where the log does not record a latency the rig's assumption stands in; t1 falls back
+    to the LiDAR clock's packet statistics when no trigger records its packet.
+    """
+    packet = stamps_ns(frames, "trig_lidar_packet_ns")
+    driver = stamps_ns(frames, "trig_lidar_driver_ns")
+    cam_driver = stamps_ns(frames, "trig_camera_driver_ns")
+    cam_sensor = stamps_ns(frames, "trig_camera_sensor_ns")
+    applied = values_ns(frames, "trig_applied_delay_ns")
     raw = {
-        "t1": _col(frames, "trig_lidar_driver_ns") - _col(frames, "trig_lidar_packet_ns"),
-        "t2": _col(frames, "trig_camera_driver_ns") - _col(frames, "trig_lidar_driver_ns"),
-        "t3": _col(frames, "trig_camera_sensor_ns")
-        - _col(frames, "trig_camera_driver_ns")
-        - applied,
-        "t4": _col(frames, "trig_exposure_start_ns") - _col(frames, "trig_camera_sensor_ns"),
+        "t1": delta_ns(driver, packet),
+        "t2": delta_ns(cam_driver, driver),
+        "t3": delta_ns(cam_sensor, cam_driver) - applied,
+        "t4": delta_ns(stamps_ns(frames, "trig_exposure_start_ns"), cam_sensor),
     }
-    if not np.isfinite(raw["t1"]).any() and scan.clock is not None:
-        raw["t1"] = np.full(n, scan.clock.t1_mean_ns)
+    if not np.isfinite(raw["t1"]).any() and clock is not None:
+        raw["t1"] = np.full(len(frames), clock.t1_mean_ns)
     assumed = {
         "t1": None,
         "t2": analysis.assumed_t2_us,
@@ -307,87 +272,255 @@ def analyze_camera(
     stats: dict[str, LatencyStats] = {}
     for name in LATENCIES:
         lat[name], stats[name] = _latency(raw[name], assumed[name])
-    if scan.clock is not None and not np.isfinite(_col(frames, "trig_lidar_packet_ns")).any():
-        c = scan.clock
+    if clock is not None and not present(packet).any():
+        c = clock
         stats["t1"] = LatencyStats("observed", c.t1_mean_ns, c.t1_p50_ns, c.t1_p99_ns, c.packets)
+    return lat, stats
 
-    # Eq. 3 running exposure and Eq. 2 per frame, from the trigger packet's stamp.
-    window = analysis.window_frames
-    t5_avg = rolling_mean(duration, window)
+
+@dataclass(frozen=True, slots=True)
+class _DelayTerms:
+    """Eq. 2 and Eq. 3: per frame and over the whole log."""
+
+    t5_avg_ns: NDArray[np.float64]
+    """Eq. 3 running exposure average per frame."""
+    t_sleep_ns: NDArray[np.float64]
+    """Eq. 2 per frame, from the trigger packet's stamp."""
+    t5_mean_ns: float
+    phase_mean_ns: float
+    recommended_ns: float
+    """Eq. 2 with the whole log's averages."""
+    applied_mean_ns: float
+
+
+def _delay_terms(
+    rotation: _Rotation,
+    revolutions: RevolutionPairing,
+    lat: dict[str, NDArray[np.float64]],
+    stats: dict[str, LatencyStats],
+    duration_ns: NDArray[np.float64],
+    applied_ns: NDArray[np.float64],
+    *,
+    window_frames: int,
+) -> _DelayTerms:
+    """Eq. 2 from the packet the trigger fired from: t_rotate + its phase - chain - t5/2."""
+    phase = revolutions.packet_phase_ns
+    t5_avg = rolling_mean(duration_ns, window_frames)
     chain = lat["t1"] + lat["t2"] + lat["t3"] + lat["t4"]
-    t_rotate_frame = (t_est - _col(frames, "trig_lidar_packet_ns")) - packet_phase
-    t_sleep = t_rotate + packet_phase - (chain + t5_avg / 2.0)
-    phase_mean = float(np.nanmean(packet_phase)) if np.isfinite(packet_phase).any() else 0.0
-    means = {k: (v.mean_ns if math.isfinite(v.mean_ns) else math.nan) for k, v in stats.items()}
-    t5_mean = float(np.nanmean(duration)) if np.isfinite(duration).any() else math.nan
-    recommended = t_rotate + phase_mean - (sum(means.values()) + t5_mean / 2.0)
-    applied_mean = float(np.nanmean(applied)) if np.isfinite(applied).any() else math.nan
-    e = t_error[paired]
-    s = signed[paired]
-    roll_mean = rolling_mean(np.where(paired, t_error, np.nan), window)
-    roll_var = rolling_variance(np.where(paired, t_error, np.nan), window)
-    mean_e, var_e = error_mean(e), error_variance(e)
-    thr_mean = thresholds.error_mean_us * 1e3
-    thr_var = thresholds.error_var_us2 * 1e6
-    table = pd.DataFrame(
+    t_sleep = rotation.t_rotate_ns + phase - (chain + t5_avg / 2.0)
+    phase_mean = float(np.nanmean(phase)) if np.isfinite(phase).any() else 0.0
+    means = [v.mean_ns if math.isfinite(v.mean_ns) else math.nan for v in stats.values()]
+    t5_mean = float(np.nanmean(duration_ns)) if np.isfinite(duration_ns).any() else math.nan
+    recommended = rotation.t_rotate_ns + phase_mean - (sum(means) + t5_mean / 2.0)
+    applied_mean = float(np.nanmean(applied_ns)) if np.isfinite(applied_ns).any() else math.nan
+    return _DelayTerms(t5_avg, t_sleep, t5_mean, phase_mean, recommended, applied_mean)
+
+
+def _judgement(paired: int, total: int, thresholds: Thresholds) -> str | None:
+    """Why a camera with `paired` of `total` frames paired is not judged (None: it is)."""
+    need = max(thresholds.min_paired_frames, math.ceil(thresholds.min_paired_fraction * total))
+    if paired >= need and total:
+        return None
+    return (
+        f"only {paired} of {total} frames paired with the LiDAR (a verdict needs at least "
+        f"{thresholds.min_paired_frames} and {thresholds.min_paired_fraction:.0%})"
+    )
+
+
+def _frame_table(
+    camera: str,
+    frames: pd.DataFrame,
+    t_l_ns: NDArray[np.int64],
+    revolutions: RevolutionPairing,
+    errors: _Errors,
+    lat: dict[str, NDArray[np.float64]],
+    delay: _DelayTerms,
+    applied_ns: NDArray[np.float64],
+    *,
+    window_frames: int,
+) -> pd.DataFrame:
+    """The per-frame table (what --csv writes): stamps Int64, differences float64."""
+    t_error = np.abs(errors.signed_ns)
+    masked = np.where(errors.paired, t_error, np.nan)
+    source = [
+        (PHASE_FROM_TRIGGER if trig else PHASE_FROM_TRACKER) if rev >= 0 else None
+        for rev, trig in zip(
+            revolutions.revolution.tolist(), revolutions.phase_from_trigger.tolist(), strict=True
+        )
+    ]
+    return pd.DataFrame(
         {
-            "camera": camera.name,
-            "frame_sequence": frames["frame_sequence"].to_numpy(),
-            "exposure_start_ns": frames["exposure_start_ns"].to_numpy(),
-            "exposure_duration_ns": frames["exposure_duration_ns"].to_numpy(),
-            "t_l_ns": t_l,
-            "t_estimated_ns": t_est,
-            "error_signed_ns": signed,
+            "camera": pd.array([camera] * len(frames), dtype="string"),
+            "frame_sequence": frames["frame_sequence"].array,
+            "exposure_start_ns": frames["exposure_start_ns"].astype("Int64").array,
+            "exposure_duration_ns": frames["exposure_duration_ns"].astype("Int64").array,
+            "t_l_ns": nullable(t_l_ns),
+            "t_estimated_ns": nullable(revolutions.t_estimated_ns),
+            "error_signed_ns": errors.signed_ns,
             "t_error_ns": t_error,
-            "paired": paired,
-            "revolution": rev_idx,
-            "revolution_start_ns": revolution_start,
-            "header_stamp_ns": frames["header_stamp_ns"].to_numpy(),
+            "paired": errors.paired,
+            "revolution": revolutions.revolution,
+            "revolution_start_ns": nullable(revolutions.revolution_start_ns),
+            "header_stamp_ns": frames["header_stamp_ns"].astype("Int64").array,
             "t1_ns": lat["t1"],
             "t2_ns": lat["t2"],
             "t3_ns": lat["t3"],
             "t4_ns": lat["t4"],
-            "t5_avg_ns": t5_avg,
-            "t_rotate_ns": t_rotate_frame,
-            "packet_phase_ns": packet_phase,
-            "t_sleep_ns": t_sleep,
-            "applied_delay_ns": applied,
-            "rolling_error_mean_ns": roll_mean,
-            "rolling_error_var_ns2": roll_var,
+            "t5_avg_ns": delay.t5_avg_ns,
+            "t_rotate_ns": revolutions.t_rotate_ns,
+            "packet_phase_ns": revolutions.packet_phase_ns,
+            "packet_phase_source": pd.array(source, dtype="string"),
+            "t_sleep_ns": delay.t_sleep_ns,
+            "applied_delay_ns": applied_ns,
+            "rolling_error_mean_ns": rolling_mean(masked, window_frames),
+            "rolling_error_var_ns2": rolling_variance(masked, window_frames),
         }
     )
-    if not n:
+
+
+ZERO_MISMATCH_TURNS = 0.125
+"""Trigger packets this far (in turns) from the rig's zero crossing: the rig is suspect."""
+
+
+def _zero_warnings(revolutions: RevolutionPairing, lidar: LidarConfig) -> list[str]:
+    """Where the triggers fire, when the rig does not say or seems to say it wrongly."""
+    fraction = revolutions.trigger_turn_fraction
+    if fraction is None:
+        return []
+    step = FULL_TURN_DEG * fraction
+    fired = (lidar.zero_azimuth_deg + (step if lidar.azimuth_increases else -step)) % 360.0
+    if revolutions.zero_from_triggers:
+        return [
+            "lidar.zero_azimuth_deg not in the rig: revolutions start where the triggers "
+            f"fire, near packet azimuth {fired:.1f} deg (estimated; set it in the rig)"
+        ]
+    off = min(fraction, 1.0 - fraction)
+    if off <= ZERO_MISMATCH_TURNS:
+        return []
+    return [
+        f"the triggers fire near packet azimuth {fired:.1f} deg, {off * FULL_TURN_DEG:.0f} deg "
+        f"from the rig's zero_azimuth_deg {lidar.zero_azimuth_deg:g}: check the rig (frames "
+        "may pair with the wrong revolution)"
+    ]
+
+
+def _camera_warnings(frames: pd.DataFrame, stats: dict[str, LatencyStats]) -> list[str]:
+    """What the log lacks for this camera, as warnings."""
+    warnings: list[str] = []
+    if frames.empty:
         warnings.append("no frames: nothing to pair with the LiDAR")
-    if not np.isfinite(duration).any() and n:
+    elif frames["exposure_duration_ns"].isna().all():
         warnings.append("no exposure metadata: t5 and t_l unknown (set assumed_exposure_us)")
     for name in LATENCIES:
         if stats[name].status == "not observed":
             warnings.append(f"{name} not observed in the log (set analysis.assumed_{name}_us)")
+    return warnings
+
+
+def _nanmax(values: NDArray[np.float64]) -> float:
+    return float(np.nanmax(values)) if np.isfinite(values).any() else math.nan
+
+
+def analyze_camera(
+    scan: LidarScan,
+    tables: CameraTables,
+    *,
+    camera: CameraConfig,
+    target_index: int,
+    camera_azimuth_deg: float,
+    offset_ns: int,
+    lidar: LidarConfig,
+    analysis: AnalysisConfig,
+    thresholds: Thresholds,
+) -> CameraSync:
+    """Eq. 1-6 for one camera over the whole log; `offset_ns` is host minus sensor clock.
+
+    `target_index` is the camera's column in the revolutions' target crossings.
+    """
+    rotation = _rotation(scan, camera_azimuth_deg, lidar)
+    frames, pairing_warning = pair_triggers(tables.frames, tables.triggers)
+    t_l = _t_l_ns(frames)
+    period = rotation.period_ns
+    revolutions = pair_revolutions(
+        frames,
+        scan.revolutions,
+        t_l,
+        target_index=target_index,
+        offset_ns=offset_ns,
+        max_gap_ns=0.5 * period if math.isfinite(period) else PAIR_TOLERANCE_NS,
+        zero_from_triggers="zero_azimuth_deg" not in lidar.model_fields_set,
+    )
+    errors = _errors(t_l, revolutions.t_estimated_ns, period_ns=period)
+    lat, stats = _latencies(frames, scan.clock, analysis)
+    duration = values_ns(frames, "exposure_duration_ns")
+    applied = values_ns(frames, "trig_applied_delay_ns")
+    delay = _delay_terms(
+        rotation, revolutions, lat, stats, duration, applied, window_frames=analysis.window_frames
+    )
+    table = _frame_table(
+        camera.name,
+        frames,
+        t_l,
+        revolutions,
+        errors,
+        lat,
+        delay,
+        applied,
+        window_frames=analysis.window_frames,
+    )
+    warnings = _camera_warnings(frames, stats)
+    warnings.extend(_zero_warnings(revolutions, lidar))
+    if pairing_warning:
+        warnings.insert(0, pairing_warning)
+    return _camera_sync(
+        camera, rotation, revolutions, errors, stats, delay, table, warnings, thresholds
+    )
+
+
+def _camera_sync(
+    camera: CameraConfig,
+    rotation: _Rotation,
+    revolutions: RevolutionPairing,
+    errors: _Errors,
+    stats: dict[str, LatencyStats],
+    delay: _DelayTerms,
+    table: pd.DataFrame,
+    warnings: list[str],
+    thresholds: Thresholds,
+) -> CameraSync:
+    """Eq. 5/6 over the paired frames, the thresholds and the judgement, as a CameraSync."""
+    s = errors.signed_ns[errors.paired]
+    e = np.abs(s)
+    mean_e, var_e = error_mean(e), error_variance(e)
+    paired = int(errors.paired.sum())
+    reason = _judgement(paired, len(table), thresholds)
     return CameraSync(
         camera=camera.name,
-        theta_deg=theta,
-        omega_deg_s=omega_mean,
-        t_rotate_ns=t_rotate,
-        packet_phase_ns=phase_mean,
+        theta_deg=rotation.theta_deg,
+        omega_deg_s=rotation.omega_deg_s,
+        t_rotate_ns=rotation.t_rotate_ns,
+        packet_phase_ns=delay.phase_mean_ns,
+        packet_phase_source=revolutions.phase_source(),
         latencies=stats,
-        t5_mean_ns=t5_mean,
-        delay_applied_ns=applied_mean,
-        delay_recommended_ns=recommended,
-        delay_from_error_ns=applied_mean - float(s.mean()) if s.size else math.nan,
-        frames_total=n,
-        frames_paired=int(paired.sum()),
-        unpaired={k: v for k, v in unpaired.items() if v},
+        t5_mean_ns=delay.t5_mean_ns,
+        delay_applied_ns=delay.applied_mean_ns,
+        delay_recommended_ns=delay.recommended_ns,
+        delay_from_error_ns=delay.applied_mean_ns - float(s.mean()) if s.size else math.nan,
+        frames_total=len(table),
+        frames_paired=paired,
+        unpaired=errors.unpaired,
         error_signed_mean_ns=float(s.mean()) if s.size else math.nan,
         error_mean_ns=mean_e,
         error_var_ns2=var_e,
         error_p99_ns=float(np.percentile(e, 99)) if e.size else math.nan,
         error_max_ns=float(e.max()) if e.size else math.nan,
-        rolling_mean_max_ns=float(np.nanmax(roll_mean))
-        if np.isfinite(roll_mean).any()
-        else math.nan,
-        rolling_var_max_ns2=float(np.nanmax(roll_var)) if np.isfinite(roll_var).any() else math.nan,
-        mean_exceeded=bool(mean_e > thr_mean),
-        var_exceeded=bool(var_e > thr_var),
+        rolling_mean_max_ns=_nanmax(table["rolling_error_mean_ns"].to_numpy(np.float64)),
+        rolling_var_max_ns2=_nanmax(table["rolling_error_var_ns2"].to_numpy(np.float64)),
+        mean_exceeded=bool(mean_e > thresholds.error_mean_us * 1e3),
+        var_exceeded=bool(var_e > thresholds.error_var_us2 * 1e6),
         frames=table,
+        judged=reason is None,
+        not_judged_reason=reason,
+        optional=camera.optional,
         warnings=warnings,
     )

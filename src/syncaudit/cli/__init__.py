@@ -12,10 +12,10 @@ and import the module below.
 
 from __future__ import annotations
 
-from syncaudit.cli import audit, calib, info, simulate
+from syncaudit.cli import audit, calib, info, rig, simulate
 from syncaudit.cli.common import app, main
 from syncaudit.fleet.cli import register as register_fleet
 
 register_fleet(app)  # syncaudit gate, syncaudit fleet report (src/syncaudit/fleet/cli.py)
 
-__all__ = ["app", "audit", "calib", "info", "main", "simulate"]
+__all__ = ["app", "audit", "calib", "info", "main", "rig", "simulate"]

@@ -107,7 +107,9 @@ def render_audit(result: AuditResult, console: Console) -> None:
     for cam in result.cameras:
         d = cam.to_dict()
         verdict = (
-            "[red]needs correction[/]"
+            f"[yellow]not judged[/] ({cam.sync.not_judged_reason})"
+            if not cam.sync.judged
+            else "[red]needs correction[/]"
             if cam.sync.needs_correction
             else "[green]within thresholds[/]"
         )
@@ -128,6 +130,10 @@ def render_audit(result: AuditResult, console: Console) -> None:
                 f"{_us(lat['p99_us'])} us  ({lat['status']})",
             )
         table.add_row("t5 mean exposure (Eq. 3)", f"{_us(d['t5_mean_us'])} us")
+        table.add_row(
+            "packet phase (zero crossing - packet)",
+            f"{_us(d['packet_phase_us'])} us  (measured from: {d['packet_phase_source']})",
+        )
         table.add_row(
             "t_sleep applied -> recommended (Eq. 2)",
             f"{_us(d['delay_applied_us'])} -> [bold]{_us(d['delay_recommended_us'])}[/] us "
@@ -163,5 +169,6 @@ def render_audit(result: AuditResult, console: Console) -> None:
         console.print(f"[cyan]guessed[/] {guess} (pass --rig to set them)")
     for warning in result.warnings:
         console.print(f"[yellow]warning[/] {warning}")
-    verdict = "PASS" if result.passed else ("NO CAMERAS" if not result.cameras else "FAIL")
-    console.print(f"[bold]verdict: {verdict}[/]")
+    for reason in result.not_judged:
+        console.print(f"[yellow]not judged[/] {reason}")
+    console.print(f"[bold]verdict: {result.verdict.upper()}[/]")

@@ -91,7 +91,9 @@ def error_plot_svg(
 def _camera_section(cam: CameraAudit, limit_us: float) -> str:
     d = cam.to_dict()
     verdict = (
-        '<span class="fail">needs correction</span>'
+        f'<span class="fail">not judged</span> ({_e(str(cam.sync.not_judged_reason))})'
+        if not cam.sync.judged
+        else '<span class="fail">needs correction</span>'
         if cam.sync.needs_correction
         else '<span class="pass">within thresholds</span>'
     )
@@ -142,7 +144,7 @@ def _camera_section(cam: CameraAudit, limit_us: float) -> str:
 def render_audit_html(result: AuditResult, extra_sections: Sequence[str] = ()) -> str:
     """The whole audit as one HTML page; `extra_sections` are appended (e.g. calibration)."""
     lidar = result.lidar
-    verdict = "PASS" if result.passed else ("NO CAMERAS" if not result.cameras else "FAIL")
+    verdict = result.verdict.upper()
     css = "pass" if result.passed else "fail"
     head = _table(
         [

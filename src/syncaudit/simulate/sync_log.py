@@ -60,6 +60,14 @@ from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
+TriggerPacket = Literal["containing", "first_after"]
+"""Which packet a trigger fires from (and names in `TriggerEvent.lidar_packet_time`).
+
+'containing': the packet that holds the zero crossing (its first block at or past zero
+with a block before it, or the first block exactly at zero): what a driver tracking the
+azimuth block by block sees first. 'first_after': the first packet whose first block is
+at or past zero, what a driver that cuts revolutions packet by packet sees first (the next
+packet in most revolutions). `trigger_packet_offset` moves either by whole packets."""
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
 
 NS_PER_S = 1_000_000_000
@@ -216,6 +224,14 @@ class SyncSimConfig(_Strict):
     frames (250-400 KB for 1080p). None: a tiny PNG of the simulated scene."""
     exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
     trigger_messages: bool = True
+    ros1_header_seq: bool = True
+    """ROS 1 logs: number each camera's header `seq` by frame; False writes 0 everywhere,
+    as drivers that leave it alone and bags converted from ROS 2 do."""
+    trigger_packet: TriggerPacket = "containing"
+    """The packet convention of the triggers (see `TriggerPacket`)."""
+    trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
+    """Triggers fire from the packet this many delivered packets after (negative: before)
+    the one `trigger_packet` picks: a driver that waits for, or predicts, the crossing."""
     controller: ControllerConfig | None = None
     """None: constant delays; else the self-adaptive controller runs live per camera."""
 
@@ -345,6 +361,13 @@ def _eq5_eq6(abs_error_ns: NDArray[np.int64]) -> tuple[float, float]:
     mean = s1 / n
     var = (n * s2 - s1 * s1) / (n * (n - 1)) if n > 1 else math.nan
     return mean, var
+
+
+def _rows(columns: dict[str, NDArray[np.int64]]) -> list[dict[str, int]]:
+    """Per-frame truth records (plain ints) from equal-length integer columns."""
+    lists = {name: values.tolist() for name, values in columns.items()}
+    n = len(next(iter(lists.values()))) if lists else 0
+    return [{name: int(values[i]) for name, values in lists.items()} for i in range(n)]
 
 
 def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -529,6 +552,33 @@ class _Simulation:
         n_blocks = pk.azimuth_q.shape[1]
         return turns, idx_delivered[at // n_blocks]
 
+    def trigger_packets(
+        self, pk: _Packets, zero_packet: NDArray[np.int64], zero_angles: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """Index of the packet each revolution's triggers fire from (the configured convention).
+
+        Only delivered packets count: the LiDAR driver never saw a lost one. Raises
+        ValueError when an offset reaches before the first or past the last packet.
+        """
+        cfg = self.cfg
+        delivered = np.flatnonzero(pk.delivered)
+        pos = np.searchsorted(delivered, zero_packet)
+        if cfg.trigger_packet == "first_after":
+            zero_q = self.zero_deg * self.clock.azimuth_units_per_deg + (
+                360 * self.clock.azimuth_units_per_deg
+            ) * np.rint((zero_angles - self.zero_deg) / 360.0)
+            # The containing packet qualifies when its first block is at or past zero;
+            # otherwise the next delivered one does (its first block is past zero).
+            first_block = pk.azimuth_q[delivered[pos], 0]
+            pos = pos + (first_block < zero_q).astype(np.int64)
+        pos = pos + cfg.trigger_packet_offset
+        if pos.size and (int(pos.min()) < 0 or int(pos.max()) >= delivered.size):
+            raise ValueError(
+                f"trigger_packet_offset {cfg.trigger_packet_offset} reaches outside the "
+                "simulated packets; lengthen the log or move start_azimuth_deg"
+            )
+        return delivered[pos]
+
     # -- cameras --------------------------------------------------------------------------
 
     def run(self, out: Path) -> dict[str, Any]:
@@ -604,6 +654,10 @@ class _Simulation:
                 "the exact azimuth model, so interpolating packets differs by ~1 us",
                 "packet_phase_ns": "zero_crossing_ns - lidar_packet_ns: when the beam "
                 "crossed the zero azimuth, relative to the trigger packet's capture",
+                "t_rotate_ns": "per frame: t_estimated_ns - zero_crossing_ns",
+                "trigger_packet": f"{cfg.trigger_packet} packet "
+                f"{cfg.trigger_packet_offset:+d} delivered packets: the packet the trigger "
+                "fires from and names in lidar_packet_time",
             },
             "lidar": lidar_truth,
             "cameras": {c["name"]: c for c in cams},
@@ -629,9 +683,9 @@ class _Simulation:
         theta = (self.camera_azimuth_deg[index] - self.zero_deg) % 360.0
         t_est_rel = self.rotation.time_at_ns(zero_angles[:n] + theta)
         t_est = cfg.start_time_ns + np.rint(t_est_rel).astype(np.int64)
-        zp = zero_packet[:n]
-        packet_ns = pk.capture_ns[zp]
-        t1 = pk.t1_ns[zp]
+        trigger = self.trigger_packets(pk, zero_packet[:n], zero_angles[:n])
+        packet_ns = pk.capture_ns[trigger]
+        t1 = pk.t1_ns[trigger]
         t2 = cfg.t2.draw_ns(rng, n)
         t3 = cfg.t3.draw_ns(rng, n)
         t4 = cfg.t4.draw_ns(rng, n)
@@ -663,39 +717,28 @@ class _Simulation:
             "trigger": packet_ns + t1 + t2 + applied + t3,
         }[cam.stamp_semantics]
         pattern_seed = int(rng.integers(0, 2**31))
-        prefix = f"/cameras/{cam.name}"
-        image_topic = (
-            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
-        )
-        topics: dict[str, str] = {"image": image_topic}
-        if "camera_exposure" in cfg.exposure_messages:
-            topics["exposure"] = f"{prefix}/exposure"
-        if "flir_meta" in cfg.exposure_messages:
-            topics["meta"] = f"{prefix}/meta"
-        if cfg.trigger_messages:
-            topics["trigger"] = f"{prefix}/trigger"
-        frames = [
+        frames = _rows(
             {
-                "frame_sequence": i,
-                "lidar_packet_ns": int(packet_ns[i]),
-                "t1_ns": int(t1[i]),
-                "t2_ns": int(t2[i]),
-                "t3_ns": int(t3[i]),
-                "t4_ns": int(t4[i]),
-                "applied_delay_ns": int(applied[i]),
-                "exposure_start_ns": int(exposure_start[i]),
-                "exposure_duration_ns": int(t5[i]),
-                "t_l_ns": int(t_l[i]),
-                "t_estimated_ns": int(t_est[i]),
-                "error_ns": int(error[i]),
-                "ideal_delay_ns": int(ideal[i]),
-                "zero_crossing_ns": int(zero_ns[i]),
-                "packet_phase_ns": int(zero_ns[i] - packet_ns[i]),
-                "image_stamp_ns": int(stamp[i]),
-                "image_log_time_ns": int(image_log[i]),
+                "frame_sequence": np.arange(n),
+                "lidar_packet_ns": packet_ns,
+                "t1_ns": t1,
+                "t2_ns": t2,
+                "t3_ns": t3,
+                "t4_ns": t4,
+                "applied_delay_ns": applied,
+                "exposure_start_ns": exposure_start,
+                "exposure_duration_ns": t5,
+                "t_l_ns": t_l,
+                "t_estimated_ns": t_est,
+                "error_ns": error,
+                "ideal_delay_ns": ideal,
+                "zero_crossing_ns": zero_ns,
+                "packet_phase_ns": zero_ns - packet_ns,
+                "t_rotate_ns": t_est - zero_ns,
+                "image_stamp_ns": stamp,
+                "image_log_time_ns": image_log,
             }
-            for i in range(n)
-        ]
+        )
         return {
             "name": cam.name,
             "frame_id": f"{cam.name}_optical_frame",
@@ -704,7 +747,7 @@ class _Simulation:
             "theta_deg": theta,
             "hfov_deg": cam.hfov_deg,
             "stamp_semantics": cam.stamp_semantics,
-            "topics": topics,
+            "topics": self._camera_topics(cam),
             "frames_count": n,
             "t_rotate_ns": t_rotate_ns,
             "t1_mean_ns": float(t1.mean()),
@@ -741,6 +784,22 @@ class _Simulation:
                 "image_log": image_log,
             },
         }
+
+    def _camera_topics(self, cam: CameraSim) -> dict[str, str]:
+        """The topics one camera's messages go to, by kind."""
+        cfg = self.cfg
+        prefix = f"/cameras/{cam.name}"
+        image_topic = (
+            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
+        )
+        topics: dict[str, str] = {"image": image_topic}
+        if "camera_exposure" in cfg.exposure_messages:
+            topics["exposure"] = f"{prefix}/exposure"
+        if "flir_meta" in cfg.exposure_messages:
+            topics["meta"] = f"{prefix}/meta"
+        if cfg.trigger_messages:
+            topics["trigger"] = f"{prefix}/trigger"
+        return topics
 
     def _run_controller(
         self,
@@ -919,7 +978,7 @@ class _Simulation:
             """Header of this camera; ROS 1 publishers number messages in `seq`."""
             fields: dict[str, Any] = {"stamp": writer.time(stamp_ns), "frame_id": frame_id}
             if ros1:
-                fields["seq"] = seq
+                fields["seq"] = seq if cfg.ros1_header_seq else 0
             return writer.new_msg("std_msgs/msg/Header", **fields)
 
         for i, frame in enumerate(cam["frames"]):

@@ -28,6 +28,7 @@ FRAME_TABLE_COLUMNS: tuple[str, ...] = (
     "t5_avg_ns",
     "t_rotate_ns",
     "packet_phase_ns",
+    "packet_phase_source",
     "t_sleep_ns",
     "applied_delay_ns",
     "rolling_error_mean_ns",

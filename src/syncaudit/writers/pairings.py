@@ -6,6 +6,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from syncaudit.audit import AuditResult
 from syncaudit.writers.log_writer import open_writer
 from syncaudit.writers.outputs import OutputSet
@@ -19,7 +21,8 @@ def pairing_topic(camera: str) -> str:
 
 
 def _ns(value: Any) -> int:
-    return 0 if value is None or not math.isfinite(float(value)) else round(float(value))
+    """An Int64 value as an exact int (0 where missing: builtin Time has no null)."""
+    return 0 if value is None or value is pd.NA else int(value)
 
 
 def write_pairings(
@@ -37,7 +40,11 @@ def write_pairings(
         for cam in result.cameras:
             topic = pairing_topic(cam.sync.camera)
             writer.add_topic(topic, PAIRING_TYPE)
-            rows: Any = cam.sync.frames.itertuples(index=False)  # pandas rows are untyped
+            frames = cam.sync.frames
+            # Stamps stay exact int64 (object Ints, <NA> for missing), never float64.
+            rows: Any = frames.astype(
+                {c: "object" for c in frames.columns if str(frames[c].dtype) == "Int64"}
+            ).itertuples(index=False)  # pandas rows are untyped
             for row in rows:
                 t_l = _ns(row.t_l_ns)
                 stamp = t_l or _ns(row.header_stamp_ns)
@@ -45,7 +52,7 @@ def write_pairings(
                     PAIRING_TYPE,
                     header=writer.header(stamp, str(cam.sync.camera)),
                     camera=str(cam.sync.camera),
-                    frame_sequence=int(row.frame_sequence) if row.frame_sequence is not None else 0,
+                    frame_sequence=_ns(row.frame_sequence),
                     image_stamp=writer.time(_ns(row.header_stamp_ns)),
                     exposure_middle=writer.time(t_l),
                     lidar_at_camera=writer.time(_ns(row.t_estimated_ns)),

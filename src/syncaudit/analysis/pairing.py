@@ -1,0 +1,297 @@
+"""Which trigger and which LiDAR revolution each camera frame belongs to.
+
+Frames pair with triggers by sequence number when the numbers can be trusted, else by
+time. Frames pair with revolutions through the packet their trigger names: that packet
+lies a few packets before or after the zero crossing that started the revolution
+(drivers differ in which packet they trigger from), so it pairs with the nearest zero
+*crossing* time; frames whose trigger names no packet pair with the nearest crossing of
+the camera centre instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from syncaudit.analysis.stamps import MISSING_NS, delta_ns, present, stamps_ns
+from syncaudit.columns.lidar import RevolutionColumns
+
+PAIR_TOLERANCE_NS = 50_000_000
+"""A trigger belongs to a frame when it precedes the exposure by less than this."""
+SEQUENCE_AGREEMENT = 0.9
+"""Sequence pairing is trusted when this share of its pairs also agree in time."""
+PHASE_FROM_TRIGGER = "trigger packet"
+PHASE_FROM_TRACKER = "tracker zero packet"
+
+
+def nearest_index(sorted_values: NDArray[np.int64], query: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Index of the nearest element of a sorted int64 array for each query (exact)."""
+    idx = np.searchsorted(sorted_values, query)
+    idx = np.clip(idx, 1, max(sorted_values.size - 1, 1))
+    left = sorted_values[idx - 1]
+    right = sorted_values[np.minimum(idx, sorted_values.size - 1)]
+    choose_left = np.abs(query - left) <= np.abs(right - query)
+    return np.where(choose_left, idx - 1, idx).astype(np.int64)
+
+
+def _frame_time_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
+    """When a frame was exposed: its exposure start, else its header stamp."""
+    start = stamps_ns(frames, "exposure_start_ns")
+    header = stamps_ns(frames, "header_stamp_ns")
+    return np.where(present(start), start, header)
+
+
+def _trigger_time_ns(triggers: pd.DataFrame) -> NDArray[np.int64]:
+    """When a trigger started its exposure: checkpoint 248, else 246."""
+    start = stamps_ns(triggers, "exposure_start_ns")
+    return start if present(start).any() else stamps_ns(triggers, "camera_sensor_ns")
+
+
+def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None:
+    """Why sequence numbers cannot pair these frames and triggers (None: they can).
+
+    Usable numbers are present everywhere, unique, increasing with log time on both sides,
+    and the frames they pair agree in time with their triggers (ROS 1 bags converted from
+    ROS 2, or drivers that leave `seq` alone, have 0 everywhere).
+    """
+    for what, table in (("frame", frames), ("trigger", triggers)):
+        seq = table["frame_sequence"]
+        if seq.isna().any():
+            return f"{int(seq.isna().sum())} of {len(seq)} {what}s have no sequence number"
+        if not seq.is_unique:
+            return f"{what} sequence numbers repeat ({seq.nunique()} distinct in {len(seq)})"
+        ordered = table.sort_values("log_time_ns", kind="stable")["frame_sequence"]
+        if len(ordered) > 1 and not bool((np.diff(ordered.to_numpy(np.int64)) > 0).all()):
+            return f"{what} sequence numbers do not increase with log time"
+    both = pd.DataFrame(
+        {"frame_sequence": frames["frame_sequence"], "_f": _frame_time_ns(frames)}
+    ).merge(
+        pd.DataFrame(
+            {"frame_sequence": triggers["frame_sequence"], "_t": _trigger_time_ns(triggers)}
+        ),
+        on="frame_sequence",
+    )
+    if both.empty:
+        return "no frame sequence number matches a trigger's"
+    gap = delta_ns(both["_f"].to_numpy(np.int64), both["_t"].to_numpy(np.int64))
+    timed = np.isfinite(gap)
+    if timed.any():
+        agree = float(np.mean(np.abs(gap[timed]) < PAIR_TOLERANCE_NS))
+        if agree < SEQUENCE_AGREEMENT:
+            return (
+                f"only {agree:.0%} of the frames paired by sequence number are within "
+                f"{PAIR_TOLERANCE_NS / 1e6:g} ms of their trigger"
+            )
+    return None
+
+
+def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
+    """Checkpoint stamps of 0 (a `builtin_interfaces/Time` the driver never set) as <NA>."""
+    stamps = [
+        c
+        for c in triggers.columns
+        if c.endswith("_ns") and c not in ("log_time_ns", "applied_delay_ns")
+    ]
+    unset = {c: triggers[c].eq(0).fillna(False) for c in stamps}
+    if not any(bool(m.any()) for m in unset.values()):
+        return triggers
+    out = triggers.copy()
+    for c, mask in unset.items():
+        out[c] = out[c].mask(mask)
+    return out
+
+
+def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.DataFrame, str | None]:
+    """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
+
+    By sequence number where `sequence_problem` finds none, else by time: the latest
+    trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
+    where it has no exposure metadata).
+    """
+    checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
+    triggers = _unset_as_missing(triggers)
+    if triggers.empty:
+        out = frames.copy()
+        for col in checkpoint_cols:
+            out[f"trig_{col}"] = pd.array([pd.NA] * len(out), dtype="Int64")
+        return out, None
+    trig = triggers[["frame_sequence", *checkpoint_cols]].add_prefix("trig_")
+    problem = sequence_problem(frames, triggers)
+    if problem is None:
+        merged = frames.merge(
+            trig, left_on="frame_sequence", right_on="trig_frame_sequence", how="left"
+        )
+        return merged.drop(columns="trig_frame_sequence"), None
+    warning = None
+    if frames["frame_sequence"].notna().any() and triggers["frame_sequence"].notna().any():
+        warning = f"frames paired with triggers by time, not sequence number: {problem}"
+    when = _frame_time_ns(frames)
+    left = frames.assign(_t=when, _row=np.arange(len(frames)))
+    timed = left[present(when)].sort_values("_t", kind="stable")
+    trig_when = _trigger_time_ns(triggers)
+    right = (
+        trig.drop(columns="trig_frame_sequence")
+        .assign(_t=trig_when)[present(trig_when)]
+        .sort_values("_t", kind="stable")
+    )
+    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=PAIR_TOLERANCE_NS)
+    untimed = left[~present(when)]
+    if not untimed.empty:
+        merged = pd.concat([merged, untimed], ignore_index=True)
+    merged = merged.sort_values("_row", kind="stable")
+    return merged.drop(columns=["_t", "_row"]).reset_index(drop=True), warning
+
+
+@dataclass(frozen=True, slots=True)
+class RevolutionPairing:
+    """Per frame: its revolution and the times the method measures from it."""
+
+    revolution: NDArray[np.int64]
+    """Row in the revolution columns, -1 where the frame has none."""
+    revolution_start_ns: NDArray[np.int64]
+    """Zero crossing of that revolution, host clock (`MISSING_NS` where none)."""
+    t_estimated_ns: NDArray[np.int64]
+    """Beam at the camera centre in that revolution, host clock (`MISSING_NS` where none)."""
+    packet_phase_ns: NDArray[np.float64]
+    """Zero crossing minus the stamp of the packet the trigger fired from."""
+    phase_from_trigger: NDArray[np.bool_]
+    """True where the phase is from the trigger's own packet, False from the tracker's."""
+    trigger_turn_fraction: float | None = None
+    """Where in the revolution the trigger packets lie (0..1 of a turn after the rig's zero
+    crossing; near 0 or 1 when the rig's zero azimuth is where the triggers fire)."""
+    zero_from_triggers: bool = False
+    """Revolutions started at the triggers' azimuth (the rig states no zero azimuth)."""
+
+    @property
+    def t_rotate_ns(self) -> NDArray[np.float64]:
+        """Per frame, zero crossing to the beam at the camera centre (Eq. 1 measured)."""
+        return delta_ns(self.t_estimated_ns, self.revolution_start_ns)
+
+    def phase_source(self) -> str:
+        """Which packet the phases were measured from, for the report."""
+        has = self.revolution >= 0
+        trig = int(np.sum(has & self.phase_from_trigger))
+        tracker = int(np.sum(has & ~self.phase_from_trigger))
+        if not trig and not tracker:
+            return "none"
+        if not tracker:
+            return PHASE_FROM_TRIGGER
+        if not trig:
+            return PHASE_FROM_TRACKER
+        return f"mixed: {trig} {PHASE_FROM_TRIGGER}, {tracker} {PHASE_FROM_TRACKER}"
+
+
+def pair_revolutions(
+    frames: pd.DataFrame,
+    revs: RevolutionColumns,
+    t_l_ns: NDArray[np.int64],
+    *,
+    target_index: int,
+    offset_ns: int,
+    max_gap_ns: float,
+    zero_from_triggers: bool = False,
+) -> RevolutionPairing:
+    """The revolution of each frame (see the module docstring); `offset_ns` is host - sensor.
+
+    A trigger packet pairs with the nearest zero crossing no more than `max_gap_ns` (half a
+    revolution) away; its packet phase is measured from that packet's recorded stamp. A
+    frame without one (or whose packet time is near no crossing) pairs with the nearest
+    crossing of the camera centre to its mid-exposure `t_l_ns`, and takes the phase of the
+    tracker's zero packet.
+
+    `zero_from_triggers` (the rig does not state the zero azimuth): revolutions start
+    where the triggers fire instead, `trigger_turn_fraction` of a turn after the tracker's
+    crossings; each frame's camera crossing is the first one after that virtual start.
+    """
+    n = len(frames)
+    rev = np.full(n, -1, dtype=np.int64)
+    from_trigger = np.zeros(n, dtype=np.bool_)
+    phase = np.full(n, np.nan)
+    if not revs.count:
+        missing = np.full(n, MISSING_NS, dtype=np.int64)
+        return RevolutionPairing(rev, missing, missing.copy(), phase, from_trigger)
+    zero_host = revs.zero_crossing_sensor_ns + offset_ns
+    cross = revs.crossing_sensor_ns[:, target_index]
+    cross_host = np.where(cross >= 0, cross + offset_ns, MISSING_NS)
+    pkt = stamps_ns(frames, "trig_lidar_packet_ns")
+    has_pkt = present(pkt)
+    fraction = None
+    if has_pkt.any():
+        query = pkt[has_pkt]
+        idx = nearest_index(zero_host, query)
+        close = np.abs(zero_host[idx] - query) <= max_gap_ns
+        fraction = trigger_turn_fraction(zero_host, query)
+        if zero_from_triggers and fraction is not None:
+            idx, close = _after_virtual_zero(zero_host, cross_host, query, fraction)
+        rows = np.flatnonzero(has_pkt)[close]
+        rev[rows] = idx[close]
+        from_trigger[rows] = True
+        phase[rows] = (zero_host[idx[close]] - query[close]).astype(np.float64)
+    # A packet time far from every crossing (0 from a driver that leaves it unset, or
+    # outside the LiDAR's span) says nothing: such frames pair like those without one.
+    no_pkt = ~from_trigger & present(t_l_ns)
+    valid = np.flatnonzero(present(cross_host))
+    if no_pkt.any() and valid.size:
+        query = t_l_ns[no_pkt]
+        idx = valid[nearest_index(cross_host[valid], query)]
+        close = np.abs(cross_host[idx] - query) <= max_gap_ns
+        rows = np.flatnonzero(no_pkt)[close]
+        rev[rows] = idx[close]
+        tracker = (revs.zero_crossing_sensor_ns - revs.zero_packet_sensor_ns).astype(np.float64)
+        phase[rows] = tracker[idx[close]]
+    has = rev >= 0
+    start = np.where(has, zero_host[np.maximum(rev, 0)], MISSING_NS)
+    t_est = np.where(has, cross_host[np.maximum(rev, 0)], MISSING_NS)
+    virtual = zero_from_triggers and fraction is not None
+    return RevolutionPairing(rev, start, t_est, phase, from_trigger, fraction, virtual)
+
+
+def trigger_turn_fraction(zero_ns: NDArray[np.int64], packet_ns: NDArray[np.int64]) -> float | None:
+    """Circular mean of where trigger packets fall in their revolution (0..1 of a turn).
+
+    None when no packet lies inside a whole revolution.
+    """
+    if zero_ns.size < 2:
+        return None
+    r = np.searchsorted(zero_ns, packet_ns, side="right") - 1
+    inside = (r >= 0) & (r < zero_ns.size - 1)
+    if not inside.any():
+        return None
+    r = r[inside]
+    period = (zero_ns[r + 1] - zero_ns[r]).astype(np.float64)
+    angle = 2.0 * np.pi * (packet_ns[inside] - zero_ns[r]).astype(np.float64) / period
+    mean = float(np.arctan2(np.sin(angle).mean(), np.cos(angle).mean()))
+    return (mean / (2.0 * np.pi)) % 1.0
+
+
+def _after_virtual_zero(
+    zero_ns: NDArray[np.int64],
+    cross_ns: NDArray[np.int64],
+    packet_ns: NDArray[np.int64],
+    fraction: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """Per packet, the revolution whose camera crossing first follows the virtual zero.
+
+    The virtual zero of revolution r is `fraction` of its turn after its zero crossing
+    (interpolated: the rate changes little within a turn; the turns before the first and
+    after the last crossing take their neighbour's period). The packet pairs with the
+    nearest virtual zero, and the camera crossing is the first at or after it.
+    """
+    count = zero_ns.size
+    period = np.diff(zero_ns).astype(np.float64)
+    turn = np.concatenate(([period[0]], period, [period[-1]]))  # revolutions -1 .. count-1
+    start = np.concatenate(([zero_ns[0] - round(period[0])], zero_ns))
+    virtual = start + np.rint(fraction * turn).astype(np.int64)
+    near = nearest_index(virtual, packet_ns)
+    r = near - 1
+    close = np.abs(virtual[near] - packet_ns) <= 0.5 * turn[near]
+    cross_r = np.where(r >= 0, cross_ns[np.maximum(r, 0)], MISSING_NS)
+    after = present(cross_r) & (cross_r >= virtual[near])
+    idx = np.where(after, r, r + 1)
+    # Before the first crossing, revolution 0's camera crossing must be within one turn.
+    first = (r < 0) & ~(present(cross_ns[0:1]) & (cross_ns[0] - virtual[near] < turn[near]))
+    close &= (idx >= 0) & (idx < count) & ~first
+    return np.clip(idx, 0, count - 1), close

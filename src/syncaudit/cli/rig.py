@@ -1,0 +1,38 @@
+"""`syncaudit rig`: a starter rig file guessed from a log."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from syncaudit.cli.common import LogArgument, OverwriteFlag, app, emit, output_set, run
+
+
+def _write_stdout(text: str) -> None:
+    sys.stdout.write(text)
+
+
+@app.command()
+def rig(
+    log: LogArgument,
+    out: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the rig here (default: stdout).")
+    ] = None,
+    overwrite: OverwriteFlag = False,
+) -> None:
+    """Write a starter rig guessed from the log: every guess and TODO commented."""
+
+    def job() -> None:
+        with output_set(overwrite=overwrite, inputs=(log,), targets=(out,)) as outputs:
+            from syncaudit.rig_guess import starter_rig_yaml
+
+            text = starter_rig_yaml(log)
+            if out is not None:
+                outputs.write_text(out, text)
+        if out is None:
+            emit(lambda: _write_stdout(text))
+
+    run(job)

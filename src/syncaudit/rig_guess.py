@@ -1,0 +1,133 @@
+"""A rig guessed from what a log holds, and a starter rig file that states every guess.
+
+The LiDAR topic is the first packet topic by type; cameras come from topic types, their
+trigger/exposure `camera` fields and namespaces (`camera.topics.detect_cameras`), and
+each camera's frame from its image header, so `/tf_static` can place it. The starter
+file writes that rig as YAML with a comment on every guessed value and a TODO on every
+value the log cannot tell, so the second run is one edit away.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from syncaudit.camera.azimuth import (
+    X_AXIS_AZIMUTH_DEG,
+    camera_azimuth,
+    needs_tf_static,
+    tf_static_yaws,
+)
+from syncaudit.camera.topics import detect_cameras, probe_camera_topics, topic_role
+from syncaudit.collect import lidar_family
+from syncaudit.errors import NoDataError
+from syncaudit.lidar.topics import guess_lidar_topics
+from syncaudit.logs import LogReader, open_log
+from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
+
+__all__ = ["guess_rig", "render_starter_rig", "starter_rig_yaml"]
+
+
+def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
+    """A rig from the log alone, and what was guessed (raises NoDataError without LiDAR)."""
+    # The guess `info` shares: IMU packet topics of the same type are set aside.
+    lidar_guess = guess_lidar_topics(log)
+    packet_topics = lidar_guess.topics
+    if not packet_topics:
+        raise NoDataError(
+            f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
+        )
+    camera_topics = [t for t, info in log.topics.items() if topic_role(info.msgtype)]
+    camera_fields, frame_ids = probe_camera_topics(log, camera_topics)
+    cameras = detect_cameras(log.topics, camera_fields, frame_ids)
+    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes]
+    if cameras:
+        guessed.append(
+            "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
+        )
+    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+
+
+def _value(value: object) -> str:
+    """A YAML scalar (JSON is valid YAML for strings, numbers, booleans and null)."""
+    return json.dumps(value)
+
+
+def _camera_lines(
+    cam: CameraConfig, lidar: LidarConfig, tf_yaws: dict[str, float], vendor: str | None
+) -> list[str]:
+    lines = [f"  - name: {_value(cam.name)}  # guessed from the topic names"]
+    for key in ("image_topic", "info_topic", "exposure_topic", "trigger_topic"):
+        topic = getattr(cam, key)
+        if topic is not None:
+            lines.append(f"    {key}: {_value(topic)}  # found by message type")
+        elif key in ("exposure_topic", "trigger_topic"):
+            lines.append(f"    # {key}: TODO none found; without it some latencies are unknown")
+    azimuth, source = camera_azimuth(cam, lidar, tf_yaws, vendor)
+    if cam.frame_id:
+        lines.append(f"    frame_id: {_value(cam.frame_id)}  # from the image header")
+    if azimuth is not None:
+        lines.append(
+            f"    # azimuth_deg: {azimuth:.2f}  # what the audit will use: {source}; "
+            "set it to override"
+        )
+    else:
+        lines.append(
+            f"    azimuth_deg: null  # TODO packet azimuth of the camera centre ({source})"
+        )
+    lines += [
+        "    hfov_deg: 90.0  # TODO the camera's horizontal field of view",
+        f"    stamp: {cam.stamp}  # TODO what the image header stamp marks in your driver "
+        "(exposure_start, exposure_middle, exposure_end, trigger)",
+        "    optional: false  # true: a camera that cannot be judged does not fail --gate",
+    ]
+    return lines
+
+
+def render_starter_rig(log: LogReader) -> str:
+    """The starter rig of an open log as commented YAML (loads as a valid rig)."""
+    rig, _ = guess_rig(log)
+    lidar = rig.lidar
+    vendor = lidar_family(log.topics[lidar.topic].msgtype)
+    tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
+    x_axis = X_AXIS_AZIMUTH_DEG.get(vendor or "")
+    lines = [
+        f"# Starter rig for {log.summary.path}, written by `syncaudit rig`.",
+        "# Every value below was guessed from the log; check each TODO, then run",
+        "#   syncaudit audit LOG --rig THIS_FILE",
+        "lidar:",
+        f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)",
+        f"  vendor: {_value(vendor)}  # from the packet message type",
+        "  # zero_azimuth_deg: TODO packet azimuth at which the trigger chain fires; while",
+        "  #   it is not set, the audit starts revolutions where the triggers fire and says",
+        "  #   which azimuth that is in a warning",
+        "  azimuth_increases: true  # packet azimuth grows with rotation (all supported vendors)",
+    ]
+    if x_axis is None:
+        lines.append("  azimuth_of_x_axis_deg: null  # TODO packet azimuth of the LiDAR frame's +X")
+    else:
+        lines.append(
+            f"  azimuth_of_x_axis_deg: {x_axis:g}  # the {vendor} ROS driver's frame "
+            "convention; change it if your cameras are mounted on another frame"
+        )
+    lines.append("cameras:" if rig.cameras else "cameras: []  # TODO no camera topic found")
+    for cam in rig.cameras:
+        lines += _camera_lines(cam, lidar, tf_yaws, vendor)
+    defaults = Thresholds()
+    lines.append("thresholds:  # the defaults; see schemas/rig.schema.json")
+    for key, value in defaults.model_dump().items():
+        number = value if not isinstance(value, float) or math.isfinite(value) else None
+        lines.append(f"  {key}: {_value(number)}")
+    return "\n".join(lines) + "\n"
+
+
+def starter_rig_yaml(path: str | Path) -> str:
+    """The starter rig of the log at `path` (see `render_starter_rig`).
+
+    Raises:
+        LogOpenError, LogReadError: the log cannot be read.
+        NoDataError: the log has no LiDAR packet topic.
+    """
+    with open_log(path) as log:
+        return render_starter_rig(log)
