@@ -47,6 +47,8 @@ class GateOptions:
     max_tries: int = DEFAULT_MAX_TRIES
     force: bool = False
     overwrite: bool = False
+    cluster: str | None = None
+    """Dask scheduler address (`tcp://host:8786`): audits run there, not here."""
 
 
 @dataclass(slots=True)
@@ -142,6 +144,10 @@ def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
     One worker per core auditing whole logs; only with fewer logs than cores does each
     audit also read its chunks in parallel (cores shared out between the logs).
     """
+    if options.cluster is not None:
+        from syncaudit.fleet.dask_executor import DaskExecutor
+
+        return DaskExecutor(options.cluster, timeout_s=options.timeout_s), 1
     cores = options.jobs or default_jobs()
     workers = max(1, min(cores, pending))
     audit_jobs = max(1, cores // workers) if pending < cores else 1
