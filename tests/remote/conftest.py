@@ -28,6 +28,8 @@ class ServerState:
     delay_s: float = 0.0
     served_bytes: int = 0
     requests: list[str] = field(default_factory=list)
+    ranged_bytes: int = 0
+    """Bytes asked for by the Range headers of 206 replies."""
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
@@ -39,7 +41,7 @@ class RangeHandler(SimpleHTTPRequestHandler):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, directory=str(self.state.root), **kwargs)
 
-    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
+    def log_message(self, format: str, *args: Any) -> None:
         """Quiet."""
 
     def do_GET(self) -> None:
@@ -65,6 +67,8 @@ class RangeHandler(SimpleHTTPRequestHandler):
                 self.send_header("Content-Range", f"bytes */{size}")
                 self.end_headers()
                 return
+            with state.lock:
+                state.ranged_bytes += end - start
             self.send_response(206)
             self.send_header("Content-Range", f"bytes {start}-{end - 1}/{size}")
         self.send_header("Content-Length", str(end - start))

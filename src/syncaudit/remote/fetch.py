@@ -76,7 +76,7 @@ def filesystem(url: str) -> tuple[Any, str]:
     scheme = url.split("://", 1)[0].lower()
     extra = EXTRAS.get(scheme, "http")
     try:
-        from fsspec.core import url_to_fs
+        from fsspec.core import url_to_fs  # type: ignore[import-untyped]
     except ImportError:
         raise UsageError(f"reading {scheme}:// needs pip install 'syncaudit[{extra}]'") from None
     try:
@@ -151,7 +151,8 @@ def fetch_log(
         raise LogOpenError(f"{public_url(url)}: no such log") from None
     except Exception as exc:
         raise LogOpenError(f"{public_url(url)}: cannot open: {exc}".splitlines()[0]) from None
-    if info.get("type") == "directory":
+    if info.get("type") == "directory" or not name.endswith((".mcap", ".bag", ".db3")):
+        # A ROS 2 bag prefix (an HTTP folder is an index page to fsspec, not a directory).
         return _fetch_folder(fs, path, url, folder / name)
     size = int(info.get("size") or 0)
     target = folder / name
