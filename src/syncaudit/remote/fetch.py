@@ -223,7 +223,9 @@ def _fetch_mcap(
         wanted = {
             cid
             for cid, channel in summary.channels.items()
-            if topics is None or channel.topic in topics
+            if topics is None
+            or channel.topic in topics
+            or _schema_name(summary, channel.schema_id).endswith("String")  # sensor metadata
         }
         chunks = summary.chunk_indexes
         needed = [c for c in chunks if topics is None or wanted & set(c.message_index_offsets)]
@@ -249,6 +251,11 @@ def subtract(ranges: list[tuple[int, int]], held: list[tuple[int, int]]) -> list
             ]
         out.extend(pieces)
     return out
+
+
+def _schema_name(summary: Any, schema_id: int) -> str:
+    schema = summary.schemas.get(schema_id)
+    return str(schema.name) if schema is not None else ""
 
 
 def _fill(

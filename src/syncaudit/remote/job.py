@@ -18,13 +18,14 @@ from syncaudit.remote.fetch import fetch_log, is_url
 
 
 def rig_topics(rig_path: str | None) -> frozenset[str] | None:
-    """Every topic a rig names (LiDAR, its metadata, each camera's), None without a rig."""
+    """Every topic a rig names (LiDAR, its metadata, each camera's) and /tf_static, /tf
+    (camera yaws); None without a rig (then every chunk is fetched)."""
     if rig_path is None:
         return None
     from syncaudit.rig import load_rig
 
     rig = load_rig(rig_path)
-    topics: set[str] = set()
+    topics: set[str] = {"/tf_static", "/tf"}
     for part in (rig.lidar, *rig.cameras):
         for name in type(part).model_fields:
             value = getattr(part, name)
@@ -37,9 +38,21 @@ def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
     """`run_log_job` for local paths; for URLs, a ranged fetch into a temporary folder first."""
     if not is_url(job.path):
         return run_log_job(job, options)
+    try:
+        topics = rig_topics(job.rig_path)
+    except SyncauditError as exc:
+        return LogOutcome(job=job, error=str(exc).splitlines()[0], error_code=exc.exit_code)
+    outcome = _fetch_and_audit(job, options, topics)
+    if topics is not None and outcome.remote_read is not None and outcome.error_code in (3, 7):
+        # The rig's topics missed something the audit reads (a chunk hole): every chunk.
+        outcome = _fetch_and_audit(job, options, None)
+    return outcome
+
+
+def _fetch_and_audit(job: LogJob, options: JobOptions, topics: frozenset[str] | None) -> LogOutcome:
     with tempfile.TemporaryDirectory(prefix="syncaudit-remote-") as folder:
         try:
-            local, stats = fetch_log(job.path, Path(folder), topics=rig_topics(job.rig_path))
+            local, stats = fetch_log(job.path, Path(folder), topics=topics)
         except SyncauditError as exc:
             return LogOutcome(job=job, error=str(exc).splitlines()[0], error_code=exc.exit_code)
         outcome = run_log_job(replace(job, path=str(local)), options)
