@@ -1,12 +1,14 @@
 """The gate's task for a log that may be a URL: fetch what the audit needs, then audit it.
 
-Runs in the worker (a local process or a cluster worker), so the bytes travel from the
+The sparse copy goes to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows:
+writing it is the slowest step on a busy disk), else the system temp folder. Runs in the worker (a local process or a cluster worker), so the bytes travel from the
 object store to where the audit runs, never through the driver. The temporary copy is
 removed when the audit ends.
 """
 
 from __future__ import annotations
 
+import os
 import tempfile
 from dataclasses import replace
 from pathlib import Path
@@ -50,7 +52,8 @@ def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
 
 
 def _fetch_and_audit(job: LogJob, options: JobOptions, topics: frozenset[str] | None) -> LogOutcome:
-    with tempfile.TemporaryDirectory(prefix="syncaudit-remote-") as folder:
+    scratch = os.environ.get("SYNCAUDIT_REMOTE_TMPDIR") or None
+    with tempfile.TemporaryDirectory(prefix="syncaudit-remote-", dir=scratch) as folder:
         try:
             local, stats = fetch_log(job.path, Path(folder), topics=topics)
         except SyncauditError as exc:
