@@ -19,6 +19,7 @@ import contextlib
 import os
 import time
 from collections.abc import Iterable, Iterator
+from dataclasses import replace
 from typing import Any
 
 from syncaudit.errors import UsageError
@@ -53,6 +54,14 @@ def _slow_hook(path: str) -> None:
         handle.write(str(os.getpid()))
     os.replace(pid_file + ".tmp", pid_file)
     time.sleep(60)
+
+
+def _absolute(job: LogJob) -> LogJob:
+    """The job with absolute local paths: workers do not share the driver's directory."""
+    if "://" in job.path:
+        return job
+    rig = os.path.abspath(job.rig_path) if job.rig_path else None
+    return replace(job, path=os.path.abspath(job.path), rig_path=rig)
 
 
 def _deaths_on_scheduler(dask_scheduler: Any, keys: list[str]) -> dict[str, int]:
@@ -106,7 +115,9 @@ class DaskExecutor:
         )
         futures: dict[Any, LogJob] = {}
         for job in jobs:
-            future = self._client.submit(cluster_task, job, options, self.task, pure=False)
+            future = self._client.submit(
+                cluster_task, _absolute(job), options, self.task, pure=False
+            )
             futures[future] = job
         started: dict[Any, float] = {}
         try:
@@ -156,6 +167,7 @@ class DaskExecutor:
         finally:
             future.release()
         outcome.attempts = attempts
+        outcome.job = job  # as the driver named it (relative paths stay relative)
         return outcome
 
     def _expire(

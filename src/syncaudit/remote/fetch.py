@@ -37,6 +37,8 @@ keep several requests in flight."""
 GAP_BYTES = 64 << 10
 """Ranges closer than this are read as one (the gap is fetched too)."""
 TRIES = 3
+IN_FLIGHT = 8
+"""Requests fetched concurrently (at most IN_FLIGHT x PIECE_BYTES = 128 MiB in memory)."""
 
 
 @dataclass(slots=True)
@@ -269,8 +271,8 @@ def _fill(
 ) -> FetchStats:
     """Fetch coalesced ranges (less what is already `held`) and write each at its offset."""
     wanted = coalesce(subtract(ranges, held or []))
-    for at in range(0, len(wanted), 64):  # bounded memory: 64 pieces in flight at most
-        group = wanted[at : at + 64]
+    for at in range(0, len(wanted), IN_FLIGHT):  # memory: IN_FLIGHT pieces at most
+        group = wanted[at : at + IN_FLIGHT]
         for (start, _), data in zip(group, _cat_ranges(fs, path, group, url), strict=True):
             os.pwrite(fd, data, start)
             stats.fetched_bytes += len(data)
