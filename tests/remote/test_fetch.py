@@ -66,3 +66,54 @@ def test_connection_dropped_mid_chunk_is_retried_then_a_read_error(
         fetch_log(f"{base}/log.mcap", tmp_path)
     assert err.value.exit_code == 3
     assert len(state.requests) >= 3 + 1
+
+
+def _per_topic_mcap(path: Path) -> dict[str, list[bytes]]:
+    """An MCAP (official writer, zstd chunks of ~64 KiB) whose topics sit in separate chunks:
+    all of /wanted's messages, then all of /other's, as a recorder splitting by topic or
+    time would leave them. Returns the payloads written per topic."""
+    from mcap.writer import CompressionType, Writer
+
+    written: dict[str, list[bytes]] = {"/wanted": [], "/other": []}
+    with path.open("wb") as handle:
+        writer = Writer(handle, chunk_size=64 << 10, compression=CompressionType.ZSTD)
+        writer.start("ros2", "syncaudit-test")
+        schema = writer.register_schema("std_msgs/msg/Int32", "ros2msg", b"int32 data")
+        channels = {
+            topic: writer.register_channel(topic, "cdr", schema) for topic in ("/wanted", "/other")
+        }
+        rng = __import__("random").Random(7)
+        for topic, count in (("/wanted", 300), ("/other", 2000)):
+            for index in range(count):
+                payload = rng.randbytes(1000)  # incompressible: chunk sizes stay honest
+                writer.add_message(channels[topic], index, payload, index)
+                written[topic].append(payload)
+        writer.finish()
+    return written
+
+
+def test_only_chunks_of_audited_topics_are_fetched(
+    http_root: tuple[str, ServerState], tmp_path: Path
+) -> None:
+    from mcap.reader import make_reader
+
+    base, state = http_root
+    source = tmp_path / "split.mcap"
+    written = _per_topic_mcap(source)
+    (state.root / "split.mcap").symlink_to(source)
+    (tmp_path / "copy").mkdir()
+    local, stats = fetch_log(f"{base}/split.mcap", tmp_path / "copy", topics=frozenset({"/wanted"}))
+    with source.open("rb") as handle:
+        summary = make_reader(handle).get_summary()
+    assert summary is not None
+    wanted_id = next(c.id for c in summary.channels.values() if c.topic == "/wanted")
+    holding = [c for c in summary.chunk_indexes if wanted_id in c.message_index_offsets]
+    assert 0 < stats.chunks_fetched == len(holding) < stats.chunks_total
+    assert stats.needed_chunk_bytes == sum(c.chunk_length for c in holding)
+    assert stats.fetched_bytes == state.ranged_bytes
+    assert stats.fetched_bytes <= 1.05 * stats.needed_chunk_bytes + 128 * 1024  # + head, summary
+    assert stats.fetched_bytes < 0.25 * stats.size_bytes
+    # The sparse copy reads back /wanted exactly, through its index.
+    with local.open("rb") as handle:
+        got = [m.data for _, _, m in make_reader(handle).iter_messages(topics=["/wanted"])]
+    assert got == written["/wanted"]

@@ -37,8 +37,8 @@ keep several requests in flight."""
 GAP_BYTES = 64 << 10
 """Ranges closer than this are read as one (the gap is fetched too)."""
 TRIES = 3
-IN_FLIGHT = 8
-"""Requests fetched concurrently (at most IN_FLIGHT x PIECE_BYTES = 128 MiB in memory)."""
+IN_FLIGHT = 16
+"""Requests fetched concurrently (at most IN_FLIGHT x PIECE_BYTES = 256 MiB in memory)."""
 
 
 @dataclass(slots=True)
