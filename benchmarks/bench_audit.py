@@ -800,6 +800,410 @@ def describe_log(label: str, meta: dict[str, Any], facts: LogFacts) -> str:
     )
 
 
+# ============================================================================ containers
+# The same 1x log in every container a recorder writes, each audited against its own
+# floor (the fastest single-process read of the audit's messages with the container's
+# standard library) and its own 2-core limit (every byte of the audit's data read, and
+# decompressed where compressed, by a pool of all cores, nothing else).
+
+CONTAINERS: tuple[str, ...] = (
+    "mcap",
+    "ros2-mcap",
+    "ros2-mcap-split",
+    "ros2-sqlite",
+    "ros1-lz4",
+    "ros1-bz2",
+)
+SPLIT_PARTS = 4
+
+MCAP_FILES_FLOOR = """\
+import sys
+from mcap.reader import make_reader
+
+files, topics = sys.argv[1].split(","), sys.argv[2:]
+count = 0
+for path in files:
+    with open(path, "rb") as f:
+        for _ in make_reader(f).iter_messages(topics=topics):
+            count += 1
+print(count)
+"""
+"""Floor of a bag folder with MCAP storage: mcap over each file in turn."""
+
+MCAP_FILES_LIMIT = """\
+import mmap, multiprocessing, os, sys
+import lz4.frame, zstandard
+from mcap.reader import make_reader
+
+def work(job):
+    path, spans = job
+    dctx = zstandard.ZstdDecompressor()
+    out = bytearray(max(u for _, _, _, u in spans))
+    total = 0
+    with open(path, "rb") as f:
+        for offset, size, compression, uncompressed in spans:
+            start = offset - offset % mmap.ALLOCATIONGRANULARITY
+            m = mmap.mmap(f.fileno(), offset + size - start, offset=start, access=mmap.ACCESS_READ)
+            view = memoryview(m)
+            data = view[offset - start:]
+            if compression == "zstd":
+                r = dctx.stream_reader(data, read_across_frames=False, closefd=False)
+                got = r.readinto(memoryview(out)[:uncompressed]); r.close(); del r
+            elif compression == "lz4":
+                got = len(lz4.frame.decompress(data))
+            else:
+                got = len(data)
+            data.release(); view.release(); m.close()
+            total += got
+    return total
+
+if __name__ == "__main__":
+    files, workers = sys.argv[1].split(","), os.cpu_count() or 1
+    jobs = []
+    for path in files:
+        with open(path, "rb") as f:
+            chunks = make_reader(f).get_summary().chunk_indexes
+        spans = [(c.chunk_start_offset + c.chunk_length - c.compressed_size, c.compressed_size,
+                  c.compression, c.uncompressed_size) for c in chunks]
+        size = max(1, len(spans) // (8 * workers))
+        jobs += [(path, spans[i:i + size]) for i in range(0, len(spans), size)]
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        print(sum(pool.imap_unordered(work, jobs)))
+"""
+
+SQLITE_FLOOR = """\
+import sqlite3, sys
+
+db, topics = sys.argv[1], sys.argv[2:]
+con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+marks = ",".join("?" * len(topics))
+ids = [r[0] for r in con.execute(f"SELECT id FROM topics WHERE name IN ({marks})", topics)]
+marks = ",".join("?" * len(ids))
+count = 0
+for _ts, _data in con.execute(
+    f"SELECT timestamp, data FROM messages WHERE topic_id IN ({marks}) ORDER BY timestamp", ids
+):
+    count += 1
+print(count)
+"""
+"""Floor of a SQLite bag: sqlite3 selecting the audit's topics' rows in time order."""
+
+SQLITE_LIMIT = """\
+import multiprocessing, os, sqlite3, sys
+
+def work(job):
+    db, lo, hi, ids = job
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    marks = ",".join("?" * len(ids))
+    total = 0
+    for (data,) in con.execute(
+        f"SELECT data FROM messages WHERE id >= ? AND id < ? AND topic_id IN ({marks})",
+        [lo, hi, *ids],
+    ):
+        total += len(data)
+    return total
+
+if __name__ == "__main__":
+    db, topics, workers = sys.argv[1], sys.argv[2:], os.cpu_count() or 1
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    marks = ",".join("?" * len(topics))
+    ids = [r[0] for r in con.execute(f"SELECT id FROM topics WHERE name IN ({marks})", topics)]
+    lo, hi = con.execute("SELECT min(id), max(id) FROM messages").fetchone()
+    step = max(1, (hi - lo + 1) // (8 * workers))
+    jobs = [(db, a, a + step, ids) for a in range(lo, hi + 1, step)]
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        print(sum(pool.imap_unordered(work, jobs)))
+"""
+
+ROS1_FLOOR = """\
+import sys
+from pathlib import Path
+from rosbags.rosbag1 import Reader
+
+path, topics = sys.argv[1], set(sys.argv[2:])
+count = 0
+with Reader(Path(path)) as reader:
+    conns = [c for c in reader.connections if c.topic in topics]
+    for _conn, _t, _data in reader.messages(connections=conns):
+        count += 1
+print(count)
+"""
+"""Floor of a ROS 1 bag: rosbags' reader over the audit's topics (raw bytes, no decoding)."""
+
+ROS1_LIMIT = """\
+import bz2, multiprocessing, os, struct, sys
+from pathlib import Path
+import lz4.frame
+from rosbags.rosbag1 import Reader
+
+def fields(buf):
+    out, pos = {}, 0
+    while pos < len(buf):
+        (n,) = struct.unpack_from("<I", buf, pos)
+        key, _, value = bytes(buf[pos + 4:pos + 4 + n]).partition(b"=")
+        out[key] = value
+        pos += 4 + n
+    return out
+
+def work(job):
+    path, positions = job
+    total = 0
+    with open(path, "rb") as f:
+        for pos in positions:
+            f.seek(pos)
+            (hlen,) = struct.unpack("<I", f.read(4))
+            head = fields(f.read(hlen))
+            (dlen,) = struct.unpack("<I", f.read(4))
+            data = f.read(dlen)
+            kind = head[b"compression"]
+            if kind == b"bz2":
+                data = bz2.decompress(data)
+            elif kind == b"lz4":
+                data = lz4.frame.decompress(data)
+            total += len(data)
+    return total
+
+if __name__ == "__main__":
+    path, workers = sys.argv[1], os.cpu_count() or 1
+    with Reader(Path(path)) as reader:
+        positions = sorted(c.pos for c in reader.chunk_infos)
+    size = max(1, len(positions) // (8 * workers))
+    jobs = [(path, positions[i:i + size]) for i in range(0, len(positions), size)]
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        print(sum(pool.imap_unordered(work, jobs)))
+"""
+"""ROS 1 limit: every chunk of the bag read and decompressed by a pool of all cores."""
+
+
+def container_path(cache: Path, one: Path, kind: str) -> Path:
+    """Where the 1x log converted to `kind` is cached (a file or a bag folder)."""
+    stem = one.name.removesuffix(".mcap")
+    return {
+        "mcap": one,
+        "ros2-mcap": cache / f"{stem}.ros2-mcap",
+        "ros2-mcap-split": cache / f"{stem}.ros2-mcap-split",
+        "ros2-sqlite": cache / f"{stem}.ros2-sqlite",
+        "ros1-lz4": cache / f"{stem}.lz4.bag",
+        "ros1-bz2": cache / f"{stem}.bz2.bag",
+    }[kind]
+
+
+def _write_rosbag2(src: Path, dst: Path, parts: int, storage: str) -> None:
+    """The bare MCAP's messages as a rosbag2 folder (rosbags' writer), split into `parts`
+    files by time as rosbag2 does (each file declares its channels anew)."""
+    import yaml
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from syncaudit.logs.mcap_log import McapLog
+    from syncaudit.logs.typesys import TypeRegistry
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with McapLog(src) as log:
+        start, end = log.summary.start_ns, log.summary.end_ns
+        assert start is not None and end is not None
+        registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
+        topics = {name: info.msgtype for name, info in log.topics.items()}
+        dst.mkdir()
+        metas = []
+        stream = log.messages()
+        pending = next(stream, None)
+        for part in range(parts):
+            hi = start + (end - start + 1) * (part + 1) // parts
+            scratch = dst / f".part{part}"
+            writer = Writer(scratch, version=8, storage_plugin=plugin)
+            writer.open()
+            conns = {
+                t: writer.add_connection(t, ty, typestore=registry.store)
+                for t, ty in topics.items()
+            }
+            while pending is not None and pending.log_time_ns < hi:
+                writer.write(conns[pending.topic], pending.log_time_ns, bytes(pending.data))
+                pending = next(stream, None)
+            writer.close()
+            meta = yaml.safe_load((scratch / "metadata.yaml").read_text())[
+                "rosbag2_bagfile_information"
+            ]
+            for entry in meta["files"]:
+                name = f"{dst.name}_{part}{Path(entry['path']).suffix}"
+                (scratch / entry["path"]).rename(dst / name)
+                entry["path"] = name
+            shutil.rmtree(scratch)
+            metas.append(meta)
+    info = metas[0]
+    info["files"] = [f for m in metas for f in m["files"]]
+    info["relative_file_paths"] = [f["path"] for f in info["files"]]
+    info["message_count"] = sum(m["message_count"] for m in metas)
+    counts: dict[str, int] = {}
+    for m in metas:
+        for t in m["topics_with_message_count"]:
+            name = t["topic_metadata"]["name"]
+            counts[name] = counts.get(name, 0) + t["message_count"]
+    for t in info["topics_with_message_count"]:
+        t["message_count"] = counts[t["topic_metadata"]["name"]]
+    first = min(m["starting_time"]["nanoseconds_since_epoch"] for m in metas)
+    last = max(
+        m["starting_time"]["nanoseconds_since_epoch"] + m["duration"]["nanoseconds"] for m in metas
+    )
+    info["starting_time"] = {"nanoseconds_since_epoch": first}
+    info["duration"] = {"nanoseconds": last - first}
+    text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
+    (dst / "metadata.yaml").write_text(text)
+
+
+def convert_container(one: Path, kind: str, dst: Path) -> None:
+    """Write the 1x log as `kind` at `dst` (runs in a measured subprocess), atomically."""
+    tmp = dst.with_name(f".{dst.name}.tmp")
+    if tmp.is_dir():
+        shutil.rmtree(tmp)
+    tmp.unlink(missing_ok=True)
+    if kind in ("ros2-mcap", "ros2-mcap-split", "ros2-sqlite"):
+        parts = SPLIT_PARTS if kind == "ros2-mcap-split" else 1
+        _write_rosbag2(one, tmp, parts, "sqlite" if kind == "ros2-sqlite" else "mcap")
+    else:  # ROS 1: rosbags' own converter, from the SQLite bag
+        from rosbags.convert import convert
+
+        sqlite = container_path(one.parent, one, "ros2-sqlite")
+        compress = kind.removeprefix("ros1-")
+        tmp.mkdir()  # rosbags writes ROS 1 for a `.bag` suffix: the bag goes inside
+        inner = tmp / dst.name
+        convert([sqlite], inner, "sqlite3", 8, compress, "file", None, None, [], [], [], [])
+        inner.rename(dst)
+        tmp.rmdir()
+        shutil.copyfile(rig_path(one), rig_path(dst))
+        return
+    tmp.rename(dst)
+    shutil.copyfile(rig_path(one), rig_path(dst))
+
+
+def ensure_containers(cache: Path, one: Path, scratch: Path, timeout_s: float) -> dict[str, Path]:
+    """Every container of the 1x log, converted once and cached."""
+    out: dict[str, Path] = {}
+    for kind in CONTAINERS:
+        path = container_path(cache, one, kind)
+        if not path.exists():
+            _log(f"converting the 1x log to {kind} ...")
+            argv = [
+                sys.executable,
+                str(Path(__file__).resolve()),
+                "--convert-to",
+                kind,
+                "--convert-from",
+                str(one),
+                "--convert-dst",
+                str(path),
+            ]
+            run = measure(f"convert {kind}", argv, scratch, timeout_s, cwd=REPO)
+            if not run.ok:
+                raise SystemExit(f"converting to {kind} failed: {run.error_line()}")
+        out[kind] = path
+    return out
+
+
+def _storage_files(path: Path, suffix: str) -> list[Path]:
+    import yaml
+
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return [path / name for name in meta["relative_file_paths"] if name.endswith(suffix)]
+
+
+def container_commands(kind: str, path: Path, topics: list[str]) -> tuple[list[str], list[str]]:
+    """(floor argv, limit argv) for one container."""
+    py = sys.executable
+    if kind == "mcap":
+        return [py, "-c", FLOOR_CODE, str(path), *topics], [py, "-c", LIMIT_CODE, str(path)]
+    if kind.startswith("ros2-mcap"):
+        files = ",".join(str(p) for p in _storage_files(path, ".mcap"))
+        return [py, "-c", MCAP_FILES_FLOOR, files, *topics], [py, "-c", MCAP_FILES_LIMIT, files]
+    if kind == "ros2-sqlite":
+        (db,) = _storage_files(path, ".db3")
+        return [py, "-c", SQLITE_FLOOR, str(db), *topics], [
+            py,
+            "-c",
+            SQLITE_LIMIT,
+            str(db),
+            *topics,
+        ]
+    return [py, "-c", ROS1_FLOOR, str(path), *topics], [py, "-c", ROS1_LIMIT, str(path)]
+
+
+def _disk_bytes(path: Path) -> int:
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def _warm_any(path: Path) -> float:
+    """Warm the page cache for a file or every file of a folder; GB/s."""
+    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    speeds = [warm_page_cache(p) for p in files]
+    return min(speeds) if speeds else float("nan")
+
+
+def bench_containers(
+    cache: Path, one: LogFacts, scratch: Path, timeout_s: float, repeat: int
+) -> list[str]:
+    """Audit, floor and limit on every container of the 1x log; the table's lines."""
+    paths = ensure_containers(cache, one.path, scratch, timeout_s)
+    rows: list[tuple[str, int, Run, Run, Run, str]] = []
+    for kind, path in paths.items():
+        floor_argv, limit_argv = container_commands(kind, path, one.audit_topics)
+        json_out = scratch / f"audit-{kind}.json"
+        runs: dict[str, list[Run]] = {}
+        for _ in range(repeat):
+            for name, argv in (
+                ("audit", audit_argv(path, json_out)),
+                ("floor", floor_argv),
+                ("limit", limit_argv),
+            ):
+                _warm_any(path)
+                runs.setdefault(name, []).append(
+                    measure(f"{kind} {name}", argv, scratch, timeout_s)
+                )
+        audit, floor, limit = (median_run(runs[n]) for n in ("audit", "floor", "limit"))
+        same = "-"
+        if audit.ok:
+            same = _same_result(scratch / "audit-mcap.json", json_out)
+        rows.append((kind, _disk_bytes(path), audit, floor, limit, same))
+    head = (
+        f"{'container':<17}{'on disk':>10}{'audit s':>9}{'floor s':>9}{'limit s':>9}"
+        f"{'audit/floor':>12}{'audit/limit':>12}{'audit MB':>10}  same result as bare mcap"
+    )
+    lines = [head, "-" * len(head)]
+    for kind, size, audit, floor, limit, same in rows:
+
+        def ratio(a: Run, b: Run) -> str:
+            return f"x{a.wall_s / b.wall_s:.2f}" if a.ok and b.ok else "-"
+
+        def wall(r: Run) -> str:
+            return f"{r.wall_s:.2f}" if r.ok else "FAILED"
+
+        lines.append(
+            f"{kind:<17}{_gb(size):>10}{wall(audit):>9}{wall(floor):>9}{wall(limit):>9}"
+            f"{ratio(audit, floor):>12}{ratio(audit, limit):>12}{_fmt(audit.pss_mb, 0):>10}  {same}"
+        )
+        for run in (audit, floor, limit):
+            if not run.ok:
+                lines.append(f"    {run.name} FAILED: {run.error_line()}")
+    return lines
+
+
+def _same_result(reference: Path, other: Path) -> str:
+    """Whether two audit JSONs agree apart from the log's path and container."""
+
+    def strip(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {k: strip(v) for k, v in value.items() if k not in ("path", "container")}
+        if isinstance(value, list):
+            return [strip(v) for v in value]
+        return value
+
+    try:
+        a, b = (strip(json.loads(p.read_text())) for p in (reference, other))
+    except (OSError, ValueError) as exc:
+        return f"not checked ({exc})"
+    return "yes" if a == b else "NO: the audit results differ"
+
+
 # =================================================================================== main
 
 
@@ -821,7 +1225,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=DEFAULT_REPEAT,
         help=f"interleaved rounds; each figure is the median-wall run (default {DEFAULT_REPEAT})",
     )
+    parser.add_argument(
+        "--skip-containers",
+        action="store_true",
+        help="do not convert the 1x log to the other containers and audit each",
+    )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--convert-to", choices=CONTAINERS, help=argparse.SUPPRESS)
+    parser.add_argument("--convert-from", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--convert-dst", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--duration-s", type=float, help=argparse.SUPPRESS)
     return parser.parse_args(argv)
 
@@ -830,6 +1242,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     if args.generate_to is not None:
         generate(args.generate_to, args.duration_s)
+        return 0
+    if args.convert_to is not None:
+        convert_container(args.convert_from, args.convert_to, args.convert_dst)
         return 0
     if not Path("/proc/self/smaps_rollup").exists():
         raise SystemExit("this benchmark samples memory from /proc (Linux 4.14+)")
@@ -976,6 +1391,17 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     _log("targets:")
     for line in verdicts(audit, floor, limit, audit2, peers, peer_note):
         _log("  " + line)
+    if not args.skip_containers:
+        _log()
+        _log(
+            "every container (issue 13), the 1x log converted once with rosbags (writer for the "
+            "ROS 2 folders, rosbags-convert for ROS 1); floor: the container's standard library "
+            f"(mcap, sqlite3, rosbags) in one process; limit: {os.cpu_count()} processes reading "
+            "(and decompressing) every chunk/row; median of "
+            f"{repeat} round(s), load average {os.getloadavg()[0]:.2f}:"
+        )
+        for line in bench_containers(cache, one, scratch, t_out, repeat):
+            _log(line)
     return 0 if audit.ok else 1
 
 

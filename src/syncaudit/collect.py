@@ -1,10 +1,13 @@
 """One pass over a log for the audit: each message becomes a small item, in log order.
 
 The extraction of a message (decoding LiDAR packets, reading an image header,
-deserialising an exposure or trigger) is pure, so for an indexed MCAP it runs in
-worker processes, one group of chunks each, on all cores; the parent merges the
-groups back into log-time order (ties broken by chunk and record, as the mcap reader
-does), so the serial and parallel paths yield the same items in the same order.
+deserialising an exposure or trigger) is pure, so for a log that offers read units
+(`LogReader.read_units`: MCAP chunks, ROS 1 chunks, SQLite row ranges) it runs in worker
+processes, one group of units each, on all cores, each unit read by the reader class
+registered for its kind (`logs.units`); the parent merges the groups back into log-time
+order (ties broken by file, unit offset and index in the unit), so the serial and
+parallel paths yield the same items in the same order. A log of one group is read in the
+parent: a pool would only cost.
 """
 
 from __future__ import annotations
@@ -14,9 +17,8 @@ import heapq
 import multiprocessing
 import os
 from collections.abc import Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from syncaudit.camera.cdr_fast import has_fast_reader, read_fast
@@ -25,8 +27,9 @@ from syncaudit.lidar import ouster
 from syncaudit.lidar.samples import packet_samples
 from syncaudit.lidar.stream import SCAN_TYPES, decode_ouster_message, decode_scan
 from syncaudit.logs import LogReader, RawMessage
-from syncaudit.logs.mcap_chunks import ChunkReader, ChunkRef, group_chunks, iter_chunk_messages
-from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.units import UnitReader, group_units, open_unit_reader
+from syncaudit.workers import worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
@@ -98,91 +101,128 @@ def default_jobs() -> int:
 
 def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Item]:
     """Every item of the plan's topics, in log-time order; parallel where the log allows."""
-    if isinstance(log, McapLog):
-        refs = _chunk_refs(log, plan)
-        if refs is not None:
-            groups = group_chunks(refs, GROUP_BYTES)
-            if jobs > 1 and len(groups) > 1:
-                yield from _merged(groups, _parallel_results(log, groups, plan, jobs))
-            else:
-                reader = ChunkReader(str(log.path), check_crc=plan.check_crc)
-                try:
-                    results = (_extract_chunks(log, reader, g, plan) for g in groups)
-                    yield from _merged(groups, results)
-                finally:
-                    reader.close()
-            return
-    for msg in log.messages(plan.topics):
-        item = extract(plan, msg, log)
-        if item is not None:
-            yield item
+    topics = frozenset(plan.topics)
+    units = log.read_units(topics)
+    if units is None:
+        for msg in log.messages(plan.topics):
+            item = extract(plan, msg, log)
+            if item is not None:
+                yield item
+        return
+    groups = group_units(units, GROUP_BYTES)
+    channels = log.unit_channels(topics)
+    ranks = _source_ranks(units)
+    if jobs > 1 and len(groups) > 1:
+        yield from _merged(groups, _parallel_results(log, groups, channels, plan, jobs))
+        return
+    readers = _Readers(plan.check_crc)
+    try:
+        results = (_extract_units(log, readers, g, channels, ranks, plan) for g in groups)
+        yield from _merged(groups, results)
+    finally:
+        readers.close()
 
 
-def _chunk_refs(log: McapLog, plan: ExtractPlan) -> list[ChunkRef] | None:
-    """Chunks holding any of the plan's topics, or None where the MCAP has no index."""
-    summary = log.indexed_summary()
-    if summary is None:
-        return None
-    wanted = {cid for cid, ch in summary.channels.items() if ch.topic in plan.topics}
-    return [
-        ChunkRef(
-            ci.chunk_start_offset,
-            ci.chunk_length,
-            ci.message_start_time,
-            ci.message_end_time,
-            ci.compressed_size,
-        )
-        for ci in summary.chunk_indexes
-        if wanted & set(ci.message_index_offsets)
-    ]
+def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
+    """Files of a log by path (ties in time across files: as the readers' serial merges)."""
+    return {source: rank for rank, source in enumerate(sorted({u.source for u in units}))}
 
 
 # ---- worker side -------------------------------------------------------------------------
 
-Keyed = tuple[int, int, int, Item]
-"""(log time, chunk offset, record index, item): the merge order."""
+Keyed = tuple[int, int, int, int, Item]
+"""(log time, file rank (by path), unit offset, index in unit, item): the merge order."""
 
-_INHERITED_LOGS: dict[str, McapLog] = {}
+
+class _Readers:
+    """One unit reader per (kind, file), opened on first use and reused for every task."""
+
+    def __init__(self, check_crc: bool) -> None:
+        self.check_crc = check_crc
+        self._open: dict[tuple[str, str], UnitReader] = {}
+
+    def get(self, unit: ReadUnit) -> UnitReader:
+        """The reader of `unit`'s kind and file."""
+        key = (unit.kind, unit.source)
+        reader = self._open.get(key)
+        if reader is None:
+            reader = open_unit_reader(unit.kind, unit.source, check_crc=self.check_crc)
+            self._open[key] = reader
+        return reader
+
+    def close(self) -> None:
+        """Close every reader."""
+        for reader in self._open.values():
+            reader.close()
+        self._open.clear()
+
+
+_INHERITED_LOGS: dict[str, LogReader] = {}
 """Logs open in the parent while its pool runs: forked workers use them as they are."""
-_WORKER_SOURCES: dict[tuple[str, bool], tuple[McapLog, ChunkReader]] = {}
-"""Per worker process: the log and one chunk reader (its buffers reused for every task)."""
+_WORKER_STATE: dict[tuple[str, bool], tuple[LogReader, _Readers]] = {}
+"""Per worker process: the log and its unit readers (buffers reused for every task)."""
 
 
-def _extract_group(path: str, refs: list[ChunkRef], plan: ExtractPlan) -> list[Keyed]:
-    """Read, decompress and extract one group of chunks (the worker task)."""
-    key = (path, plan.check_crc)
-    if key not in _WORKER_SOURCES:
-        log = _INHERITED_LOGS.get(path) or McapLog(Path(path))
-        _WORKER_SOURCES[key] = (log, ChunkReader(path, check_crc=plan.check_crc))
-    log, reader = _WORKER_SOURCES[key]
-    return _extract_chunks(log, reader, refs, plan)
+@dataclass(frozen=True, slots=True)
+class _Task:
+    """What a worker needs besides the units: picklable."""
+
+    log_path: str
+    channels: dict[int, ChannelInfo]
+    ranks: dict[str, int]
+    plan: ExtractPlan
 
 
-def _extract_chunks(
-    log: McapLog, reader: ChunkReader, refs: list[ChunkRef], plan: ExtractPlan
+def _extract_group(task: _Task, units: list[ReadUnit]) -> list[Keyed]:
+    """Read and extract one group of units (the worker task)."""
+    key = (task.log_path, task.plan.check_crc)
+    if key not in _WORKER_STATE:
+        log = _INHERITED_LOGS.get(task.log_path)
+        if log is None:  # spawned, not forked: open the log afresh
+            from syncaudit.logs import open_log
+
+            log = open_log(task.log_path)
+        _WORKER_STATE[key] = (log, _Readers(task.plan.check_crc))
+    log, readers = _WORKER_STATE[key]
+    return _extract_units(log, readers, units, task.channels, task.ranks, task.plan)
+
+
+def _extract_units(
+    log: LogReader,
+    readers: _Readers,
+    units: list[ReadUnit],
+    channels: dict[int, ChannelInfo],
+    ranks: dict[str, int],
+    plan: ExtractPlan,
 ) -> list[Keyed]:
-    """The items of a group of chunks, sorted into merge order."""
-    summary = log.indexed_summary()
-    assert summary is not None
-    topics = set(plan.topics)
-    channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
-    wanted = frozenset(channels)
+    """The items of a group of units, sorted into merge order."""
     out: list[Keyed] = []
-    for ref in refs:
-        records = reader.read(ref)
-        for index, cid, log_time, data in iter_chunk_messages(records, wanted):
-            item = extract(plan, log.raw_message(channels[cid], log_time, data), log)
+    for unit in units:
+        rank = ranks[unit.source]
+        for log_time, index, cid, data in readers.get(unit).messages(unit, channels):
+            info = channels[cid]
+            msg = RawMessage(info.topic, info.msgtype, log_time, data, info.encoding)
+            item = extract(plan, msg, log)
             if item is not None:
-                out.append((log_time, ref.offset, index, item))
-    out.sort(key=lambda k: (k[0], k[1], k[2]))
+                out.append((log_time, rank, unit.offset, index, item))
+    out.sort(key=_merge_key)
     return out
 
 
+def _merge_key(keyed: Keyed) -> tuple[int, int, int, int]:
+    return keyed[0], keyed[1], keyed[2], keyed[3]
+
+
 def _parallel_results(
-    log: McapLog, groups: list[list[ChunkRef]], plan: ExtractPlan, jobs: int
+    log: LogReader,
+    groups: list[list[ReadUnit]],
+    channels: dict[int, ChannelInfo],
+    plan: ExtractPlan,
+    jobs: int,
 ) -> Iterator[list[Keyed]]:
     """Each group's extracted items, in group order, computed by `jobs` worker processes."""
-    path = str(log.path)
+    path = log.summary.path
+    task = _Task(path, channels, _source_ranks([u for g in groups for u in g]), plan)
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
     if context.get_start_method() == "fork":
@@ -198,12 +238,12 @@ def _parallel_results(
     if freeze:
         gc.freeze()
     try:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        with worker_pool(jobs, context) as pool:
             window: list[Future[list[Keyed]]] = []
             submitted = 0
             for _ in range(len(groups)):
                 while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
-                    window.append(pool.submit(_extract_group, path, groups[submitted], plan))
+                    window.append(pool.submit(_extract_group, task, groups[submitted]))
                     submitted += 1
                 yield window.pop(0).result()
     finally:
@@ -212,26 +252,26 @@ def _parallel_results(
         _INHERITED_LOGS.pop(path, None)
 
 
-def _deserialised_encodings(log: McapLog, plan: ExtractPlan) -> set[str]:
+def _deserialised_encodings(log: LogReader, plan: ExtractPlan) -> set[str]:
     """Encodings of the plan's messages that go through rosbags (no struct reader)."""
     infos = [log.topics[t] for t in (*plan.exposures, *plan.triggers) if t in log.topics]
     return {i.encoding for i in infos if not has_fast_reader(i.msgtype, i.encoding)}
 
 
-def _merged(groups: list[list[ChunkRef]], results: Iterator[list[Keyed]]) -> Iterator[Item]:
-    """Group results merged into one log-time order (chunks of a log may overlap in time)."""
+def _merged(groups: list[list[ReadUnit]], results: Iterator[list[Keyed]]) -> Iterator[Item]:
+    """Group results merged into one log-time order (units of a log may overlap in time)."""
     pending: list[Keyed] = []
     for done, result in enumerate(results):
         # Everything before the next group's first message can no longer be overtaken.
-        horizon = min(c.start_ns for c in groups[done + 1]) if done + 1 < len(groups) else None
-        merged = list(heapq.merge(pending, result, key=lambda k: (k[0], k[1], k[2])))
+        horizon = min(u.start_ns for u in groups[done + 1]) if done + 1 < len(groups) else None
+        merged = list(heapq.merge(pending, result, key=_merge_key))
         if horizon is None:
             ready, pending = merged, []
         else:
             cut = next((i for i, k in enumerate(merged) if k[0] >= horizon), len(merged))
             ready, pending = merged[:cut], merged[cut:]
         for keyed in ready:
-            yield keyed[3]
+            yield keyed[4]
 
 
 def lidar_family(msgtype: str) -> str | None:

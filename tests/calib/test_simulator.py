@@ -154,3 +154,59 @@ def test_nonsense_scene_configs_are_config_errors() -> None:
     except ConfigError as exc:
         message = str(exc)
     assert "\n" not in message and "n_stops" in message
+
+
+def test_drive_session_layouts_tf_chain_and_odometry(tmp_path: Path) -> None:
+    """A driving session: organised ouster-ros cloud with zeros, two-level /tf_static,
+    odometry on both carriers, stops and moving scans as the config asks."""
+    from syncaudit.calib.config import calib_scene_config
+    from syncaudit.calib.extrinsics import from_static_transforms
+    from syncaudit.calib.io import read_odometry
+
+    out = tmp_path / "drive.mcap"
+    cfg = calib_scene_config(
+        motion="drive",
+        beams=16,
+        n_stops=3,
+        organized="second",
+        tf_chain="sensor_kit",
+        odometry="both",
+        mount="bumper_front_rear",
+    )
+    truth = simulate_calib_session(out, cfg)
+    rear = truth["lidars"][1]
+    with open_log(out) as log:
+        assert log.topics["/odom"].msgtype == "nav_msgs/msg/Odometry"
+        assert log.topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage"
+        raw = next(iter(log.messages(topics=[rear["topic"]])))
+        msg: Any = log.deserialize(raw)
+        assert (msg.height, msg.width, msg.point_step) == (16, 600, 48)
+        assert not msg.is_dense
+        assert [f.name for f in msg.fields][:4] == ["x", "y", "z", "intensity"]
+        xyz = np.frombuffer(msg.data, dtype=np.uint8).reshape(16, 600, 48)[:, :, :12]
+        no_return = (xyz.view(np.float32).reshape(16, 600, 3) == 0).all(axis=2)
+        assert no_return.any() and not no_return.all()  # sky above a low LiDAR: zeros
+    decoded = {(s.topic, s.stamp_ns): s.points_m.shape[0] for s in iter_scans(out, [rear["topic"]])}
+    for scan in truth["scans"]:
+        if scan["topic"] == rear["topic"]:
+            assert decoded[(scan["topic"], scan["stamp_ns"])] == scan["points"]
+    # Two levels on /tf_static, resolving to the recorded extrinsic exactly.
+    edges = read_static_transforms(out, "/tf_static")
+    assert {e.parent for e in edges} == {"base_link", "sensor_kit_base_link"}
+    resolved = from_static_transforms(edges, [rear["frame_id"]], "test")
+    assert resolved.base_frame == "base_link"
+    assert np.allclose(
+        resolved.base_from_frame[rear["frame_id"]],
+        _matrix(rear["recorded_base_from_lidar"]),
+        atol=1e-9,
+    )
+    odometry = read_odometry(out, "base_link")
+    assert odometry is not None and odometry.source == "/odom"
+    assert odometry.stamps_ns.size == truth["odometry"]["samples"]
+    # Every stop holds 3+ static scans per LiDAR; 10-18 sweeps are taken between stops.
+    for lidar in truth["lidars"]:
+        mine = [s for s in truth["scans"] if s["topic"] == lidar["topic"]]
+        for stop in truth["stops"]:
+            assert sum(1 for s in mine if s["stop"] == stop["index"]) >= 3
+        moving = sum(1 for s in mine if not s["static"])
+        assert 2 * 9 <= moving <= 2 * 19

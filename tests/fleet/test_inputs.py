@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -43,10 +44,13 @@ def test_manifests_and_vehicle_sources(tmp_path: Path) -> None:
     )
     (job,) = read_manifest(tmp_path / "m.csv")
     assert (job.vehicle, job.rig_path, job.tags) == ("car7", f"{log}.rig.yaml", ("night", "rain"))
-    (tmp_path / "m.jsonl").write_text(json.dumps({"path": str(log), "tags": ["a"]}) + "\n")
-    policy = parse_policy({"vehicle_pattern": r"wt/(?P<vehicle>[a-z]+)/sample_logs"}, "p")
+    fleet_log = tmp_path / "uploads" / "car12" / log.name
+    fleet_log.parent.mkdir(parents=True)
+    shutil.copyfile(log, fleet_log)
+    (tmp_path / "m.jsonl").write_text(json.dumps({"path": str(fleet_log), "tags": ["a"]}) + "\n")
+    policy = parse_policy({"vehicle_pattern": r"/uploads/(?P<vehicle>car\d+)/"}, "p")
     (job,) = discover([str(tmp_path / "m.jsonl")], policy).jobs
-    assert job.vehicle == "gate" and job.tags == ("a",)  # from the path pattern
+    assert job.vehicle == "car12" and job.tags == ("a",)  # from the path pattern
     (tmp_path / "bad.csv").write_text("log,car\nx,y\n")
     with pytest.raises(ConfigError, match="'path' column"):
         read_manifest(tmp_path / "bad.csv")

@@ -427,8 +427,12 @@ def test_summary_without_statistics_uses_chunk_index_times(tmp_path: Path, probe
     msgs = write_mcap(path, pair(probe), probes(probe, 40), chunk_size=300, use_statistics=False)
     with open_log(path) as log:
         s = log.summary
-        assert (s.start_ns, s.end_ns, s.message_count) == (1_000, 1_390, None)
-        assert {t.count for t in log.topics.values()} == {None}
+        assert (s.start_ns, s.end_ns, s.message_count) == (1_000, 1_390, 40)
+        # issue 9 item 8: counted from the message indexes after each chunk
+        expected: dict[str, int] = {}
+        for m in msgs:
+            expected[m.topic] = expected.get(m.topic, 0) + 1
+        assert {n: t.count for n, t in log.topics.items()} == expected
         assert stream(log) == as_tuples(msgs) and log.warnings == []
 
 

@@ -10,8 +10,10 @@ from mcap.writer import CompressionType, Writer
 
 from syncaudit.errors import LogReadError
 from syncaudit.logs import open_log
-from syncaudit.logs.mcap_chunks import ChunkReader, ChunkRef, group_chunks, iter_chunk_messages
+from syncaudit.logs.mcap_chunks import ChunkReader, iter_chunk_messages
 from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.model import ReadUnit
+from syncaudit.logs.units import group_units
 
 
 def _write(path: Path, probe: Any, compression: CompressionType, n: int = 300) -> None:
@@ -34,19 +36,10 @@ def _write(path: Path, probe: Any, compression: CompressionType, n: int = 300) -
         writer.finish()
 
 
-def _refs(log: McapLog) -> list[ChunkRef]:
-    summary = log.indexed_summary()
-    assert summary is not None
-    return [
-        ChunkRef(
-            c.chunk_start_offset,
-            c.chunk_length,
-            c.message_start_time,
-            c.message_end_time,
-            c.compressed_size,
-        )
-        for c in summary.chunk_indexes
-    ]
+def _refs(log: McapLog) -> list[ReadUnit]:
+    units = log.read_units(frozenset(log.topics))
+    assert units is not None
+    return sorted(units, key=lambda u: u.offset)
 
 
 @pytest.mark.parametrize(
@@ -65,7 +58,7 @@ def test_chunk_reading_matches_messages(
         keyed = []
         reader = ChunkReader(str(path), check_crc=True)
         for ref in _refs(log):
-            records = reader.read(ref)
+            records = reader.read(ref.offset, ref.length)
             for index, cid, stamp, data in iter_chunk_messages(
                 records, frozenset(summary.channels)
             ):
@@ -94,7 +87,9 @@ def test_channel_filter(tmp_path: Path, probe: Any) -> None:
         got = [
             cid
             for ref in _refs(log)
-            for _i, cid, _t, _d in iter_chunk_messages(reader.read(ref), frozenset({2}))
+            for _i, cid, _t, _d in iter_chunk_messages(
+                reader.read(ref.offset, ref.length), frozenset({2})
+            )
         ]
     assert got == [2] * 100
 
@@ -110,14 +105,14 @@ def test_damaged_chunk_is_a_log_read_error(tmp_path: Path, probe: Any) -> None:
     data[at : at + 4] = bytes(b ^ 0xFF for b in data[at : at + 4])
     path.write_bytes(bytes(data))
     with pytest.raises(LogReadError, match="CRC") as info:
-        ChunkReader(str(path), check_crc=True).read(ref)
+        ChunkReader(str(path), check_crc=True).read(ref.offset, ref.length)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
     # Without the CRC check an uncompressed chunk's payload damage goes unseen (by design).
-    assert ChunkReader(str(path), check_crc=False).read(ref)
+    assert ChunkReader(str(path), check_crc=False).read(ref.offset, ref.length)
 
-    beyond = ChunkRef(len(data) - 10, 100, 0, 0, 100)
+    beyond = ReadUnit(str(path), "mcap-chunk", len(data) - 10, 100, 0, 0, 100)
     with pytest.raises(LogReadError, match="past the end"):
-        ChunkReader(str(path)).read(beyond)
+        ChunkReader(str(path)).read(beyond.offset, beyond.length)
 
 
 def test_records_that_do_not_tile_the_chunk_raise() -> None:
@@ -131,10 +126,10 @@ def test_records_that_do_not_tile_the_chunk_raise() -> None:
 
 def test_group_chunks_by_time_and_size() -> None:
     refs = [
-        ChunkRef(offset=o, length=10, start_ns=s, end_ns=s + 5, compressed_size=40)
+        ReadUnit("f", "mcap-chunk", offset=o, length=10, start_ns=s, end_ns=s + 5, cost=40)
         for o, s in [(300, 30), (100, 10), (200, 20), (400, 40), (500, 50)]
     ]
-    groups = group_chunks(refs, target_bytes=100)
+    groups = group_units(refs, target_bytes=100)
     assert [[r.start_ns for r in g] for g in groups] == [[10, 20, 30], [40, 50]]
 
 
@@ -160,8 +155,8 @@ def test_damaged_zstd_chunk_is_a_log_read_error(tmp_path: Path, probe: Any, dama
     reader = ChunkReader(str(path))
     try:
         with pytest.raises(LogReadError, match="corrupt") as info:
-            reader.read(ref)
+            reader.read(ref.offset, ref.length)
         assert str(path) in str(info.value) and "\n" not in str(info.value)
-        assert len(reader.read(refs[2])) > 0
+        assert len(reader.read(refs[2].offset, refs[2].length)) > 0
     finally:
         reader.close()

@@ -5,6 +5,7 @@ imported only when `calibrate_log` runs, so the simulator and the report work wi
 """
 
 from syncaudit.calib.config import (
+    AlignmentLimits,
     CalibConfig,
     CalibSceneConfig,
     LidarSimConfig,
@@ -14,14 +15,17 @@ from syncaudit.calib.config import (
     SceneConfig,
     SelectionConfig,
     ValidationConfig,
+    calib_scene_config,
     load_config,
+    mount_preset,
     rig_preset,
 )
 from syncaudit.calib.pipeline import calibrate_log
-from syncaudit.calib.report import html_section, render_calibration
+from syncaudit.calib.report import html_section, render_calibration, render_calibration_html
 from syncaudit.calib.result import CalibrationResult
 
 __all__ = [
+    "AlignmentLimits",
     "CalibConfig",
     "CalibSceneConfig",
     "CalibrationResult",
@@ -32,9 +36,12 @@ __all__ = [
     "SceneConfig",
     "SelectionConfig",
     "ValidationConfig",
+    "calib_scene_config",
     "calibrate_log",
     "html_section",
     "load_config",
+    "mount_preset",
     "render_calibration",
+    "render_calibration_html",
     "rig_preset",
 ]

@@ -20,6 +20,7 @@ from syncaudit.logs import open_log
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 TFMESSAGE = "tf2_msgs/msg/TFMessage"
+ODOMETRY = "nav_msgs/msg/Odometry"
 
 _DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 """sensor_msgs/PointField datatype codes -> numpy type codes (without byte order)."""
@@ -167,3 +168,77 @@ def read_static_transforms(path: Path, tf_topic: str) -> list[StaticTransform]:
                     parent_from_child=se3.make_transform(rot, (float(t.x), float(t.y), float(t.z))),
                 )
     return list(edges.values())
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """The vehicle's odometry: `odom_from_base` poses (N, 4, 4) at sorted stamps, and where
+    they came from."""
+
+    source: str
+    stamps_ns: NDArray[np.int64]
+    poses: NDArray[np.float64]
+
+    def at(self, stamp_ns: int) -> NDArray[np.float64]:
+        """The pose of the sample nearest in time to `stamp_ns`."""
+        i = int(np.clip(np.searchsorted(self.stamps_ns, stamp_ns), 1, self.stamps_ns.size - 1))
+        if abs(int(self.stamps_ns[i - 1]) - stamp_ns) <= abs(int(self.stamps_ns[i]) - stamp_ns):
+            i -= 1
+        return np.asarray(self.poses[i])
+
+
+def _pose_matrix(position: Any, orientation: Any) -> NDArray[np.float64] | None:
+    q = orientation
+    try:
+        rot = se3.quaternion_to_matrix(float(q.x), float(q.y), float(q.z), float(q.w))
+    except ValueError:
+        return None
+    return se3.make_transform(rot, (float(position.x), float(position.y), float(position.z)))
+
+
+def read_odometry(path: Path, base_frame: str) -> Odometry | None:
+    """The vehicle's odometry from the log, or None when it has none.
+
+    Prefers a nav_msgs/Odometry topic whose child frame is `base_frame` (the first such
+    topic by name), else /tf transforms whose child is `base_frame` (e.g. odom ->
+    base_link). Only these small messages are decoded.
+    """
+    with open_log(path) as log:
+        odom_topics = sorted(t for t, i in log.topics.items() if i.msgtype == ODOMETRY)
+        tf_topics = [t for t, i in log.topics.items() if t == "/tf" and i.msgtype == TFMESSAGE]
+        for topic in odom_topics:
+            stamps: list[int] = []
+            poses: list[NDArray[np.float64]] = []
+            for raw in log.messages(topics=[topic]):
+                msg: Any = log.deserialize(raw)
+                if str(msg.child_frame_id).lstrip("/") != base_frame:
+                    break
+                pose = _pose_matrix(msg.pose.pose.position, msg.pose.pose.orientation)
+                if pose is not None:
+                    stamps.append(_stamp_ns(msg, raw.log_time_ns))
+                    poses.append(pose)
+            if len(stamps) >= 2:
+                return _odometry(topic, stamps, poses)
+        for topic in tf_topics:
+            stamps, poses = [], []
+            for raw in log.messages(topics=[topic]):
+                msg = log.deserialize(raw)
+                for tr in msg.transforms:
+                    if str(tr.child_frame_id).lstrip("/") != base_frame:
+                        continue
+                    pose = _pose_matrix(tr.transform.translation, tr.transform.rotation)
+                    if pose is not None:
+                        stamps.append(_stamp_ns(tr, raw.log_time_ns))
+                        poses.append(pose)
+            if len(stamps) >= 2:
+                return _odometry(f"{topic} -> {base_frame}", stamps, poses)
+    return None
+
+
+def _odometry(source: str, stamps: list[int], poses: list[NDArray[np.float64]]) -> Odometry:
+    order = np.argsort(np.asarray(stamps, dtype=np.int64), kind="stable")
+    return Odometry(
+        source=source,
+        stamps_ns=np.asarray(stamps, dtype=np.int64)[order],
+        poses=np.stack(poses)[order],
+    )

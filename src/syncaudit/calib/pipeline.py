@@ -1,19 +1,27 @@
-"""`calibrate_log`: method B end to end on a recorded turntable or slow-turn session.
+"""`calibrate_log`: method B end to end on a turntable, slow-turn or driving session.
 
-1. read the LiDARs' PointCloud2 scans and the recorded extrinsics;
-2. find stationary stops (runs of scans without motion; scans taken while turning are
-   left out), the vehicle's turn between consecutive stops (all LiDARs merged in the base
-   frame, yaw search + coarse GICP) and so each stop's turntable angle; keep distinct
-   angular positions;
-3. per LiDAR, align overlapping scan pairs with GICP, accept/reject each by overlap,
-   point-to-plane error and conditioning (degenerate alignments are rejected);
-4. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
-   stops the accepted alignments connect, anchored at a stop shared with the other
-   LiDARs: every scan lands in that LiDAR's frame at the anchor stop -- its local map;
-5. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
+1. read the LiDARs' PointCloud2 scans (organised or not), the recorded extrinsics (any
+   depth of /tf_static chain) and, when the log has it, the vehicle's odometry;
+2. find still stops from scan-to-scan change (nearest-neighbour residuals, no
+   registration, so low and sparse LiDARs work); scans taken while moving are skipped,
+   not deskewed. Refuse a degenerate scene (a direction no stop constrains: corridor,
+   ground plus one wall) before any registration, naming the free direction; a log
+   with too few stops gets a not-calibratable result saying why, never "nothing to audit";
+3. the vehicle's motion between stops (all LiDARs merged in the base frame): seeded by
+   odometry when present, else a yaw search scored on the structure off the ground
+   (ground plane fitted and removed), verified by a second criterion; a stop links to
+   the nearest earlier stop whose motion verifies, so one weak link does not drop the rest;
+4. per LiDAR, align every pair of stops whose views should overlap with GICP; accept on
+   point-to-plane error and conditioning (planar directions for a planar graph), with
+   overlap judged against the share the two views allow at the seed pose;
+5. per LiDAR, a pose graph (gtsam, robust kernel, planar by default) over each group of
+   stops the accepted alignments connect (loop closures included), anchored at a stop
+   shared with the other LiDARs: every scan lands in that LiDAR's frame at the anchor
+   stop -- its local map;
+6. GICP between the reference LiDAR's map and each other LiDAR's map anchored at the same
    stop, seeded with the recorded extrinsic: the result is `reference_from_lidar`, the
    extrinsic calibration (estimates from several anchors are fused by their information);
-6. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
+7. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
@@ -45,7 +53,10 @@ from syncaudit.calib.registration import (
     Conditioning,
     align,
     backend,
+    evaluate,
+    gicp,
     prepare,
+    visible_fraction,
     yaw_search,
 )
 from syncaudit.calib.result import (
@@ -70,11 +81,10 @@ _MIN_POINTS = 100
 
 @dataclass
 class _Scan:
-    """A scan kept in memory: points at the finest voxel used (float32), a coarse cloud."""
+    """A scan kept in memory: points at the finest voxel used (float32)."""
 
     stamp_ns: int
     points_m: NDArray[np.float32]
-    coarse: Cloud
 
 
 @dataclass
@@ -176,8 +186,7 @@ def _read(
         if points.shape[0] < _MIN_POINTS:
             skipped += 1
             continue
-        coarse = prepare(points, reg.coarse_voxel_m, 20, reg.num_threads)
-        scans[scan.topic].append(_Scan(scan.stamp_ns, points, coarse))
+        scans[scan.topic].append(_Scan(scan.stamp_ns, points))
     if skipped:
         notes.append(f"{skipped} scan(s) with fewer than {_MIN_POINTS} points skipped")
     for topic in topics:
@@ -199,39 +208,54 @@ def _recorded(path: Path, config: CalibConfig, frames: list[str]) -> extr.Record
     return extr.from_static_transforms(edges, frames, f"{path.name}:{config.tf_topic}")
 
 
+def _scan_changes(lidar: _Lidar, config: CalibConfig) -> list[tuple[float, float] | None]:
+    """Scan-to-scan change of each scan against the one before (None for the first)."""
+    sg = backend()
+    threads = config.registration.num_threads
+    out: list[tuple[float, float] | None] = [None]
+    previous: Cloud | None = None
+    for scan in lidar.scans:
+        raw = np.ascontiguousarray(scan.points_m, dtype=np.float64)
+        cloud = Cloud(raw, np.zeros_like(raw), None, sg.KdTree(raw, num_threads=threads), 0.0)
+        if previous is not None:
+            out.append(selection.scan_change(previous, cloud, threads))
+        previous = cloud
+    return out
+
+
 def _find_stops(
     lidars: list[_Lidar], config: CalibConfig, notes: list[str]
 ) -> list[selection.VehicleStop]:
-    """Static runs per LiDAR, merged across LiDARs into vehicle stops."""
+    """Still runs per LiDAR (scan-to-scan change, no registration), merged across LiDARs
+    into vehicle stops."""
     sel = config.selection
     runs: list[selection.Run] = []
     for lidar in lidars:
         runs += selection.static_runs(
             lidar.topic,
             [s.stamp_ns for s in lidar.scans],
-            [s.coarse for s in lidar.scans],
+            _scan_changes(lidar, config),
             min_scans=sel.min_static_scans,
-            max_rotation_deg=sel.static_rotation_deg,
-            max_translation_m=sel.static_translation_m,
+            max_residual_m=sel.static_residual_m,
+            min_near_fraction=sel.static_near_fraction,
             max_gap_ns=round(sel.max_static_gap_s * 1e9),
-            min_translation_information=config.registration.min_translation_information,
-            min_rotation_information=config.registration.min_rotation_information,
-            threads=config.registration.num_threads,
         )
     if not runs:
         notes.append(
-            "no stationary periods found (no consecutive scans without motion): "
-            "every scan is treated as one stop"
+            "no two consecutive scans of any LiDAR are alike (one scan per stop): every scan "
+            "is treated as a stop"
         )
         for lidar in lidars:
             runs += [
                 selection.Run(lidar.topic, (i,), s.stamp_ns, s.stamp_ns)
                 for i, s in enumerate(lidar.scans)
             ]
-    else:
-        moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
-        if moving:
-            notes.append(f"{moving} scan(s) taken while moving (or isolated) were not used")
+    moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
+    if moving:
+        notes.append(
+            f"{moving} scan(s) taken while moving (or isolated) were skipped, not deskewed: "
+            "only still scans are aligned"
+        )
     tolerance_ns = round(sel.stop_match_tolerance_s * 1e9)
     stops = selection.group_stops(runs, tolerance_ns)
     for stop in stops:
@@ -261,79 +285,191 @@ def _provisional_reference(
     )
 
 
-def _vehicle_cloud(
-    lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtrinsics, config: CalibConfig
-) -> Cloud:
-    """All LiDARs' scans at one stop in the base frame (recorded extrinsics), coarse voxels."""
-    reg = config.registration
+def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtrinsics) -> F64:
+    """All LiDARs' points at one stop in the base frame (recorded extrinsics)."""
     parts = [
         se3.apply(
             recorded.base_from_frame[lidar.frame_id],
-            lidar.scans[lidar.stop_scan[stop]].coarse.points_m,
+            lidar.scans[lidar.stop_scan[stop]].points_m,
         )
         for lidar in lidars
         if stop in lidar.stop_scan
     ]
-    return prepare(np.concatenate(parts), reg.coarse_voxel_m, 20, reg.num_threads)
+    return np.concatenate(parts)
+
+
+_GROUND_BAND_M = 0.3
+_GROUND_KEEP_M = 0.2
+
+
+def remove_ground(points_m: F64) -> F64:
+    """Points of a base-frame cloud that are not on the ground plane.
+
+    The plane is fitted (least squares, then once more on its inliers) to the low points
+    -- within a band above the 5th height percentile -- and points within 0.2 m of it are
+    dropped. Flat ground overlaps itself at any turn, so only the rest can tell turns apart.
+    """
+    if points_m.shape[0] < 50:
+        return points_m
+    z = points_m[:, 2]
+    low = points_m[z < float(np.percentile(z, 5)) + _GROUND_BAND_M]
+    design = np.c_[points_m[:, :2], np.ones(points_m.shape[0])]
+    low_design = np.c_[low[:, :2], np.ones(low.shape[0])]
+    coef: F64 = np.asarray(np.linalg.lstsq(low_design, low[:, 2], rcond=None)[0], dtype=np.float64)
+    for _ in range(2):
+        resid = z - design @ coef
+        inl = np.abs(resid) < _GROUND_KEEP_M
+        if inl.sum() < 3:
+            break
+        coef = np.asarray(np.linalg.lstsq(design[inl], z[inl], rcond=None)[0], dtype=np.float64)
+    keep = np.abs(z - design @ coef) > _GROUND_KEEP_M
+    return points_m[keep] if keep.sum() >= 50 else points_m
+
+
+_MIN_STRUCTURE_OVERLAP = 0.3
+_MAX_STRUCTURE_RMSE_FACTOR = 0.5
+_TURN_LOOKBACK = 3
+
+
+def _verify_turn(
+    full: tuple[Cloud, Cloud], structure: tuple[Cloud, Cloud], turn: F64, config: CalibConfig
+) -> str | None:
+    """Second criterion for a turn hypothesis (None: verified): the structure off the
+    ground must overlap and lie on itself within half a coarse voxel, and the full clouds
+    must constrain every direction."""
+    reg = config.registration
+    fit = evaluate(structure[0], structure[1], turn, reg.coarse_voxel_m, reg.num_threads)
+    if fit.overlap < _MIN_STRUCTURE_OVERLAP:
+        return f"structure off the ground overlaps {fit.overlap:.0%} < {_MIN_STRUCTURE_OVERLAP:.0%}"
+    if fit.rmse_m > _MAX_STRUCTURE_RMSE_FACTOR * reg.coarse_voxel_m:
+        return f"structure off the ground misfits by {fit.rmse_m * 100:.0f} cm"
+    up = np.array([0.0, 0.0, 1.0])
+    cond = evaluate(full[0], full[1], turn, reg.coarse_voxel_m, reg.num_threads, up).conditioning
+    if (
+        cond.translation_information < reg.turn_min_translation_information
+        or cond.rotation_information < reg.turn_min_rotation_information
+    ):
+        return f"degenerate view ({cond.describe()})"
+    return None
+
+
+def _find_turn(
+    a: int,
+    b: int,
+    full: dict[int, Cloud],
+    structure: dict[int, Cloud],
+    prior: F64 | None,
+    config: CalibConfig,
+) -> tuple[F64 | None, str]:
+    """The vehicle's motion `a_from_b` (base frame), or None and why not.
+
+    With odometry, GICP on the structure starts from its motion and the search is not
+    needed when that verifies; otherwise yaw hypotheses are scored on the structure off
+    the ground (ground removed), and the winner must pass `_verify_turn`.
+    """
+    reg = config.registration
+    pair = (structure[a], structure[b])
+    why = "no yaw hypothesis verified"
+    if prior is not None:
+        result = gicp(pair[0], pair[1], prior, reg.coarse_max_correspondence_m, reg.num_threads, 30)
+        turn = np.asarray(result.T_target_source, dtype=np.float64)
+        why = _verify_turn((full[a], full[b]), pair, turn, config) or ""
+        if not why:
+            return turn, ""
+        why = f"from odometry: {why}"
+    _yaw, found = yaw_search(
+        [(pair[0], pair[1], np.eye(4))],
+        step_deg=reg.yaw_search_step_deg,
+        max_step_deg=reg.max_step_deg,
+        max_correspondence_m=reg.coarse_max_correspondence_m,
+        overlap_distance_m=reg.coarse_voxel_m,
+        threads=reg.num_threads,
+    )
+    turn = found[0][0]
+    problem = _verify_turn((full[a], full[b]), pair, turn, config)
+    if problem is None:
+        return turn, ""
+    return None, problem if prior is None else f"{why}; search: {problem}"
 
 
 def _angular_chain(
-    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, reference: int, config: CalibConfig
+    lidars: list[_Lidar],
+    recorded: extr.RecordedExtrinsics,
+    reference: int,
+    config: CalibConfig,
+    odometry: io.Odometry | None,
+    notes: list[str],
 ) -> None:
-    """Coarse chain of the vehicle's turns between consecutive stops.
+    """Coarse vehicle motion between stops, hence each LiDAR's seeds and stop angles.
 
-    The turn is unknown but common to every LiDAR, so it is estimated once from all
-    LiDARs' scans merged in the base frame (through the recorded extrinsics): together
-    they see far more than any single LiDAR, which may face one featureless wall. Each
-    LiDAR's relative poses (only seeds for its own fine alignments) follow by carrying
-    the turn into its frame, and every stop gets its turntable angle.
+    The motion is unknown but common to every LiDAR, so it is estimated once from all
+    LiDARs' scans merged in the base frame (through the recorded extrinsics). Each stop is
+    linked to the nearest earlier stop (up to three back) whose motion verifies, so one
+    weak link does not cut the stops after it; stops that link to nothing start a new
+    segment, and only the segment holding the reference gets angles.
     """
     reg = config.registration
     order = sorted({k for lidar in lidars for k in lidar.stop_scan})
-    clouds = {k: _vehicle_cloud(lidars, k, recorded, config) for k in order}
-    segments: list[dict[int, F64]] = [{order[0]: np.eye(4)}]
-    broken: dict[int, str] = {}
-    for a, b in itertools.pairwise(order):
-        _yaw, found = yaw_search(
-            [(clouds[a], clouds[b], np.eye(4))],
-            step_deg=reg.yaw_search_step_deg,
-            max_step_deg=reg.max_step_deg,
-            max_correspondence_m=reg.coarse_max_correspondence_m,
-            overlap_distance_m=reg.coarse_voxel_m,
-            threads=reg.num_threads,
+    full: dict[int, Cloud] = {}
+    structure: dict[int, Cloud] = {}
+    for k in order:
+        points = _vehicle_points(lidars, k, recorded)
+        full[k] = prepare(points, reg.coarse_voxel_m, 20, reg.num_threads)
+        structure[k] = prepare(
+            remove_ground(full[k].points_m), reg.coarse_voxel_m, 20, reg.num_threads
         )
-        turn, fit = found[0]
-        if fit.overlap < reg.min_overlap:
-            broken[b] = (
-                f"turn from stop {a} unknown: overlap {fit.overlap:.0%} < {reg.min_overlap:.0%}"
-            )
-        elif (
-            fit.conditioning.translation_information < reg.turn_min_translation_information
-            or fit.conditioning.rotation_information < reg.turn_min_rotation_information
-        ):
-            broken[b] = (
-                f"turn from stop {a} unknown: degenerate view ({fit.conditioning.describe()})"
-            )
-        if b in broken:
-            segments.append({b: np.eye(4)})
+    stamp = {
+        k: next(
+            lidar.scans[lidar.stop_scan[k]].stamp_ns for lidar in lidars if k in lidar.stop_scan
+        )
+        for k in order
+    }
+    segment_of: dict[int, int] = {order[0]: 0}
+    pose: dict[int, F64] = {order[0]: np.eye(4)}
+    broken: dict[int, str] = {}
+    n_segments = 1
+    for i, b in enumerate(order[1:], start=1):
+        reasons = []
+        for a in reversed(order[max(0, i - _TURN_LOOKBACK) : i]):
+            prior = None
+            if odometry is not None:
+                prior = se3.invert(odometry.at(stamp[a])) @ odometry.at(stamp[b])
+            turn, why = _find_turn(a, b, full, structure, prior, config)
+            if turn is not None:
+                segment_of[b] = segment_of[a]
+                pose[b] = pose[a] @ turn
+                break
+            reasons.append(f"from stop {a}: {why}")
         else:
-            segments[-1][b] = segments[-1][a] @ turn
-    home = next(seg for seg in segments if reference in seg)
-    ref_inv = se3.invert(home[reference])
+            segment_of[b] = n_segments
+            n_segments += 1
+            pose[b] = np.eye(4)
+            broken[b] = "motion unknown (" + "; ".join(reasons) + ")"
+    home = segment_of.get(reference, 0)
+    ref_inv = se3.invert(pose[reference])
     up = np.array([0.0, 0.0, 1.0])
+    if odometry is not None:
+        notes.append(f"odometry from {odometry.source} seeded the vehicle's motion between stops")
     for lidar in lidars:
         base = recorded.base_from_frame[lidar.frame_id]
         base_inv = se3.invert(base)
         for k in sorted(lidar.stop_scan):
-            if k in home:
-                motion = ref_inv @ home[k]
+            if segment_of[k] == home:
+                motion = ref_inv @ pose[k]
                 lidar.chain[k] = base_inv @ motion @ base
                 lidar.angles[k] = selection.signed_angle_deg(motion, up)
             else:
                 lidar.angles[k] = None
-                lidar.dropped[k] = broken.get(k) or next(
-                    (broken[j] for j in sorted(broken, reverse=True) if j < k), "angle unknown"
-                )
+                starts = [j for j in broken if j <= k and segment_of[j] == segment_of[k]]
+                if not starts:
+                    lidar.dropped[k] = "not connected to the reference stop's group"
+                else:
+                    start = max(starts)
+                    lidar.dropped[k] = (
+                        broken[start]
+                        if start == k
+                        else f"in the group of stops from stop {start}: {broken[start]}"
+                    )
 
 
 def _strength(cond: Conditioning) -> float:
@@ -342,18 +478,16 @@ def _strength(cond: Conditioning) -> float:
 
 def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
     reg = config.registration
+    target, source = lidar.fine[a], lidar.fine[b]
     return align(
-        lidar.fine[a],
-        lidar.fine[b],
+        target,
+        source,
         initial,
-        reg.correspondence_stages_m,
-        overlap_distance_m=reg.overlap_distance_m,
-        min_overlap=reg.min_overlap,
-        max_rmse_m=reg.max_rmse_m,
-        min_translation_information=reg.min_translation_information,
-        min_rotation_information=reg.min_rotation_information,
+        reg.limits,
         max_iterations=reg.max_iterations,
         threads=reg.num_threads,
+        expected_overlap=visible_fraction(target, source, initial),
+        planar_axis=lidar.up if config.pose_graph.motion == "planar" else None,
     )
 
 
@@ -563,6 +697,33 @@ def _graph_lidars(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
     return anchors
 
 
+def _causes(lidar: _Lidar) -> str:
+    """Why a LiDAR's stops did not join: unknown vehicle motion and rejected pairs, counted
+    by kind, each with its first example."""
+    parts = []
+    unknown = [k for k, angle in lidar.angles.items() if angle is None]
+    if unknown:
+        first = lidar.dropped.get(min(unknown), "motion unknown")
+        parts.append(
+            f"the vehicle's motion to {len(unknown)} stop(s) could not be found, "
+            f"first at stop {min(unknown)}: {first}"
+        )
+    rejected = [r.reason for r in lidar.results.values() if not r.accepted and r.reason]
+    if rejected:
+        kinds: dict[str, int] = {}
+        for reason in rejected:
+            kind = reason.split(":")[0].split(" ")[0]
+            kinds[kind] = kinds.get(kind, 0) + 1
+        counted = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items()))
+        parts.append(
+            f"{len(rejected)} of {len(lidar.results)} pair alignments rejected ({counted}), "
+            f"e.g. {rejected[0]}"
+        )
+    elif not lidar.results:
+        parts.append("no pairs of stops whose views should overlap")
+    return "; ".join(parts) or "no accepted alignments"
+
+
 def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
     """Used stops, reasons for the others, pose-graph totals and per-pair output."""
     sel = config.selection
@@ -594,18 +755,10 @@ def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
             iterations=max(s.iterations for s in sols),
         )
     else:
-        results = lidar.results
-        rejected = [r.reason for r in results.values() if not r.accepted and r.reason]
-        if results:
-            why = f"{len(rejected)} of {len(results)} pair alignments rejected"
-            why += f", e.g. {rejected[0]}" if rejected else ""
-        else:
-            first = next(iter(lidar.dropped.values()), "no overlapping stops")
-            why = f"no pairs to align: {first}"
         largest = max((len(g) for g in _components(lidar)), default=0)
         lidar.reason = (
             f"{lidar.topic}: at most {largest} of {len(lidar.stop_scan)} stops could be "
-            f"aligned together ({why}); need {sel.min_stops}"
+            f"aligned together ({_causes(lidar)}); need {sel.min_stops}"
         )
         lidar.dropped.setdefault(main, "too few stops aligned to it")
     for a, b, sep, pred in lidar.candidates:
@@ -691,12 +844,7 @@ def _extrinsic(
             ref_map[0],
             other_map[0],
             rec,
-            mc.correspondence_stages_m,
-            overlap_distance_m=mc.overlap_distance_m,
-            min_overlap=mc.min_overlap,
-            max_rmse_m=mc.max_rmse_m,
-            min_translation_information=mc.min_translation_information,
-            min_rotation_information=mc.min_rotation_information,
+            mc.limits,
             max_iterations=config.registration.max_iterations,
             threads=config.registration.num_threads,
         )
@@ -711,7 +859,7 @@ def _extrinsic(
             )
         )
         if m2m.accepted:
-            weight = m2m.after.correspondences / mc.overlap_distance_m**2
+            weight = m2m.after.correspondences / mc.limits.overlap_distance_m**2
             estimates.append((m2m.target_from_source, m2m.after.hessian * weight))
     if first is None:
         why = ref.reason if not ref.graphs else other.reason
@@ -793,6 +941,114 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
     )
 
 
+_DEGENERATE_INFORMATION = 0.02
+"""A scene whose merged normals leave a direction with less than this mean squared
+constraint at most stops (a corridor, ground plus one wall) cannot be calibrated.
+Measured on the simulator's sessions: ground plus one wall and corridors 0.0005-0.007
+(16-beam normals are the noisiest), every yard case (bumper mounts, 16 beams) 0.07 or more."""
+
+
+def _degenerate_scene(
+    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
+) -> str | None:
+    """Why the scene itself cannot constrain an alignment, or None.
+
+    Per stop, the normals of all LiDARs' points (base frame) give sum(n n^T); a direction
+    with (almost) no constraint -- along a corridor, along a lone wall over flat ground --
+    makes every alignment slide. Refused before any registration when most stops show it.
+    """
+    reg = config.registration
+    order = sorted({k for lidar in lidars for k in lidar.stop_scan})
+    free: list[tuple[float, F64]] = []
+    for k in order:
+        cloud = prepare(
+            _vehicle_points(lidars, k, recorded), reg.coarse_voxel_m, 20, reg.num_threads
+        )
+        normals = cloud.normals[np.linalg.norm(cloud.normals, axis=1) > 0.5]
+        if normals.shape[0] < 10:
+            continue
+        values, vectors = np.linalg.eigh(normals.T @ normals / normals.shape[0])
+        free.append((float(values[0]), vectors[:, 0]))
+    weak = [(v, d) for v, d in free if v < _DEGENERATE_INFORMATION]
+    if not free or len(weak) * 2 <= len(free):
+        return None
+    value, direction = min(weak, key=lambda w: w[0])
+    direction = direction if direction[int(np.argmax(np.abs(direction)))] >= 0 else -direction
+    x, y, z = (float(v) for v in direction)
+    return (
+        f"degenerate scene: at {len(weak)} of {len(free)} stops nothing constrains translation "
+        f"along ({x:.2f}, {y:.2f}, {z:.2f}) in {recorded.base_frame} (information {value:.4f} "
+        f"< {_DEGENERATE_INFORMATION}): a corridor or a lone wall over flat ground; "
+        "calibrate where the LiDARs see structure facing several directions"
+    )
+
+
+def _refusal(
+    path: Path,
+    lidars: list[_Lidar],
+    recorded: extr.RecordedExtrinsics,
+    stops: list[selection.VehicleStop],
+    why: str,
+    notes: list[str],
+    timer: _Timer,
+    config: CalibConfig,
+) -> CalibrationResult:
+    """A not-calibratable result for a log that has scans but cannot be calibrated."""
+    for lidar in lidars:
+        lidar.reason = why
+    ref = lidars[0]
+    extrinsics = []
+    for other in lidars[1:]:
+        extrinsics.append(
+            ExtrinsicOut(
+                topic=other.topic,
+                frame_id=other.frame_id,
+                reference_topic=ref.topic,
+                reference_frame_id=ref.frame_id,
+                recorded=TransformOut.of(recorded.relative(ref.frame_id, other.frame_id)),
+                calibrated=False,
+                reason=why,
+                result=None,
+                rotation_diff_deg=None,
+                translation_diff_cm=None,
+                diff_rpy_deg=None,
+                diff_xyz_cm=None,
+                passed=False,
+                map_to_map=None,
+                stop_angle_disagreement_deg=None,
+                hand_eye_rotation_residual_deg=None,
+            )
+        )
+    timer.seconds["total"] = sum(timer.seconds.values())
+    return CalibrationResult(
+        log=str(path),
+        calibratable=False,
+        reason="not calibratable: " + why,
+        passed=False,
+        reference_topic=ref.topic,
+        reference_frame_id=ref.frame_id,
+        base_frame=recorded.base_frame,
+        extrinsics_source=recorded.source,
+        reference_stop=None,
+        anchor_stops=[],
+        limits=Limits(
+            max_rotation_deg=config.validation.max_rotation_deg,
+            max_translation_cm=config.validation.max_translation_cm,
+        ),
+        stops=[
+            VehicleStopOut(
+                index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs)
+            )
+            for s in stops
+        ],
+        lidars=[_lidar_out(lidar, stops) for lidar in lidars],
+        extrinsics=extrinsics,
+        notes=notes,
+        timings_s=dict(timer.seconds),
+        libraries=_library_versions(),
+    )
+
+
 def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     """Calibrate the extrinsics between the log's LiDARs and validate the recorded ones."""
     path = Path(path)
@@ -811,15 +1067,24 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         lidars.append(_Lidar(topic=topic, frame_id=frame, scans=scans, up=up))
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
-        for lidar in lidars:
-            if len(lidar.stop_scan) < config.selection.min_stops:
-                raise NoDataError(
-                    f"{path}: {lidar.topic} has {len(lidar.stop_scan)} stop(s); calibration "
-                    f"needs at least {config.selection.min_stops}"
-                )
-        reference = _provisional_reference(stops, lidars, config)
+    with timer.stage("degeneracy"):
+        refusal = _degenerate_scene(lidars, recorded, config)
+    short = [
+        f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
+        for lidar in lidars
+        if len(lidar.stop_scan) < config.selection.min_stops
+    ]
+    if refusal is None and short:
+        refusal = (
+            "; ".join(short) + f"; calibration needs at least {config.selection.min_stops} stops "
+            f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
+        )
+    if refusal is not None:
+        return _refusal(path, lidars, recorded, stops, refusal, notes, timer, config)
+    reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
-        _angular_chain(lidars, recorded, reference, config)
+        odometry = io.read_odometry(path, recorded.base_frame)
+        _angular_chain(lidars, recorded, reference, config, odometry, notes)
     with timer.stage("align_pairs"):
         for lidar in lidars:
             _align_pairs(lidar, reference, config)

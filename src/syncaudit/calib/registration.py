@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
+from syncaudit.calib.config import AlignmentLimits
 from syncaudit.errors import ConfigError
 
 F64 = NDArray[np.float64]
@@ -128,8 +129,29 @@ class Fit:
     tangent), so an edge's information in the pose graph is `hessian / sigma^2`."""
 
 
+def _planar_weakest(rows: F64, axis: F64) -> tuple[float, tuple[float, float, float]]:
+    """Like `_weakest`, over the plane across `axis` only (the directions a planar pose
+    graph uses)."""
+    axis = axis / np.linalg.norm(axis)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = ref - axis * (ref @ axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    basis = np.stack([e1, e2], axis=1)
+    planar = rows @ basis
+    values, vectors = np.linalg.eigh(planar.T @ planar / max(planar.shape[0], 1))
+    vec = basis @ vectors[:, 0]
+    vec = vec if vec[int(np.argmax(np.abs(vec)))] >= 0 else -vec
+    return max(float(values[0]), 0.0), (float(vec[0]), float(vec[1]), float(vec[2]))
+
+
 def evaluate(
-    target: Cloud, source: Cloud, target_from_source: F64, distance_m: float, threads: int
+    target: Cloud,
+    source: Cloud,
+    target_from_source: F64,
+    distance_m: float,
+    threads: int,
+    planar_axis: F64 | None = None,
 ) -> Fit:
     """Overlap, point-to-plane RMSE and conditioning of `source` moved by `target_from_source`."""
     if source.size == 0 or target.size == 0:
@@ -153,8 +175,15 @@ def evaluate(
     jacobian = np.hstack([np.cross(points, normals_src), normals_src])
     hessian = jacobian.T @ jacobian / jacobian.shape[0]
     lever_len = np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-6)
-    t_info, t_dir = _weakest(normals_src)
-    r_info, r_axis = _weakest(jacobian[:, :3] / lever_len)
+    if planar_axis is None:
+        t_info, t_dir = _weakest(normals_src)
+        r_info, r_axis = _weakest(jacobian[:, :3] / lever_len)
+    else:
+        # Planar motion: translation across the axis, rotation about it only.
+        t_info, t_dir = _planar_weakest(normals_src, planar_axis)
+        unit = planar_axis / np.linalg.norm(planar_axis)
+        r_info = float(np.mean(((jacobian[:, :3] / lever_len) @ unit) ** 2))
+        r_axis = (float(unit[0]), float(unit[1]), float(unit[2]))
     return Fit(
         overlap,
         float(np.sqrt(np.mean(residual**2))),
@@ -175,6 +204,8 @@ class Alignment:
     after: Fit
     accepted: bool
     reason: str | None
+    expected_overlap: float | None = None
+    """Overlap the two views allow at the seed pose (None: not judged relative to it)."""
 
 
 def gicp(
@@ -200,26 +231,100 @@ def gicp(
     )
 
 
+def visible_fraction(
+    target: Cloud,
+    source: Cloud,
+    target_from_source: F64,
+    *,
+    bin_deg: tuple[float, float] = (2.0, 4.0),
+) -> float:
+    """Share of the source the target's view could hold, with the source at the given pose.
+
+    Both clouds are in their sensor frames, so the target's field of view is the set of
+    (azimuth, elevation) cells its points occupy, each out to its farthest return. A moved
+    source point inside an occupied cell and not behind the target's farthest return there
+    could overlap the target; the rest (outside the target's view, or occluded) cannot.
+    This is the overlap "the geometry of the two stops allows" that an alignment's own
+    overlap is compared with.
+    """
+    if source.size == 0 or target.size == 0:
+        return 0.0
+    az_bin, el_bin = (math.radians(v) for v in bin_deg)
+
+    def cells(points: F64) -> tuple[NDArray[np.int64], F64]:
+        rng = np.linalg.norm(points, axis=1)
+        az = np.arctan2(points[:, 1], points[:, 0])
+        el = np.arcsin(np.clip(points[:, 2] / np.maximum(rng, 1e-9), -1.0, 1.0))
+        ia = np.floor((az + math.pi) / az_bin).astype(np.int64)
+        ie = np.floor((el + math.pi / 2.0) / el_bin).astype(np.int64)
+        return ia * 1000 + ie, rng
+
+    t_cell, t_rng = cells(target.points_m)
+    order = np.argsort(t_cell)
+    t_cell, t_rng = t_cell[order], t_rng[order]
+    keys, first = np.unique(t_cell, return_index=True)
+    far = np.maximum.reduceat(t_rng, first)
+    s_cell, s_rng = cells(se3.apply(target_from_source, source.points_m))
+    pos = np.clip(np.searchsorted(keys, s_cell), 0, keys.size - 1)
+    seen = (keys[pos] == s_cell) & (s_rng <= far[pos] * 1.05 + 0.5)
+    return float(seen.mean())
+
+
+def _verdict(after: Fit, limits: AlignmentLimits, expected_overlap: float | None) -> str | None:
+    """Why an alignment is rejected (None: accepted): error and conditioning first,
+    overlap against what the views allow (or the absolute floor alone)."""
+    cond = after.conditioning
+    floor = limits.min_overlap
+    if expected_overlap is not None:
+        floor = max(floor, limits.min_overlap_ratio * expected_overlap)
+    if after.overlap < floor:
+        if expected_overlap is None or floor == limits.min_overlap:
+            return f"overlap {after.overlap:.0%} < {limits.min_overlap:.0%}"
+        return (
+            f"overlap {after.overlap:.0%} < {limits.min_overlap_ratio:.0%} of the "
+            f"{expected_overlap:.0%} the two views allow"
+        )
+    if after.rmse_m > limits.max_rmse_m:
+        return f"error {after.rmse_m * 100:.1f} cm > {limits.max_rmse_m * 100:.1f} cm"
+    if cond.translation_information < limits.min_translation_information:
+        t = cond.weakest_translation
+        return (
+            f"degenerate: translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) barely "
+            f"constrained ({cond.translation_information:.4f} < "
+            f"{limits.min_translation_information})"
+        )
+    if cond.rotation_information < limits.min_rotation_information:
+        r = cond.weakest_rotation_axis
+        return (
+            f"degenerate: rotation about ({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}) barely "
+            f"constrained ({cond.rotation_information:.4f} < {limits.min_rotation_information})"
+        )
+    return None
+
+
 def align(
     target: Cloud,
     source: Cloud,
     initial: F64,
-    max_correspondences_m: tuple[float, ...],
+    limits: AlignmentLimits,
     *,
-    overlap_distance_m: float,
-    min_overlap: float,
-    max_rmse_m: float,
-    min_translation_information: float,
-    min_rotation_information: float,
     max_iterations: int,
     threads: int,
+    expected_overlap: float | None = None,
+    planar_axis: F64 | None = None,
 ) -> Alignment:
-    """Coarse-to-fine GICP from `initial`, then the overlap, error and degeneracy tests."""
-    before = evaluate(target, source, initial, overlap_distance_m, threads)
+    """Coarse-to-fine GICP from `initial`, then the error, degeneracy and overlap tests.
+
+    `expected_overlap` (e.g. `visible_fraction` at the coarse pose) makes the overlap test
+    relative to what the two views can share; without it only the absolute floor applies.
+    With `planar_axis` (the LiDAR's up, for a planar pose graph) conditioning is judged on
+    the planar directions only: roll and pitch between stops are not estimated there.
+    """
+    before = evaluate(target, source, initial, limits.overlap_distance_m, threads)
     transform = np.asarray(initial, dtype=np.float64)
     converged, iterations = False, 0
     result: Any = None
-    for max_corr in max_correspondences_m:
+    for max_corr in limits.correspondence_stages_m:
         result = gicp(
             target,
             source,
@@ -233,25 +338,8 @@ def align(
         transform = np.asarray(result.T_target_source, dtype=np.float64)
         converged = bool(result.converged)
         iterations += int(result.iterations)
-    after = evaluate(target, source, transform, overlap_distance_m, threads)
-    cond = after.conditioning
-    reason = None
-    if after.overlap < min_overlap:
-        reason = f"overlap {after.overlap:.0%} < {min_overlap:.0%}"
-    elif after.rmse_m > max_rmse_m:
-        reason = f"error {after.rmse_m * 100:.1f} cm > {max_rmse_m * 100:.1f} cm"
-    elif cond.translation_information < min_translation_information:
-        t = cond.weakest_translation
-        reason = (
-            f"degenerate: translation along ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) barely "
-            f"constrained ({cond.translation_information:.4f} < {min_translation_information})"
-        )
-    elif cond.rotation_information < min_rotation_information:
-        r = cond.weakest_rotation_axis
-        reason = (
-            f"degenerate: rotation about ({r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}) barely "
-            f"constrained ({cond.rotation_information:.4f} < {min_rotation_information})"
-        )
+    after = evaluate(target, source, transform, limits.overlap_distance_m, threads, planar_axis)
+    reason = _verdict(after, limits, expected_overlap)
     return Alignment(
         target_from_source=transform,
         converged=converged,
@@ -260,6 +348,7 @@ def align(
         after=after,
         accepted=reason is None,
         reason=reason,
+        expected_overlap=expected_overlap,
     )
 
 

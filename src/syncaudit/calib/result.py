@@ -89,6 +89,8 @@ class AlignmentOut(_Out):
     iterations: int
     accepted: bool
     reason: str | None
+    expected_overlap: float | None = None
+    """Overlap the two views allow at the seed pose (the overlap test is relative to it)."""
 
     @classmethod
     def of(cls, alignment: Alignment) -> AlignmentOut:
@@ -101,6 +103,7 @@ class AlignmentOut(_Out):
             iterations=alignment.iterations,
             accepted=alignment.accepted,
             reason=alignment.reason,
+            expected_overlap=alignment.expected_overlap,
         )
 
 

@@ -100,18 +100,39 @@ class Scene:
             cos_inc[closer] = cos[closer]
             refl[closer] = reflectivity
 
+        def take_at(idx: NDArray[np.int64], t: F64, cos: F64, reflectivity: float) -> None:
+            closer = t < best[idx]
+            sel = idx[closer]
+            best[sel] = t[closer]
+            cos_inc[sel] = cos[closer]
+            refl[sel] = reflectivity
+
         # Ground plane z = 0.
         dz = dirs[:, 2]
         down = dz < -1e-9
         t_ground = np.where(down, -origins[:, 2] / np.where(down, dz, -1.0), np.inf)
         take(np.where(t_ground > _EPS_M, t_ground, np.inf), np.abs(dz), self.ground_reflectivity)
         for box in self.boxes:
-            t_box, cos_box = _ray_box(origins, dirs, box)
-            take(t_box, cos_box, box.reflectivity)
+            idx = _near_rays(
+                origins, dirs, np.asarray(box.center_m), float(np.linalg.norm(box.size_m)) / 2.0
+            )
+            t_box, cos_box = _ray_box(origins[idx], dirs[idx], box)
+            take_at(idx, t_box, cos_box, box.reflectivity)
         for pole in self.poles:
-            t_pole, cos_pole = _ray_pole(origins, dirs, pole)
-            take(t_pole, cos_pole, pole.reflectivity)
+            center = np.array([*pole.center_xy_m, pole.height_m / 2.0])
+            idx = _near_rays(origins, dirs, center, math.hypot(pole.radius_m, pole.height_m / 2.0))
+            t_pole, cos_pole = _ray_pole(origins[idx], dirs[idx], pole)
+            take_at(idx, t_pole, cos_pole, pole.reflectivity)
         return Hits(range_m=best, cos_incidence=cos_inc, reflectivity=refl)
+
+
+def _near_rays(origins: F64, dirs: F64, center: F64, radius_m: float) -> NDArray[np.int64]:
+    """Indices of rays that pass within `radius_m` of `center` ahead of their origin: the
+    only ones that can hit a primitive inside that bounding sphere (exact culling)."""
+    rel = center - origins
+    along = np.einsum("ij,ij->i", rel, dirs)
+    miss2 = np.einsum("ij,ij->i", rel, rel) - along * along
+    return np.flatnonzero((miss2 <= radius_m * radius_m) & (along > -radius_m))
 
 
 def _ray_box(origins: F64, dirs: F64, box: Box) -> tuple[F64, F64]:
@@ -168,6 +189,14 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
         center = (dist_m * math.cos(yaw), dist_m * math.sin(yaw), 1.5)
         wall = Box(center, (0.3, 80.0, 3.0), yaw, "wall", 0.5)
         return Scene(boxes=(wall,), poles=())
+    if config.kind == "corridor":
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        half_m = config.clear_radius_m + 1.0
+        walls = []
+        for side in (-1.0, 1.0):
+            center = (-side * half_m * math.sin(yaw), side * half_m * math.cos(yaw), 1.5)
+            walls.append(Box(center, (80.0, 0.3, 3.0), yaw, "wall", 0.5))
+        return Scene(boxes=tuple(walls), poles=())
     size_x, size_y = config.yard_size_m
     yard_yaw = float(rng.uniform(-math.pi, math.pi))
     offset = rng.uniform(-1.0, 1.0, size=2)

@@ -1,7 +1,8 @@
 """Choosing scans: stationary stops, their angular positions, and which pairs to align.
 
-A stop is a run of consecutive scans of one LiDAR that register onto each other with
-(almost) no motion; scans taken while the vehicle turns are motion-distorted and left out.
+A stop is a run of consecutive scans of one LiDAR that re-hit the same surfaces (nearest
+neighbour residuals at the noise level, no registration needed); scans taken while the
+vehicle moves are motion-distorted and left out.
 Stops of different LiDARs that overlap in time are the same vehicle stop. The angle of
 each stop about the turntable axis comes from a coarse registration chain, and it decides
 which stops are kept (distinct positions) and which pairs should overlap.
@@ -15,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import Cloud, evaluate, gicp
+from syncaudit.calib.registration import Cloud
 
 F64 = NDArray[np.float64]
 
@@ -35,64 +36,53 @@ class Run:
         return self.indices[len(self.indices) // 2]
 
 
-def motion_between(
-    a: Cloud,
-    b: Cloud,
-    threads: int,
-    *,
-    min_translation_information: float,
-    min_rotation_information: float,
-) -> tuple[float, float, bool]:
-    """Rotation (deg), translation (m) between two coarse scans registered from identity,
-    and whether the registration was well conditioned enough to tell "no motion" apart
-    from "motion the geometry cannot see" (e.g. turning above bare ground)."""
-    transform = np.eye(4)
-    for max_corr in (4.0 * a.voxel_m, 2.0 * a.voxel_m):
-        result = gicp(a, b, transform, max_corr, threads, 30)
-        transform = np.asarray(result.T_target_source, dtype=np.float64)
-    cond = evaluate(a, b, transform, 2.0 * a.voxel_m, threads).conditioning
-    well_conditioned = (
-        cond.translation_information >= min_translation_information
-        and cond.rotation_information >= min_rotation_information
-    )
-    return (
-        se3.rotation_angle_deg(transform[:3, :3]),
-        float(np.linalg.norm(transform[:3, 3])),
-        well_conditioned,
-    )
+def scan_change(
+    previous: Cloud, current: Cloud, threads: int, *, near_m: float = 0.05
+) -> tuple[float, float]:
+    """How much a scan differs from the one before: (median nearest-neighbour distance of
+    its points to the previous scan, fraction within `near_m`).
+
+    No registration is involved, so a view that constrains motion poorly (a low LiDAR
+    above bare ground) is judged as well as a rich one: still scans re-hit the same
+    surfaces at the same places (residual at the range-noise level), moving ones do not.
+    """
+    _idx, sq = previous.tree.batch_nearest_neighbor_search(current.points_m, num_threads=threads)
+    dist = np.sqrt(np.asarray(sq, dtype=np.float64))
+    return float(np.median(dist)), float(np.mean(dist <= near_m))
 
 
 def static_runs(
     topic: str,
     stamps_ns: list[int],
-    coarse: list[Cloud],
+    changes: list[tuple[float, float] | None],
     *,
     min_scans: int,
-    max_rotation_deg: float,
-    max_translation_m: float,
+    max_residual_m: float,
+    min_near_fraction: float,
     max_gap_ns: int,
-    min_translation_information: float,
-    min_rotation_information: float,
-    threads: int,
 ) -> list[Run]:
-    """Runs of at least `min_scans` consecutive scans with no motion between neighbours.
+    """Runs of at least `min_scans` consecutive scans with no change between neighbours.
 
-    Neighbours further apart in time than `max_gap_ns`, or whose registration is
-    degenerate, never count as static: a stop is only declared where it is seen.
+    `changes[i]` is `scan_change(scan i-1, scan i)` (None for the first). A pair is still
+    when its median residual is within `max_residual_m` -- or within 1.5 times the
+    quietest tenth of this LiDAR's pairs, whichever is larger (noisier sensors) -- and
+    at least `min_near_fraction` of the points are near the previous scan. Neighbours
+    further apart in time than `max_gap_ns` never count as still.
     """
+    medians = [c[0] for c in changes if c is not None]
+    limit = max_residual_m
+    if len(medians) >= 10:
+        limit = max(limit, 1.5 * float(np.percentile(medians, 10)))
     runs: list[Run] = []
     current = [0] if stamps_ns else []
     for i in range(1, len(stamps_ns)):
-        static = False
-        if stamps_ns[i] - stamps_ns[i - 1] <= max_gap_ns:
-            rot_deg, trans_m, ok = motion_between(
-                coarse[i - 1],
-                coarse[i],
-                threads,
-                min_translation_information=min_translation_information,
-                min_rotation_information=min_rotation_information,
-            )
-            static = ok and rot_deg <= max_rotation_deg and trans_m <= max_translation_m
+        change = changes[i]
+        static = (
+            change is not None
+            and stamps_ns[i] - stamps_ns[i - 1] <= max_gap_ns
+            and change[0] <= limit
+            and change[1] >= min_near_fraction
+        )
         if static:
             current.append(i)
             continue

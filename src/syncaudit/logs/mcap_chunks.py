@@ -3,7 +3,14 @@
 A chunk is mapped, decompressed (zstd, lz4 or none) into a reused buffer and walked
 record by record with `struct`, yielding message payloads as memoryviews without
 copying; records of unwanted channels are skipped unread. Damage (short read, bad
-compression, CRC mismatch, records that do not tile the chunk) is a LogReadError.
+compression, CRC mismatch, records that do not tile the chunk) is a LogReadError naming
+the file and the chunk's offset.
+
+A chunk's declared uncompressed size is never trusted for an allocation: it must agree
+with the compression frame's own header where that records the size, stay below
+`MAX_CHUNK_BYTES`, and (for large chunks) below `MAX_RATIO` times the compressed size;
+decompression itself is bounded by the declared size, so a decompression bomb is refused
+after at most that many bytes.
 """
 
 from __future__ import annotations
@@ -13,45 +20,149 @@ import os
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
-
-import lz4.frame
-import zstandard
+from typing import TYPE_CHECKING
 
 from syncaudit.errors import LogReadError
+from syncaudit.logs.model import ChannelInfo, ReadUnit
 
-OP_CHUNK = 0x06
+if TYPE_CHECKING:
+    import zstandard
+
+OP_CHANNEL = 0x04
 OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
+_CHANNEL_HEAD = struct.Struct("<HHI")  # id, schema id, topic length
+
+MAX_LOG_TIME_NS = 2**63 - 1
+"""Log times are u64 in MCAP; past int64 they cannot be a time (year 2262) and break numpy."""
+MAX_CHUNK_BYTES = 128 * 1024 * 1024
+"""Largest uncompressed chunk accepted: writers chunk at 1-64 MiB (rosbag2 768 KiB, mcap
+1 MiB, ours 4 MiB) and put a larger message in a chunk of its own; 128 MiB holds any
+camera frame or point cloud, and two workers' buffers stay within a few hundred MB."""
+MAX_RATIO = 1024
+"""Largest uncompressed/compressed ratio accepted for chunks above `RATIO_FLOOR_BYTES`."""
+RATIO_FLOOR_BYTES = 16 * 1024 * 1024
+"""Chunks up to this size are accepted at any ratio (a small chunk cannot exhaust memory)."""
 
 
-@dataclass(frozen=True, slots=True)
-class ChunkRef:
-    """Where a chunk sits in the file, as the summary's chunk index says."""
-
-    offset: int
-    length: int
-    start_ns: int
-    end_ns: int
-    compressed_size: int
+def chunk_where(path: str, offset: int) -> str:
+    """How messages name a chunk: file and byte offset of its record."""
+    return f"{path}: MCAP chunk at offset {offset}"
 
 
-def group_chunks(chunks: list[ChunkRef], target_bytes: int) -> list[list[ChunkRef]]:
-    """Consecutive chunks (in time order) grouped to about `target_bytes` compressed each."""
-    groups: list[list[ChunkRef]] = []
-    current: list[ChunkRef] = []
-    size = 0
-    for chunk in sorted(chunks, key=lambda c: (c.start_ns, c.offset)):
-        current.append(chunk)
-        size += chunk.compressed_size
-        if size >= target_bytes:
-            groups.append(current)
-            current, size = [], 0
-    if current:
-        groups.append(current)
-    return groups
+def check_chunk_size(where: str, compression: str, declared: int, data: bytes | memoryview) -> None:
+    """Refuse a chunk whose declared uncompressed size cannot be true, before allocating.
+
+    The zstd frame header (and an lz4 frame header that records it) states the content
+    size; it must equal the chunk's. Any size is capped absolutely and, for large chunks,
+    by a ratio to the compressed bytes (lz4 cannot exceed ~255:1; zstd of real sensor data
+    is far below 1024:1).
+    """
+    compressed = len(data)
+    check_declared_size(where, declared, compressed)
+    if compression == "":
+        if declared != compressed:
+            raise LogReadError(
+                f"{where} is corrupt: uncompressed chunk holds {compressed} bytes "
+                f"but declares {declared}"
+            )
+        return
+    framed = _frame_content_size(compression, data)
+    if framed is not None and framed != declared:
+        raise LogReadError(
+            f"{where} is corrupt: chunk declares {declared} bytes uncompressed but its "
+            f"{compression} frame header says {framed}"
+        )
+
+
+def check_declared_size(where: str, declared: int, compressed: int) -> None:
+    """Refuse an uncompressed size over `MAX_CHUNK_BYTES`, or a large one over `MAX_RATIO`
+    times the compressed size (a decompression bomb)."""
+    if declared > MAX_CHUNK_BYTES:
+        raise LogReadError(
+            f"{where} declares {declared} bytes uncompressed, over the "
+            f"{MAX_CHUNK_BYTES // 2**20} MiB limit for one chunk (corrupt or hostile chunk)"
+        )
+    if declared > RATIO_FLOOR_BYTES and declared > MAX_RATIO * compressed:
+        raise LogReadError(
+            f"{where} declares {declared} bytes from {compressed} compressed "
+            f"(over {MAX_RATIO}:1): refused as a decompression bomb"
+        )
+
+
+def _frame_content_size(compression: str, data: bytes | memoryview) -> int | None:
+    """Content size a zstd/lz4 frame header records, None where it records none."""
+    try:
+        if compression == "zstd":
+            import zstandard
+
+            size = zstandard.frame_content_size(data)
+            return None if size < 0 else int(size)
+        if compression == "lz4":
+            import lz4.frame
+
+            size = int(lz4.frame.get_frame_info(data)["content_size"])
+            return size or None  # 0: not recorded
+    except Exception:  # a damaged header: the decompressor reports it
+        return None
+    return None
+
+
+def decompress_bounded(where: str, compression: str, data: bytes | memoryview, size: int) -> bytes:
+    """Decompress chunk data that must yield exactly `size` bytes, never producing more.
+
+    For the readers that do not decompress into a reused buffer (the linear scan).
+    """
+    check_chunk_size(where, compression, size, data)
+    if compression not in ("zstd", "lz4", ""):
+        raise LogReadError(f"{where}: unsupported compression {compression!r}")
+    try:
+        out = decompress_upto(compression, data, size + 1, tolerant=False)
+    except Exception as exc:
+        raise LogReadError(f"{where} is corrupt: {' '.join(str(exc).split())}") from exc
+    if len(out) != size:
+        held = "more than" if len(out) > size else str(len(out))
+        raise LogReadError(f"{where} is corrupt: its data holds {held} bytes, not {size}")
+    return out
+
+
+def decompress_upto(
+    compression: str, data: bytes | memoryview, limit: int, *, tolerant: bool
+) -> bytes:
+    """At most `limit` bytes of decompressed chunk data.
+
+    `tolerant` (for a chunk cut off by the end of the file): what decodes before the
+    damage, instead of an error.
+    """
+    if compression == "":
+        return bytes(data[:limit])
+    parts: list[bytes] = []
+    got = 0
+    try:
+        if compression == "zstd":
+            import zstandard
+
+            reader = zstandard.ZstdDecompressor().stream_reader(bytes(data))
+            with reader:
+                while got < limit:
+                    part = reader.read(min(limit - got, 1 << 20))
+                    if not part:
+                        break
+                    parts.append(part)
+                    got += len(part)
+        elif compression == "lz4":
+            import lz4.frame
+
+            parts.append(lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit))
+        else:
+            raise ValueError(f"unsupported compression {compression!r}")
+    except Exception:
+        if not tolerant:
+            raise
+    return b"".join(parts)
 
 
 class ChunkReader:
@@ -60,31 +171,31 @@ class ChunkReader:
     Each chunk is mapped on its own (so resident memory stays one chunk, however large the
     log) and decompressed straight from the mapping into a reused output buffer: no read
     copy and no fresh allocation per chunk, about a fifth less CPU than read-then-decompress.
+    With `reuse=False` every chunk gets its own buffer (for callers holding several).
     """
 
-    def __init__(self, path: str, check_crc: bool = False) -> None:
+    def __init__(self, path: str, check_crc: bool = False, *, reuse: bool = True) -> None:
         self.path = path
         self.check_crc = check_crc
+        self.reuse = reuse
         self._file = open(path, "rb")  # noqa: SIM115 - closed in close()
         self._size = os.fstat(self._file.fileno()).st_size
         self._out = bytearray()
-        self._zstd = zstandard.ZstdDecompressor()
+        self._zstd: zstandard.ZstdDecompressor | None = None
 
-    def read(self, ref: ChunkRef) -> memoryview:
-        """The decompressed records of one chunk, valid until the next `read`."""
-        where = f"{self.path}: MCAP chunk at offset {ref.offset}"
-        if ref.offset < 0 or ref.length < _RECORD_HEAD.size or ref.offset + ref.length > self._size:
+    def read(self, offset: int, length: int) -> memoryview:
+        """The decompressed records of the chunk record at `offset`, valid until the next
+        `read` (when reusing its buffer)."""
+        where = chunk_where(self.path, offset)
+        if offset < 0 or length < _RECORD_HEAD.size or offset + length > self._size:
             raise LogReadError(f"{where} runs past the end of the file")
-        start = ref.offset - ref.offset % mmap.ALLOCATIONGRANULARITY
+        start = offset - offset % mmap.ALLOCATIONGRANULARITY
         mapped = mmap.mmap(
-            self._file.fileno(),
-            ref.offset + ref.length - start,
-            offset=start,
-            access=mmap.ACCESS_READ,
+            self._file.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
         )
         try:
             with memoryview(mapped) as whole:
-                view = whole[ref.offset - start :]
+                view = whole[offset - start :]
                 try:
                     size, crc, records = self._records(view, where)
                 finally:
@@ -97,6 +208,8 @@ class ChunkReader:
 
     def _records(self, view: memoryview, where: str) -> tuple[int, int, memoryview]:
         """(uncompressed size, CRC, records) of the chunk record in `view`."""
+        import zstandard
+
         try:
             opcode, _length = _RECORD_HEAD.unpack_from(view, 0)
             if opcode != OP_CHUNK:
@@ -105,31 +218,40 @@ class ChunkReader:
             _start, _end, size, crc = _CHUNK_HEAD.unpack_from(view, pos)
             pos += _CHUNK_HEAD.size
             (name_len,) = struct.unpack_from("<I", view, pos)
-            compression = bytes(view[pos + 4 : pos + 4 + name_len]).decode()
+            if pos + 4 + name_len > len(view):
+                raise LogReadError(f"{where} is corrupt: its compression name runs past it")
+            compression = bytes(view[pos + 4 : pos + 4 + name_len]).decode("utf-8", "replace")
             pos += 4 + name_len
             (data_len,) = struct.unpack_from("<Q", view, pos)
             pos += 8
             if pos + data_len > len(view):
                 raise LogReadError(f"{where} is corrupt: its data runs past the chunk record")
             with view[pos : pos + data_len] as data:
+                if compression not in ("zstd", "lz4", ""):
+                    raise LogReadError(f"{where}: unsupported compression {compression!r}")
+                check_chunk_size(where, compression, size, data)
                 if compression == "zstd":
                     return size, crc, self._unzstd(data, size)
                 if compression == "lz4":
-                    return size, crc, memoryview(lz4.frame.decompress(data))
-                if compression == "":
-                    return size, crc, self._copy(data)
-            raise LogReadError(f"{where}: unsupported compression {compression!r}")
+                    return size, crc, self._unlz4(data, size)
+                return size, crc, self._copy(data)
         except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
             raise LogReadError(f"{where} is corrupt: {' '.join(str(exc).split())}") from exc
 
     def _buffer(self, size: int) -> memoryview:
         """The first `size` bytes of the reused output buffer (grown when too small)."""
+        if not self.reuse:
+            return memoryview(bytearray(size))
         if len(self._out) < size:
             self._out = bytearray(size)  # earlier records (views) keep the old one alive
         return memoryview(self._out)[:size]
 
     def _unzstd(self, data: memoryview, size: int) -> memoryview:
         """Decompress a zstd frame of `size` bytes into the output buffer."""
+        import zstandard
+
+        if self._zstd is None:
+            self._zstd = zstandard.ZstdDecompressor()
         out = self._buffer(size)
         reader = self._zstd.stream_reader(data, read_across_frames=False, closefd=False)
         try:
@@ -141,6 +263,17 @@ class ChunkReader:
         if got != size or extra:
             raise ValueError(f"zstd data holds {'more' if extra else got} bytes, not {size}")
         return out
+
+    def _unlz4(self, data: memoryview, size: int) -> memoryview:
+        """Decompress an lz4 frame, stopping one byte past `size` (a bomb stops there)."""
+        import lz4.frame
+
+        got = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+        if len(got) != size:
+            raise ValueError(
+                f"lz4 data holds {'more' if len(got) > size else len(got)} bytes, not {size}"
+            )
+        return memoryview(got)
 
     def _copy(self, data: memoryview) -> memoryview:
         """Copy uncompressed records out of the mapping into the output buffer."""
@@ -154,10 +287,19 @@ class ChunkReader:
 
 
 def iter_chunk_messages(
-    records: bytes | memoryview, channels: frozenset[int]
+    records: bytes | memoryview,
+    channels: dict[int, ChannelInfo] | frozenset[int],
+    *,
+    where: str = "MCAP chunk",
 ) -> Iterator[tuple[int, int, int, memoryview]]:
-    """(record index, channel id, log time, payload) of each wanted message in a chunk."""
+    """(record index, channel id, log time, payload) of each wanted message in a chunk.
+
+    `where` names the chunk in errors (file and offset). Where `channels` maps ids to
+    their topics, a Channel record in the chunk that gives a wanted id another topic is
+    refused (a malformed log would otherwise mix two topics' messages).
+    """
     view = memoryview(records)
+    infos = channels if isinstance(channels, dict) else None
     pos, index, end = 0, 0, len(records)
     head = _RECORD_HEAD.size
     while pos + head <= end:
@@ -168,8 +310,57 @@ def iter_chunk_messages(
         if opcode == OP_MESSAGE:
             channel, _seq, log_time, _pub = _MESSAGE_HEAD.unpack_from(records, body)
             if channel in channels:
+                if log_time > MAX_LOG_TIME_NS:
+                    topic = infos[channel].topic if infos is not None else f"channel {channel}"
+                    raise LogReadError(
+                        f"{where}: message {index} on {topic} has log time {log_time} ns, "
+                        "past the int64 range (year 2262): corrupt time"
+                    )
                 yield index, channel, log_time, view[body + _MESSAGE_HEAD.size : body + length]
+        elif opcode == OP_CHANNEL and infos is not None and length >= _CHANNEL_HEAD.size:
+            _check_channel(records, body, length, infos, where)
         pos = body + length
         index += 1
     if pos != end:
-        raise LogReadError("MCAP chunk records overrun the chunk (corrupt chunk)")
+        raise LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
+
+
+def _check_channel(
+    records: bytes | memoryview, body: int, length: int, infos: dict[int, ChannelInfo], where: str
+) -> None:
+    """Refuse a Channel record that redefines a wanted channel id with another topic."""
+    cid, _schema, topic_len = _CHANNEL_HEAD.unpack_from(records, body)
+    info = infos.get(cid)
+    if info is None or _CHANNEL_HEAD.size + topic_len > length:
+        return
+    start = body + _CHANNEL_HEAD.size
+    topic = bytes(records[start : start + topic_len]).decode("utf-8", "replace")
+    if topic != info.topic:
+        raise LogReadError(
+            f"{where}: malformed MCAP: channel id {cid} is declared twice, for {info.topic!r} "
+            f"and {topic!r} (duplicate channel ids mix two topics' messages)"
+        )
+
+
+class McapChunkUnitReader:
+    """Per-worker reader of 'mcap-chunk' units of one MCAP file."""
+
+    def __init__(self, source: str, *, check_crc: bool = False) -> None:
+        self.source = source
+        self._reader = ChunkReader(source, check_crc=check_crc)
+
+    def messages(
+        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
+    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(log time, record index, channel id, payload) of the unit's wanted messages.
+
+        Payloads are views into a buffer reused by the next unit: use them before that.
+        """
+        records = self._reader.read(unit.offset, unit.length)
+        where = chunk_where(self.source, unit.offset)
+        for index, cid, log_time, data in iter_chunk_messages(records, channels, where=where):
+            yield log_time, index, cid, data
+
+    def close(self) -> None:
+        """Close the file."""
+        self._reader.close()

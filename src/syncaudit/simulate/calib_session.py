@@ -1,8 +1,15 @@
-"""Simulated calibration session for method B: LiDARs with non-overlapping views on a turntable.
+"""Simulated calibration session for method B: LiDARs with non-overlapping views.
 
-The vehicle stops at N turntable angles (or slow-turn positions: a large pivot offset);
-at each stop every LiDAR publishes `scans_per_stop` static scans, and optionally
-motion-distorted scans while the vehicle turns between stops. Scans are ray-cast against
+turntable: the vehicle stops at N turntable angles (or slow-turn positions: a large pivot
+offset); at each stop every LiDAR publishes `scans_per_stop` static scans, and optionally
+motion-distorted scans while the vehicle turns between stops. drive: the vehicle turns
+25-45 deg and moves 0.3-1.1 m along an arc between short stops while every LiDAR scans
+continuously; scans whose sweep falls inside a stop are static, the others are
+motion-distorted (each column fired from where the LiDAR was at that instant). Clouds are
+unorganised (Velodyne layout) or organised beam x column with zeros for no return
+(ouster-ros layout); /tf_static holds base_link -> lidar or base_link -> sensor kit ->
+lidar; an optional odometry (nav_msgs/Odometry and/or /tf odom -> base_link) carries
+scale error, yaw drift and noise. Scans are ray-cast against
 an exact scene (`syncaudit.calib.scene`) with Gaussian range noise, and written as real
 `sensor_msgs/msg/PointCloud2` messages to an MCAP log (or any format `open_writer`
 supports), with the *recorded* (perturbed) extrinsics on `/tf_static`. The truth -- true
@@ -27,7 +34,40 @@ from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_sca
 from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
 from syncaudit.writers.outputs import OutputSet
 
-__all__ = ["CalibSceneConfig", "simulate_calib_session", "truth_path"]
+__all__ = ["MATRIX", "CalibSceneConfig", "simulate_calib_session", "truth_path"]
+
+MATRIX: dict[str, dict[str, Any]] = {
+    "turntable-32-roof": {"beams": 32, "mount": "roof_front_rear", "motion": "turntable"},
+    "drive-16-roof": {"beams": 16, "mount": "roof_front_rear", "motion": "drive"},
+    "drive-32-left-right": {"beams": 32, "mount": "roof_left_right", "motion": "drive"},
+    "drive-32-diagonal": {
+        "beams": 32,
+        "mount": "diagonal",
+        "motion": "drive",
+        "tf_chain": "sensor_kit",
+    },
+    "drive-64-bumper": {
+        "beams": 64,
+        "mount": "bumper_front_rear",
+        "motion": "drive",
+        "organized": "second",
+    },
+    "drive-64-roof-odom": {
+        "beams": 64,
+        "mount": "roof_front_rear",
+        "motion": "drive",
+        "odometry": "odometry",
+    },
+    "drive-128-left-right": {
+        "beams": 128,
+        "mount": "roof_left_right",
+        "motion": "drive",
+        "organized": "both",
+        "tf_chain": "sensor_kit",
+        "odometry": "tf",
+    },
+}
+"""The calibration test matrix: `calib_scene_config` arguments per case (add `seed`)."""
 
 _NS = 1_000_000_000
 _LOG_LATENCY_NS = 4_000_000
@@ -43,6 +83,20 @@ _POINT_FIELDS: tuple[tuple[str, int, int, str], ...] = (
     ("time", 18, 7, "<f4"),
 )
 _POINT_STEP = 22
+# ouster-ros `ouster_ros::Point` (os_point.h): PCL_ADD_POINT4D pads x/y/z to 16 bytes,
+# EIGEN_ALIGN16 pads the point to 48.
+_OUSTER_FIELDS: tuple[tuple[str, int, int, str], ...] = (
+    ("x", 0, 7, "<f4"),
+    ("y", 4, 7, "<f4"),
+    ("z", 8, 7, "<f4"),
+    ("intensity", 16, 7, "<f4"),
+    ("t", 20, 6, "<u4"),
+    ("reflectivity", 24, 4, "<u2"),
+    ("ring", 26, 4, "<u2"),
+    ("ambient", 28, 4, "<u2"),
+    ("range", 32, 6, "<u4"),
+)
+_OUSTER_STEP = 48
 
 
 def truth_path(out: Path) -> Path:
@@ -110,6 +164,56 @@ def _stops(config: CalibSceneConfig, rng: np.random.Generator) -> list[_Stop]:
     return stops
 
 
+def _drive_stops(config: CalibSceneConfig, rng: np.random.Generator) -> list[_Stop]:
+    """Stops of a driving session: each turn and move drawn from the configured ranges.
+
+    The vehicle starts on the circle its mean step would drive, so the path stays about
+    the yard's centre; it always turns left (a loop, so late stops see early ones again).
+    """
+    turn_lo, turn_hi = (math.radians(v) for v in config.turn_deg_range)
+    step_lo, step_hi = config.translation_m_range
+    mean_turn = max((turn_lo + turn_hi) / 2.0, 1e-3)
+    radius = (step_lo + step_hi) / 2.0 / (2.0 * math.sin(mean_turn / 2.0))
+    x, y, yaw = 0.0, -radius, 0.0
+    t = round(config.start_time_s * _NS)
+    period_ns = round(config.scan_period_s * _NS)
+    stops = []
+    for k in range(config.n_stops):
+        stop_ns = round(float(rng.uniform(*config.stop_duration_s_range)) * _NS)
+        pose = se3.make_transform(se3.rot_z(yaw), (x, y, 0.0))
+        stops.append(_Stop(k, yaw, pose, t, t + stop_ns))
+        lo, hi = config.moving_scans_range
+        t += stop_ns + int(rng.integers(lo, hi + 1)) * period_ns
+        turn = float(rng.uniform(turn_lo, turn_hi))
+        step = float(rng.uniform(step_lo, step_hi))
+        x += step * math.cos(yaw + turn / 2.0)
+        y += step * math.sin(yaw + turn / 2.0)
+        yaw += turn
+    return stops
+
+
+def _poses_at(stops: list[_Stop], times_ns: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Vehicle poses (N, 4, 4) at many times (vectorised `_pose_at`)."""
+    starts = np.array([s.start_ns for s in stops], dtype=np.float64)
+    ends = np.array([s.end_ns for s in stops], dtype=np.float64)
+    yaws = np.array([s.yaw_rad for s in stops])
+    trans = np.array([s.world_from_base[:3, 3] for s in stops])
+    i = np.clip(np.searchsorted(starts, times_ns, side="right") - 1, 0, len(stops) - 1)
+    nxt = np.minimum(i + 1, len(stops) - 1)
+    gap = np.maximum(starts[nxt] - ends[i], 1.0)
+    s = np.clip((times_ns - ends[i]) / gap, 0.0, 1.0)
+    s = np.where(nxt == i, 0.0, s * s * (3.0 - 2.0 * s))
+    yaw = yaws[i] + s * (yaws[nxt] - yaws[i])
+    pos = (1.0 - s)[:, None] * trans[i] + s[:, None] * trans[nxt]
+    out = np.zeros((times_ns.shape[0], 4, 4))
+    c, sn = np.cos(yaw), np.sin(yaw)
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -sn, sn, c
+    out[:, 2, 2] = 1.0
+    out[:, 3, 3] = 1.0
+    out[:, :3, 3] = pos
+    return out
+
+
 def _pose_at(stops: list[_Stop], t_ns: float) -> NDArray[np.float64]:
     """Vehicle pose at time t: static within a stop, interpolated while turning."""
     for a, b in itertools.pairwise(stops):
@@ -161,6 +265,116 @@ def _cloud_msg(writer: LogWriter, frame_id: str, stamp_ns: int, scan: Any, time_
     )
 
 
+def _organized_msg(
+    writer: LogWriter,
+    frame_id: str,
+    stamp_ns: int,
+    scan: Any,
+    pattern: Any,
+    beams: int,
+    col_time_s: NDArray[np.float64],
+) -> Any:
+    """An organised `sensor_msgs/msg/PointCloud2` in the ouster-ros layout.
+
+    height = beams (row 0 = the top beam, as ouster-ros orders them), width = columns;
+    a beam without return keeps x = y = z = range = 0, and is_dense is false.
+    """
+    dtype = np.dtype(
+        {
+            "names": [f[0] for f in _OUSTER_FIELDS],
+            "formats": [f[3] for f in _OUSTER_FIELDS],
+            "offsets": [f[1] for f in _OUSTER_FIELDS],
+            "itemsize": _OUSTER_STEP,
+        }
+    )
+    width = pattern.n_columns
+    grid = np.zeros((beams, width), dtype=dtype)
+    row = beams - 1 - scan.ring.astype(np.int64)
+    col = scan.column
+    cell = grid[row, col]
+    cell["x"], cell["y"], cell["z"] = scan.points_m.T
+    cell["intensity"] = scan.intensity
+    cell["range"] = np.round(np.linalg.norm(scan.points_m, axis=1) * 1000.0).astype(np.uint32)
+    cell["reflectivity"] = np.clip(scan.intensity, 0, 255).astype(np.uint16)
+    grid[row, col] = cell
+    grid["ring"] = np.arange(beams, dtype=np.uint16)[:, None]
+    grid["t"] = np.round(col_time_s * 1e9).astype(np.uint32)[None, :]
+    fields = [
+        writer.new_msg("sensor_msgs/msg/PointField", name=name, offset=off, datatype=dt, count=1)
+        for name, off, dt, _ in _OUSTER_FIELDS
+    ]
+    return writer.new_msg(
+        "sensor_msgs/msg/PointCloud2",
+        header=writer.header(stamp_ns, frame_id),
+        height=beams,
+        width=width,
+        fields=fields,
+        is_bigendian=False,
+        point_step=_OUSTER_STEP,
+        row_step=_OUSTER_STEP * width,
+        data=grid.view(np.uint8).reshape(-1),
+        is_dense=False,
+    )
+
+
+def _odometry(
+    config: CalibSceneConfig, stops: list[_Stop], rng: np.random.Generator
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Odometry stamps, measured odom_from_base poses and the true ones (both (N, 4, 4)).
+
+    Dead reckoning of the true planar motion with a per-session scale error on distance
+    and on yaw, plus white noise on each increment: errors accumulate, as with wheel
+    odometry; standing still adds nothing.
+    """
+    step_ns = round(_NS / config.odom_rate_hz)
+    t0 = stops[0].start_ns - _NS // 2
+    stamps = np.arange(t0, stops[-1].end_ns + _NS // 2, step_ns, dtype=np.int64)
+    true = _poses_at(stops, stamps.astype(np.float64))
+    origin_inv = se3.invert(true[0])
+    true = np.einsum("ij,njk->nik", origin_inv, true)
+    scale = 1.0 + float(rng.normal(0.0, config.odom_scale_error))
+    yaw_scale = 1.0 + float(rng.normal(0.0, config.odom_yaw_scale_error))
+    measured = np.empty_like(true)
+    measured[0] = true[0]
+    for i in range(1, stamps.size):
+        delta = se3.invert(true[i - 1]) @ true[i]
+        dyaw = math.atan2(delta[1, 0], delta[0, 0])
+        moving = np.linalg.norm(delta[:2, 3]) > 1e-9 or abs(dyaw) > 1e-9
+        if moving:
+            dyaw = dyaw * yaw_scale + math.radians(float(rng.normal(0.0, config.odom_noise_deg)))
+            dxy = delta[:2, 3] * scale + rng.normal(0.0, config.odom_noise_m, size=2)
+        else:
+            dxy = np.zeros(2)
+        step = se3.make_transform(se3.rot_z(dyaw), (float(dxy[0]), float(dxy[1]), 0.0))
+        measured[i] = measured[i - 1] @ step
+    return stamps, measured, true
+
+
+def _odom_msgs(
+    writer: LogWriter, config: CalibSceneConfig, stamp_ns: int, pose: NDArray[np.float64]
+) -> tuple[Any, Any]:
+    """(nav_msgs/Odometry, tf2_msgs/TFMessage odom -> base_link) for one odometry pose."""
+    qx, qy, qz, qw = se3.matrix_to_quaternion(pose[:3, :3])
+    tx, ty, tz = (float(v) for v in pose[:3, 3])
+    cov = np.diag([1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-4]).reshape(-1)
+    odom = writer.new_msg(
+        "nav_msgs/msg/Odometry",
+        header=writer.header(stamp_ns, "odom"),
+        child_frame_id=config.base_frame,
+        pose=writer.new_msg(
+            "geometry_msgs/msg/PoseWithCovariance",
+            pose=writer.new_msg(
+                "geometry_msgs/msg/Pose",
+                position=writer.new_msg("geometry_msgs/msg/Point", x=tx, y=ty, z=tz),
+                orientation=writer.new_msg("geometry_msgs/msg/Quaternion", x=qx, y=qy, z=qz, w=qw),
+            ),
+            covariance=cov,
+        ),
+    )
+    tf = _tf_msg(writer, stamp_ns, "odom", {config.base_frame: pose})
+    return odom, tf
+
+
 def _tf_msg(
     writer: LogWriter, stamp_ns: int, parent: str, children: dict[str, NDArray[np.float64]]
 ) -> Any:
@@ -182,6 +396,30 @@ def _tf_msg(
             )
         )
     return writer.new_msg("tf2_msgs/msg/TFMessage", transforms=transforms)
+
+
+def _static_messages(
+    writer: LogWriter,
+    config: CalibSceneConfig,
+    stamp_ns: int,
+    recorded_ext: dict[str, NDArray[np.float64]],
+    kit: NDArray[np.float64],
+) -> list[Any]:
+    """The /tf_static messages: one base -> lidar message, or base -> kit and kit -> lidars
+    (two publishers, as a sensor-kit launch file starts them)."""
+    frames = {lidar.frame: recorded_ext[lidar.name] for lidar in config.lidars}
+    if config.tf_chain == "direct":
+        return [_tf_msg(writer, stamp_ns, config.base_frame, frames)]
+    kit_inv = se3.invert(kit)
+    return [
+        _tf_msg(writer, stamp_ns, config.base_frame, {config.sensor_kit_frame: kit}),
+        _tf_msg(
+            writer,
+            stamp_ns,
+            config.sensor_kit_frame,
+            {frame: kit_inv @ ext for frame, ext in frames.items()},
+        ),
+    ]
 
 
 def simulate_calib_session(
@@ -229,8 +467,11 @@ def _simulate(
     pose_rng = np.random.default_rng([config.seed, 1])
     noise_rng = np.random.default_rng([config.seed, 2])
     extr_rng = np.random.default_rng([config.seed, 3])
+    odom_rng = np.random.default_rng([config.seed, 4])
     scene = build_scene(config.scene, scene_rng)
-    stops = _stops(config, pose_rng)
+    stops = (
+        _stops(config, pose_rng) if config.motion == "turntable" else _drive_stops(config, pose_rng)
+    )
     true_ext = {lidar.name: _mount(lidar) for lidar in config.lidars}
     recorded_ext = {
         lidar.name: _perturb(
@@ -241,24 +482,32 @@ def _simulate(
         )
         for lidar in config.lidars
     }
+    kit = se3.make_transform(se3.rpy_to_matrix(0.0, 0.0, math.radians(0.5)), (0.9, 0.0, 1.6))
     period_ns = round(config.scan_period_s * _NS)
     scans: list[dict[str, Any]] = []
+    odometry = None if config.odometry == "none" else _odometry(config, stops, odom_rng)
     with open_writer(out, fmt, overwrite=outputs.overwrite, outputs=outputs) as writer:
         writer.add_topic(config.tf_topic, "tf2_msgs/msg/TFMessage", latched=True)
         for lidar in config.lidars:
             writer.add_topic(lidar.topic_name, "sensor_msgs/msg/PointCloud2")
+        if config.odometry in ("odometry", "both"):
+            writer.add_topic(config.odom_topic, "nav_msgs/msg/Odometry")
+        if config.odometry in ("tf", "both"):
+            writer.add_topic("/tf", "tf2_msgs/msg/TFMessage")
         tf_stamp = stops[0].start_ns - _NS
-        writer.write_msg(
-            config.tf_topic,
-            tf_stamp,
-            _tf_msg(
-                writer,
-                tf_stamp,
-                config.base_frame,
-                {lidar.frame: recorded_ext[lidar.name] for lidar in config.lidars},
-            ),
-        )
-        events = _scan_events(config, stops, period_ns)
+        for msg in _static_messages(writer, config, tf_stamp, recorded_ext, kit):
+            writer.write_msg(config.tf_topic, tf_stamp, msg)
+        if odometry is not None:
+            for stamp, pose in zip(odometry[0], odometry[1], strict=True):
+                odom, tf = _odom_msgs(writer, config, int(stamp), pose)
+                if config.odometry in ("odometry", "both"):
+                    writer.write_msg(config.odom_topic, int(stamp) + _LOG_LATENCY_NS // 4, odom)
+                if config.odometry in ("tf", "both"):
+                    writer.write_msg("/tf", int(stamp) + _LOG_LATENCY_NS // 4, tf)
+        if config.motion == "turntable":
+            events = _scan_events(config, stops, period_ns)
+        else:
+            events = _drive_events(config, stops, period_ns)
         patterns = {lidar.name: beam_pattern(lidar) for lidar in config.lidars}
         for stamp_ns, lidar_index, stop_index in events:
             lidar = config.lidars[lidar_index]
@@ -267,12 +516,19 @@ def _simulate(
             col_time_s = (np.arange(pattern.n_columns) + 0.5) / pattern.n_columns * sweep_s
             if stop_index is not None:
                 pose = stops[stop_index].world_from_base @ true_ext[lidar.name]
-            else:
+            elif config.motion == "turntable":
                 pose = np.stack(
                     [_pose_at(stops, stamp_ns + t * _NS) @ true_ext[lidar.name] for t in col_time_s]
                 )
+            else:
+                pose = _poses_at(stops, stamp_ns + col_time_s * _NS) @ true_ext[lidar.name]
             scan = simulate_scan(scene, lidar, pattern, pose, noise_rng)
-            msg = _cloud_msg(writer, lidar.frame, stamp_ns, scan, col_time_s[scan.column])
+            if lidar.organized:
+                msg = _organized_msg(
+                    writer, lidar.frame, stamp_ns, scan, pattern, lidar.beams, col_time_s
+                )
+            else:
+                msg = _cloud_msg(writer, lidar.frame, stamp_ns, scan, col_time_s[scan.column])
             writer.write_msg(lidar.topic_name, stamp_ns + _LOG_LATENCY_NS, msg)
             scans.append(
                 {
@@ -284,6 +540,20 @@ def _simulate(
                 }
             )
     truth = _truth(config, scene, stops, true_ext, recorded_ext, scans, out)
+    if config.tf_chain == "sensor_kit":
+        truth["sensor_kit"] = {
+            "frame_id": config.sensor_kit_frame,
+            "base_from_kit": _transform_json(kit),
+        }
+    if odometry is not None:
+        stamps, measured, true = odometry
+        last_rot, last_trans = se3.transform_difference(true[-1], measured[-1])
+        truth["odometry"] = {
+            "kind": config.odometry,
+            "samples": int(stamps.size),
+            "final_drift_deg": last_rot,
+            "final_drift_m": last_trans,
+        }
     outputs.write_text(truth_path(out), json.dumps(truth, indent=2) + "\n")
     return truth
 
@@ -308,6 +578,30 @@ def _scan_events(
                 t = a.end_ns + round((m + 0.5) / config.turning_scans * gap) - period_ns // 2
                 events.append((t + phase, i, None))
     events.sort()
+    return events
+
+
+def _drive_events(
+    config: CalibSceneConfig, stops: list[_Stop], period_ns: int
+) -> list[tuple[int, int, int | None]]:
+    """(stamp, LiDAR index, stop index or None while moving) for continuously scanning LiDARs.
+
+    A scan is static when its whole sweep lies inside a stop; LiDARs are not phase-locked.
+    """
+    events: list[tuple[int, int, int | None]] = []
+    n = len(config.lidars)
+    first, last = stops[0].start_ns, stops[-1].end_ns
+    for i, lidar in enumerate(config.lidars):
+        sweep_ns = round(period_ns * lidar.horizontal_fov_deg / 360.0)
+        t = first + round(i * period_ns / (n + 1))
+        k = 0
+        while t + sweep_ns <= last:
+            while k < len(stops) - 1 and stops[k].end_ns < t:
+                k += 1
+            inside = stops[k].start_ns <= t and t + sweep_ns <= stops[k].end_ns
+            events.append((t, i, stops[k].index if inside else None))
+            t += period_ns
+    events.sort(key=lambda e: (e[0], e[1]))
     return events
 
 

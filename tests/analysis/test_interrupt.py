@@ -1,0 +1,116 @@
+"""Signals during the worker phase (issue 10 item 15), with real processes: Ctrl-C to the
+whole process group and SIGTERM to the main process both end `syncaudit audit` with exit
+130, no traceback, and no worker left alive, in bounded time."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from syncaudit.simulate.rig_file import rig_from_truth
+from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+# The real CLI, with one chunk per task and each task held 0.3 s in the worker, so that the
+# worker phase lasts seconds on any machine (the signal must arrive while it runs).
+RUN = """
+import sys, time
+import syncaudit.collect as c
+
+c.GROUP_BYTES = 1
+_extract = c._extract_group
+
+
+def slow(*args):
+    time.sleep(0.3)
+    return _extract(*args)
+
+
+c._extract_group = slow
+from syncaudit.cli import main
+
+sys.argv = ["syncaudit", *sys.argv[1:]]
+main()
+"""
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("sig")
+    out = folder / "log.mcap"
+    truth = simulate_sync_log(out, SyncSimConfig(seed=5, duration_s=20.0, lidar_model="VLP-32C"))
+    rig = folder / "rig.yaml"
+    data = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)  # type: ignore[arg-type]
+    rig.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out, rig
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(p) for p in text.split()]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead, just unreaped
+
+
+def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], float]:
+    out, rig = log
+    proc = subprocess.Popen(
+        [sys.executable, "-c", RUN, "audit", str(out), "--rig", str(rig)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,  # its own process group, as a shell gives a command
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    workers: list[int] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = _children(proc.pid)
+        if len(workers) >= 2:
+            break
+        time.sleep(0.005)
+    if proc.poll() is not None or not workers:
+        proc.kill()
+        proc.communicate()
+        pytest.skip("the audit finished before its worker phase could be interrupted")
+    time.sleep(0.05)
+    began = time.monotonic()
+    if send == "SIGINT-group":
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        os.kill(proc.pid, signal.SIGTERM)
+    try:
+        _, stderr = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"{send}: the audit hung after the signal")
+    took = time.monotonic() - began
+    time.sleep(0.2)  # workers killed by PDEATHSIG/terminate need a moment to go
+    return proc.returncode, stderr, [w for w in workers if _alive(w)], took
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
+@pytest.mark.parametrize("send", ["SIGINT-group", "SIGTERM-main", "SIGINT-group", "SIGINT-group"])
+def test_interrupted_audit_exits_130_and_leaves_no_worker(
+    log: tuple[Path, Path], send: str
+) -> None:
+    code, stderr, survivors, took = _interrupt(log, send)
+    assert code == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    assert survivors == []
+    assert took < 10

@@ -1,0 +1,163 @@
+"""ROS 2 bag folders with MCAP storage (issue 13): one file or split into many, written by
+rosbags' rosbag2 writer from a simulated log, audit exactly like the bare `.mcap`."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from syncaudit import collect
+from syncaudit.audit import audit_log
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap_bag import McapBag, open_mcap_bag
+from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.typesys import TypeRegistry
+from syncaudit.logs.units import group_units
+from syncaudit.simulate.rig_file import rig_from_truth
+from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+
+@pytest.fixture(scope="module")
+def bare(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, object]]:
+    out = tmp_path_factory.mktemp("bare") / "log.mcap"
+    truth = simulate_sync_log(out, SyncSimConfig(seed=71, duration_s=3.0, lidar_model="VLP-16"))
+    return out, truth
+
+
+def _to_bag(bare: Path, folder: Path, parts: int, *, reorder: bool = False) -> list[Path]:
+    """Write the bare log's messages as a rosbag2 MCAP bag split into `parts` files by time.
+
+    Each part is written by its own rosbags Writer (as rosbag2 does on a split, every file
+    declares its channels anew); `reorder` declares them in reverse order in odd parts, so
+    the files number their channels differently.
+    """
+    with open_log(bare) as log:
+        assert isinstance(log, McapLog) and log.summary.start_ns is not None
+        assert log.summary.end_ns is not None
+        span = log.summary.end_ns - log.summary.start_ns + 1
+        topics = sorted(log.topics)
+        defs = {}
+        for channel in log._channels.values():
+            schema = log._schemas[channel.schema_id]
+            defs[channel.topic] = (log.topics[channel.topic].msgtype, schema.data.decode())
+        messages = list(log.messages())
+        registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
+    folder.mkdir()
+    files, metas = [], []
+    for part in range(parts):
+        lo = log.summary.start_ns + span * part // parts
+        hi = log.summary.start_ns + span * (part + 1) // parts
+        scratch = folder.parent / f"{folder.name}-part{part}"
+        writer = Writer(scratch, version=8, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        order = topics[::-1] if reorder and part % 2 else topics
+        conns = {t: writer.add_connection(t, defs[t][0], typestore=registry.store) for t in order}
+        for m in messages:
+            if lo <= m.log_time_ns < hi:
+                writer.write(conns[m.topic], m.log_time_ns, bytes(m.data))
+        writer.close()
+        meta = yaml.safe_load((scratch / "metadata.yaml").read_text())
+        info = meta["rosbag2_bagfile_information"]
+        (entry,) = info["files"]
+        target = folder / f"{folder.name}_{part}.mcap"
+        shutil.move(scratch / entry["path"], target)
+        entry["path"] = target.name
+        shutil.rmtree(scratch)
+        files.append(target)
+        metas.append(info)
+    # One metadata.yaml listing every part, as rosbag2 writes it after a split.
+    info = metas[0]
+    info["files"] = [m["files"][0] for m in metas]
+    info["relative_file_paths"] = [f.name for f in files]
+    info["message_count"] = sum(m["message_count"] for m in metas)
+    counts: dict[str, int] = {}
+    for m in metas:
+        for t in m["topics_with_message_count"]:
+            name = t["topic_metadata"]["name"]
+            counts[name] = counts.get(name, 0) + t["message_count"]
+    for t in info["topics_with_message_count"]:
+        t["message_count"] = counts[t["topic_metadata"]["name"]]
+    meta_text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
+    (folder / "metadata.yaml").write_text(meta_text)
+    return files
+
+
+def _json(result: object) -> str:
+    def strip(value: object) -> object:  # the path and container differ by design
+        if isinstance(value, dict):
+            return {k: strip(v) for k, v in value.items() if k not in ("path", "container")}
+        if isinstance(value, list):
+            return [strip(v) for v in value]
+        return value
+
+    return json.dumps(strip(result.to_dict()), sort_keys=True)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(("parts", "reorder"), [(1, False), (3, False), (3, True)])
+def test_bag_folder_audits_like_the_bare_mcap(
+    bare: tuple[Path, dict[str, object]],
+    tmp_path: Path,
+    parts: int,
+    reorder: bool,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    path, truth = bare
+    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)  # several tasks per file
+    folder = tmp_path / "bag"
+    files = _to_bag(path, folder, parts, reorder=reorder)
+    rig = rig_from_truth(truth)
+    with open_mcap_bag(folder, files) as bag, open_log(path) as log:
+        assert bag.summary.container == "rosbag2-mcap"
+        assert bag.summary.message_count == log.summary.message_count
+        assert {n: t.count for n, t in bag.topics.items()} == {
+            n: t.count for n, t in log.topics.items()
+        }
+        topics = frozenset(bag.topics)
+        units = bag.read_units(topics)
+        if reorder:
+            assert units is None  # channel ids differ between files: read serially
+        else:
+            assert units is not None and {u.source for u in units} == {str(f) for f in files}
+            assert len(group_units(units, collect.GROUP_BYTES)) > 1  # jobs=2 uses the pool
+        same = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
+        assert same == [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
+    with open_log(folder) as opened:  # open_log takes the MCAP path for such folders
+        assert isinstance(opened, McapBag)
+    reference = audit_log(path, rig, jobs=1)
+    for jobs in (1, 2):
+        result = audit_log(folder, rig, jobs=jobs)
+        assert _json(result) == _json(reference)
+        assert result.frames().equals(reference.frames())
+
+
+def test_split_bag_with_a_cut_last_file(
+    bare: tuple[Path, dict[str, object]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A recording that crashed: the last file of a split bag has no summary and ends
+    inside a chunk. Every file still gives read units; the parallel read equals the serial
+    one and holds every message before the cut."""
+    path, truth = bare
+    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)
+    folder = tmp_path / "bag"
+    files = _to_bag(path, folder, 3)
+    last = files[-1]
+    data = last.read_bytes()
+    last.write_bytes(data[: len(data) * 2 // 3])
+    rig = rig_from_truth(truth)  # type: ignore[arg-type]
+    with open_mcap_bag(folder, files) as bag:
+        assert any(w.code == "mcap-truncated" for w in bag.warnings)
+        units = bag.read_units(frozenset(bag.topics))
+        assert units is not None and str(last) in {u.source for u in units}
+        serial = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
+    with open_log(path) as log:
+        full = [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
+    assert 0 < len(serial) < len(full) and serial == full[: len(serial)]
+    results = [audit_log(folder, rig, jobs=jobs) for jobs in (1, 2)]
+    assert _json(results[0]) == _json(results[1])
+    monkeypatch.setattr(McapBag, "read_units", lambda self, topics: None)
+    assert _json(audit_log(folder, rig, jobs=1)) == _json(results[0])
