@@ -511,7 +511,7 @@ def ensure_log(
         "log": str(log),
         "duration_s": duration_s,
         "size_bytes": log.stat().st_size,
-        "generated_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "generated_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "generator_version": GENERATOR_VERSION,
         "generation": {"wall_s": run.wall_s, "cpu_s": run.cpu_s, "peak_rss_mb": run.rss_mb},
         "config": sim_config(duration_s),

@@ -20,6 +20,7 @@ from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metad
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.rig_guess import guess_rig
+from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
@@ -311,10 +312,12 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     from syncaudit.analysis.replay import replay_controller
     from syncaudit.analysis.sync import analyze_camera
 
-    warnings: list[str] = []
+    # Camera topics in encodings that cannot be read are dropped (warned); see rig_vs_log.
+    rig, warnings = check_rig_against_log(log, rig)
     missing: list[str] = []
     located = _locate_cameras(log, rig, warnings)
     scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc)
+    warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")

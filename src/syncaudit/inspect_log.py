@@ -1,4 +1,12 @@
-"""`inspect_log`: what a log holds for a sync audit, as the `info` command shows it."""
+"""`inspect_log`: what a log holds for a sync audit, as the `info` command shows it.
+
+`info` and `audit` agree on what is damaged: the LiDAR topic the audit would use (the
+rig's, else the first packet topic by name) is scanned the same way, and where that
+fails (damaged packets, unreadable encoding, a rig contradicting the packets) the report
+records the error and its exit code. By default `inspect_log` then raises it (so `info`
+exits as `audit` would); with `partial=True` it returns the report with `error` and
+`exit_code` set, for a caller that prints what could be read and then exits non-zero.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +20,7 @@ from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
+from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import json_ready
 
 CHECKPOINTS_BY_TYPE: dict[str, tuple[int, ...]] = {
@@ -83,6 +92,10 @@ class InfoReport:
     cameras: list[CameraRow] = field(default_factory=list)
     guessed: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    error: str | None = None
+    """Why the audit's LiDAR topic cannot be read (None where it can)."""
+    exit_code: int = 0
+    """The exit code `audit` gives on this log for that error (0 where none)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; NaN becomes None."""
@@ -129,13 +142,20 @@ def lidar_warnings(row: LidarRow) -> list[str]:
     return warnings
 
 
-def inspect_log(path: str | Path, rig: Rig | None = None) -> InfoReport:
-    """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records."""
+def inspect_log(path: str | Path, rig: Rig | None = None, *, partial: bool = False) -> InfoReport:
+    """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
+
+    Raises the error that makes `audit` fail on the LiDAR topic, unless `partial`: then
+    the report is returned with `error` and `exit_code` set.
+    """
     with open_log(path) as log:
-        return _inspect(log, rig)
+        report, failure = _inspect(log, rig)
+    if failure is not None and not partial:
+        raise failure
+    return report
 
 
-def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
+def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditError | None]:
     summary = log.summary
     duration = summary.duration_s
     report = InfoReport(
@@ -156,8 +176,22 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
     if guess is not None and lidar_topics:
         report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
     report.warnings.extend(guess.notes if guess else [])
-    for topic in lidar_topics:
+    # The topic `audit` would use decides: the rig's, else the first guessed by name.
+    audited = rig.lidar.topic if rig else (lidar_topics[0] if lidar_topics else None)
+    failure: SyncauditError | None = None
+    if rig is not None:
         try:
+            rig, skipped = check_rig_against_log(log, rig)
+            report.warnings.extend(skipped)
+        except SyncauditError as exc:
+            failure = exc
+    first_problem: SyncauditError | None = None
+    for topic in lidar_topics:
+        if failure is not None and topic == audited:
+            continue
+        try:
+            if topic not in log.topics:
+                raise NoDataError(f"LiDAR topic {topic} (from the rig) is not in the log")
             scan = scan_lidar(
                 log,
                 topic,
@@ -165,16 +199,24 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
                 azimuth_increases=rig.lidar.azimuth_increases if rig else True,
                 ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
             )
+            if scan.packets == 0:
+                raise NoDataError(f"LiDAR topic {topic} holds no packets")
         except SyncauditError as exc:
-            report.warnings.append(f"{topic}: {exc}")
-            continue
-        if scan.packets == 0:
-            report.warnings.append(f"{topic}: no LiDAR data packets (e.g. an IMU packet topic)")
+            if topic == audited:
+                failure = exc
+                continue
+            first_problem = first_problem or exc
+            if isinstance(exc, NoDataError) and "holds no packets" in str(exc):
+                report.warnings.append(f"{topic}: no LiDAR data packets (e.g. an IMU packet topic)")
+            else:
+                report.warnings.append(f"{topic}: {exc}")
             continue
         row = lidar_row(scan)
         report.lidars.append(row)
         report.warnings.extend(scan.warnings)
         report.warnings.extend(lidar_warnings(row))
+    if failure is None and rig is None and not report.lidars:
+        failure = first_problem
     cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)
     if not (rig and rig.cameras) and cameras:
         report.guessed.append(
@@ -183,11 +225,15 @@ def _inspect(log: LogReader, rig: Rig | None) -> InfoReport:
     for cam in cameras:
         report.cameras.append(_camera_row(log, cam, duration))
     report.warnings.extend(w.message for w in log.warnings)
-    if not report.lidars:
+    if failure is not None:
+        report.error = str(failure)
+        report.exit_code = failure.exit_code
+        report.warnings.append(f"the audit cannot use the LiDAR: {failure}")
+    elif not lidar_topics:
         report.warnings.append("no LiDAR packet topic found: the sync audit needs one")
     if not report.cameras:
         report.warnings.append("no camera topic found: only the LiDAR side can be audited")
-    return report
+    return report, failure
 
 
 def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> CameraRow:

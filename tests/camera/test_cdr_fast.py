@@ -1,4 +1,5 @@
-"""The struct readers give exactly what rosbags gives, on every per-frame message of a log."""
+"""The struct readers give exactly what rosbags gives, on every per-frame message of a log
+(ROS 2 CDR and ROS 1 serialization)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,11 @@ from syncaudit.logs import open_log
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
 
-@pytest.fixture(scope="module")
-def log_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("fast") / "log.mcap"
-    simulate_sync_log(out, SyncSimConfig(seed=81, duration_s=1.0))
+@pytest.fixture(scope="module", params=["mcap", "mcap-ros1", "bag"])
+def log_path(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest) -> Path:
+    suffix = ".bag" if request.param == "bag" else ".mcap"
+    out = tmp_path_factory.mktemp("fast") / f"log{suffix}"
+    simulate_sync_log(out, SyncSimConfig(seed=81, duration_s=1.0, log_format=request.param))
     return out
 
 
@@ -38,6 +40,6 @@ def test_fast_rows_equal_rosbags_rows(log_path: Path) -> None:
     assert all(count >= 20 for count in checked.values()), checked
 
 
-def test_no_fast_path_for_ros1_or_other_types() -> None:
-    assert read_fast(b"\x00" * 64, "syncaudit_msgs/msg/CameraExposure", "ros1") is None
+def test_no_fast_path_for_other_types_or_encodings() -> None:
+    assert read_fast(b"\x00" * 64, "syncaudit_msgs/msg/CameraExposure", "protobuf") is None
     assert read_fast(b"\x00\x01\x00\x00" + b"\x00" * 60, "sensor_msgs/msg/Image", "cdr") is None

@@ -331,6 +331,36 @@ def test_simulate_sync_writes_log_truth_and_rig_then_audits(tmp_path: Path) -> N
     _no_temporaries(tmp_path)
 
 
+@pytest.mark.parametrize(
+    ("convention", "offset"), [("first_after", 0), ("containing", 2), ("containing", -1)]
+)
+def test_simulate_trigger_packet_conventions_audit_to_the_truth(
+    tmp_path: Path, convention: str, offset: int
+) -> None:
+    """The simulator's trigger-packet options, through the CLI: the audit's recommended
+    delay stays within 20 us of the truth whichever packet the triggers name."""
+    out = tmp_path / "sim.mcap"
+    made = runner.invoke(
+        app,
+        [
+            "simulate", "sync", str(out), "--lidar", "VLP-32C", "--duration", "2",
+            "--trigger-packet", convention, "--trigger-packet-offset", str(offset),
+        ],
+    )  # fmt: skip
+    assert made.exit_code == 0, made.output
+    truth = json.loads(Path(f"{out}.truth.json").read_text())
+    audited = runner.invoke(app, ["audit", str(out), "--rig", f"{out}.rig.yaml", "--json"])
+    assert audited.exit_code == 0, audited.output
+    for cam in json.loads(audited.stdout)["cameras"]:
+        ideal_us = truth["cameras"][cam["camera"]]["ideal_delay_mean_ns"] / 1e3
+        assert abs(cam["delay_recommended_us"] - ideal_us) < 20.0
+        assert cam["packet_phase_source"] == "trigger packet"
+    bad = runner.invoke(
+        app, ["simulate", "sync", str(tmp_path / "x.mcap"), "--trigger-packet", "x"]
+    )
+    assert "--trigger-packet" in _one_line_error(bad, 64)
+
+
 def test_simulate_db3_names_the_bag_folder_sanely(tmp_path: Path) -> None:
     made = runner.invoke(app, ["simulate", "sync", str(tmp_path / "drive.db3"), "--duration", "1"])
     assert made.exit_code == 0, made.output

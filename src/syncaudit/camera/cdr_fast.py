@@ -2,8 +2,14 @@
 
 rosbags deserialises any message but costs ~30 us each; these fixed-layout CDR messages
 (ROS 2) arrive once per camera frame, so the audit reads their fields with `struct` in
-a few microseconds. Anything else, or ROS 1 bytes, goes through rosbags. Tests check
-the two give identical rows.
+a few microseconds, in CDR (ROS 2) and ROS 1 serialization alike. Anything else goes
+through rosbags. Tests check the two give identical rows.
+
+Damaged bytes (a message cut short, a length past its end, an unknown encapsulation)
+never raise: `read_fast` returns a namespace whose `damaged` attribute says what is
+wrong, so the row functions can skip the message with a counted warning (a damaged
+camera message should not stop the audit of everything else). Strings decode leniently
+(bit flips become U+FFFD): the audit does not use their text.
 """
 
 from __future__ import annotations
@@ -21,22 +27,36 @@ _LE = {
     "f": struct.Struct("<f"),
 }
 _BE = {k: struct.Struct(">" + v.format[1:]) for k, v in _LE.items()}
+_CDR_LE_IDS = (b"\x00\x01", b"\x00\x03")
+_CDR_IDS = (b"\x00\x00", *_CDR_LE_IDS, b"\x00\x02")
+"""Encapsulation ids of (PL_)CDR big- and little-endian: what ROS 2 writes."""
+
+
+class _TruncatedError(Exception):
+    """A field reaches past the end of the message (internal to this module)."""
 
 
 class _Cursor:
-    """Reads CDR primitives in order, aligned relative to after the 4-byte header."""
+    """Reads CDR primitives in order, aligned relative to after the 4-byte header.
 
-    __slots__ = ("data", "fmt", "pos")
+    With `ros1`, reads ROS 1 serialization instead: little-endian, packed (no alignment),
+    strings without terminator, and the std_msgs/Header `seq` before the stamp.
+    """
 
-    def __init__(self, data: bytes | memoryview) -> None:
+    __slots__ = ("data", "fmt", "pos", "ros1")
+
+    def __init__(self, data: bytes | memoryview, *, ros1: bool = False) -> None:
         self.data = data
-        self.fmt = _LE if bytes(data[1:2]) in (b"\x01", b"\x03") else _BE
-        self.pos = 4
+        self.ros1 = ros1
+        self.fmt = _LE if ros1 or bytes(data[0:2]) in _CDR_LE_IDS else _BE
+        self.pos = 0 if ros1 else 4
 
     def _get(self, code: str, size: int) -> Any:
-        rem = (self.pos - 4) % size
+        rem = 0 if self.ros1 else (self.pos - 4) % size
         if rem:
             self.pos += size - rem
+        if self.pos + size > len(self.data):
+            raise _TruncatedError(f"a {size}-byte field at byte {self.pos}")
         (value,) = self.fmt[code].unpack_from(self.data, self.pos)
         self.pos += size
         return value
@@ -60,15 +80,23 @@ class _Cursor:
         return int(self._get("h", 2))
 
     def string(self) -> str:
+        start = self.pos
         length = self.u32()
-        text = bytes(self.data[self.pos : self.pos + length - 1]).decode()
+        terminator = 0 if self.ros1 else 1
+        if length < terminator or self.pos + length > len(self.data):
+            raise _TruncatedError(f"a string of {length} bytes at byte {start}")
+        end = self.pos + length - terminator
+        text = bytes(self.data[self.pos : end]).decode(errors="replace")
         self.pos += length
         return text
 
     def time(self) -> SimpleNamespace:
-        return SimpleNamespace(sec=self.i32(), nanosec=self.u32())
+        return SimpleNamespace(sec=self.u32() if self.ros1 else self.i32(), nanosec=self.u32())
 
     def header(self) -> SimpleNamespace:
+        if self.ros1:
+            seq = self.u32()
+            return SimpleNamespace(seq=seq, stamp=self.time(), frame_id=self.string())
         return SimpleNamespace(stamp=self.time(), frame_id=self.string())
 
 
@@ -112,11 +140,27 @@ FAST_READERS = {
 
 def has_fast_reader(msgtype: str, encoding: str) -> bool:
     """True where `read_fast` reads this type and encoding (else rosbags must)."""
-    return encoding == "cdr" and msgtype in FAST_READERS
+    return encoding in ("cdr", "ros1") and msgtype in FAST_READERS
 
 
 def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNamespace | None:
-    """The fields the audit needs, or None where this type/encoding has no fast reader."""
+    """The fields the audit needs, or None where this type/encoding has no fast reader.
+
+    Where the bytes do not fit the layout, the namespace holds only `damaged`: what is
+    wrong, e.g. "truncated CameraExposure (7 bytes): a 4-byte field at byte 8 is missing".
+    """
     if not has_fast_reader(msgtype, encoding):
         return None
-    return FAST_READERS[msgtype](_Cursor(data))
+    name = msgtype.rsplit("/", 1)[-1]
+    ros1 = encoding == "ros1"
+    if not ros1 and (len(data) < 4 or bytes(data[0:2]) not in _CDR_IDS):
+        head = bytes(data[0:4]).hex() or "nothing"
+        return SimpleNamespace(
+            damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
+        )
+    try:
+        return FAST_READERS[msgtype](_Cursor(data, ros1=ros1))
+    except _TruncatedError as exc:
+        return SimpleNamespace(
+            damaged=f"truncated {name} ({len(data)} bytes): {exc} is missing or cut"
+        )

@@ -4,16 +4,24 @@ Image headers are read straight from the serialized bytes (the stamp sits at a f
 offset in both encodings), so large image payloads are never deserialised. Exposure and
 trigger messages are small and go through rosbags with the log's own definitions.
 The row functions are pure (message in, tuple out) so worker processes can run them.
+
+A damaged camera message (cut short, empty, a stamp or duration no sensor writes) becomes
+a `DamagedRow` naming topic, log time and what is wrong, never an exception: the builder
+skips it and the audit warns "camera front: 3 damaged messages skipped on
+/cameras/front/exposure (...)". The audit of the rest goes on; only a topic whose every
+message is damaged stops it (LogReadError, exit 3), since nothing of it can be judged.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
+from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage
 from syncaudit.rig import CameraConfig
 
@@ -25,27 +33,72 @@ _STAMP_BE = struct.Struct(">iI")
 _ROS1_STAMP = struct.Struct("<II")
 _ROS1_SEQ = struct.Struct("<I")
 
+_HEADER_BYTES = 12
+"""Bytes up to the end of the header stamp: ROS 1 seq + stamp, or CDR encapsulation + stamp."""
+MAX_DURATION_S = 3600.0
+"""Exposures or delays longer than this (or not finite) are damaged values, not timing."""
+
 Deserialize = Callable[[RawMessage], Any]
+
+
+@dataclass(frozen=True, slots=True)
+class DamagedRow:
+    """A camera message that could not be read: skipped, counted and reported."""
+
+    topic: str
+    log_time_ns: int
+    reason: str
+
+
 ImageRow = tuple[int, int, int | None]
 """(header stamp ns, log time ns, ROS 1 seq or None)."""
 
 
 def header_stamp_ns(msg: RawMessage) -> int:
-    """std_msgs/Header stamp of a message whose first field is the header."""
+    """std_msgs/Header stamp of a message whose first field is the header.
+
+    Raises LogReadError (naming topic and log time) where the message is too short to
+    hold one or its nanoseconds are out of range.
+    """
     data = msg.data
+    if len(data) < _HEADER_BYTES:
+        raise LogReadError(_where(msg, f"{len(data)} bytes cannot hold a header stamp"))
     if msg.encoding == "ros1":
         sec, nsec = _ROS1_STAMP.unpack_from(data, 4)
     else:
         little = bytes(data[1:2]) in (b"\x01", b"\x03")
         sec, nsec = (_STAMP if little else _STAMP_BE).unpack_from(data, 4)
+    if sec < 0 or nsec >= 1_000_000_000:
+        raise LogReadError(_where(msg, f"header stamp {sec} s {nsec} ns out of range"))
     return int(sec) * 1_000_000_000 + int(nsec)
 
 
+def _where(msg: RawMessage, what: str) -> str:
+    return f"{msg.topic} at log time {msg.log_time_ns / 1e9:.9f} s: {what}"
+
+
+def _damaged(msg: RawMessage, reason: str) -> DamagedRow:
+    return DamagedRow(msg.topic, msg.log_time_ns, reason)
+
+
+def _duration_ns(seconds: Any, what: str) -> int:
+    """Seconds as int64 ns; ValueError for values no camera reports (NaN, inf, hours)."""
+    value = float(seconds)
+    if not math.isfinite(value) or abs(value) > MAX_DURATION_S:
+        raise ValueError(f"{what} {value!r} s is not a duration")
+    return round(value * 1e9)
+
+
 def _time_ns(t: Any) -> int:
-    return int(t.sec) * 1_000_000_000 + int(t.nanosec)
+    sec, nanosec = int(t.sec), int(t.nanosec)
+    if sec < 0 or not 0 <= nanosec < 1_000_000_000:
+        raise ValueError(f"time {sec} s {nanosec} ns out of range")
+    return sec * 1_000_000_000 + nanosec
 
 
 def _ros1_seq(msg: RawMessage) -> int | None:
+    if msg.encoding == "ros1" and len(msg.data) < _ROS1_SEQ.size:
+        raise LogReadError(_where(msg, f"{len(msg.data)} bytes cannot hold a header seq"))
     return int(_ROS1_SEQ.unpack_from(msg.data, 0)[0]) if msg.encoding == "ros1" else None
 
 
@@ -56,31 +109,57 @@ def exposure_start_ns(stamp: int, duration: int | None, semantics: str) -> int:
     return stamp - (duration // 2 if semantics == "exposure_middle" else duration)
 
 
-def image_row(msg: RawMessage) -> ImageRow:
-    """The header of an image (or CameraInfo / WFOVImage) message."""
-    return header_stamp_ns(msg), msg.log_time_ns, _ros1_seq(msg)
+def image_row(msg: RawMessage) -> ImageRow | DamagedRow:
+    """The header of an image (or CameraInfo / WFOVImage) message; DamagedRow if unreadable."""
+    try:
+        return header_stamp_ns(msg), msg.log_time_ns, _ros1_seq(msg)
+    except LogReadError as exc:
+        return _damaged(msg, str(exc).rsplit(": ", 1)[-1])
 
 
-def exposure_row(msg: RawMessage, m: Any, camera: str, semantics: str) -> tuple[Any, ...]:
-    """A FRAME_COLUMNS row from one deserialised exposure message."""
+def exposure_row(
+    msg: RawMessage, m: Any, camera: str, semantics: str
+) -> tuple[Any, ...] | DamagedRow:
+    """A FRAME_COLUMNS row from one deserialised exposure message; DamagedRow if unreadable."""
+    damage = getattr(m, "damaged", None)
+    if damage is not None:
+        return _damaged(msg, str(damage))
+    try:
+        return _exposure_row(msg, m, camera, semantics)
+    except (ValueError, LogReadError) as exc:
+        return _damaged(msg, str(exc).rsplit(": ", 1)[-1])
+
+
+def _exposure_row(msg: RawMessage, m: Any, camera: str, semantics: str) -> tuple[Any, ...]:
     stamp = _time_ns(m.header.stamp)
     seq = _ros1_seq(msg)
     duration: int | None
     if msg.msgtype == "syncaudit_msgs/msg/CameraExposure":
         start = _time_ns(m.exposure_start)
-        duration = round(float(m.exposure_duration) * 1e9)
+        duration = _duration_ns(m.exposure_duration, "exposure_duration")
         seq = int(m.frame_sequence)
     elif msg.msgtype == "flir_camera_msgs/msg/ImageMetaData":
         duration = int(m.exposure_time) * 1000
         start = exposure_start_ns(stamp, duration, semantics)
     else:  # wfov_camera_msgs/msg/WFOVImage: shutter in seconds, negative = invalid
-        duration = round(float(m.shutter) * 1e9) if float(m.shutter) >= 0 else None
+        shutter = float(m.shutter)
+        duration = _duration_ns(shutter, "shutter") if shutter >= 0 else None
         start = exposure_start_ns(stamp, duration, semantics)
     return (camera, seq, stamp, msg.log_time_ns, start, duration, msg.msgtype)
 
 
-def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
-    """A TRIGGER_COLUMNS row from one deserialised trigger message."""
+def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...] | DamagedRow:
+    """A TRIGGER_COLUMNS row from one deserialised trigger message; DamagedRow if unreadable."""
+    damage = getattr(m, "damaged", None)
+    if damage is not None:
+        return _damaged(msg, str(damage))
+    try:
+        return _trigger_row(msg, m, camera)
+    except (ValueError, LogReadError) as exc:
+        return _damaged(msg, str(exc).rsplit(": ", 1)[-1])
+
+
+def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
     if msg.msgtype == "syncaudit_msgs/msg/TriggerEvent":
         return (
             camera,
@@ -91,7 +170,7 @@ def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
             _time_ns(m.camera_driver_time),
             _time_ns(m.camera_sensor_time),
             _time_ns(m.exposure_start_time),
-            round(float(m.applied_delay) * 1e9),
+            _duration_ns(m.applied_delay, "applied_delay"),
             msg.msgtype,
         )
     sent = _time_ns(m) if msg.msgtype == "builtin_interfaces/msg/Time" else _time_ns(m.time_ref)
@@ -122,6 +201,8 @@ class CameraTables:
     """TRIGGER_COLUMNS."""
     exposure_source: str | None
     trigger_source: str | None
+    warnings: tuple[str, ...] = ()
+    """Damaged messages skipped, one line per topic."""
 
 
 @dataclass(slots=True)
@@ -129,24 +210,31 @@ class CameraTableBuilder:
     """Collects one camera's rows as they stream by, then builds its tables."""
 
     camera: CameraConfig
-    images: list[ImageRow] = field(default_factory=list)
-    exposures: list[tuple[Any, ...]] = field(default_factory=list)
-    triggers: list[tuple[Any, ...]] = field(default_factory=list)
+    images: list[ImageRow | DamagedRow] = field(default_factory=list)
+    exposures: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
+    triggers: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
 
     def build(self) -> CameraTables:
-        """The camera's frame, image and trigger tables."""
+        """The camera's frame, image and trigger tables, damaged messages left out.
+
+        Raises LogReadError where every message of one of its topics is damaged.
+        """
         import pandas as pd  # deferred: worker processes extract rows without pandas
 
         cam = self.camera
+        image_rows, image_warning = _readable(cam.name, self.images)
+        exposure_rows, exposure_warning = _readable(cam.name, self.exposures)
+        trigger_rows, trigger_warning = _readable(cam.name, self.triggers)
+        warnings = tuple(w for w in (image_warning, exposure_warning, trigger_warning) if w)
         images = pd.DataFrame(
             {
-                "header_stamp_ns": pd.array([r[0] for r in self.images], dtype="int64"),
-                "log_time_ns": pd.array([r[1] for r in self.images], dtype="int64"),
-                "frame_sequence": pd.array([r[2] for r in self.images], dtype="Int64"),
+                "header_stamp_ns": pd.array([r[0] for r in image_rows], dtype="int64"),
+                "log_time_ns": pd.array([r[1] for r in image_rows], dtype="int64"),
+                "frame_sequence": pd.array([r[2] for r in image_rows], dtype="Int64"),
             }
         )
-        if self.exposures:
-            frames = _table(self.exposures, FRAME_COLUMNS)
+        if exposure_rows:
+            frames = _table(exposure_rows, FRAME_COLUMNS)
         else:
             assumed = (
                 None if cam.assumed_exposure_us is None else round(cam.assumed_exposure_us * 1e3)
@@ -167,15 +255,38 @@ class CameraTableBuilder:
                 columns=list(FRAME_COLUMNS),
             )
         frames = frames.astype(FRAME_COLUMNS).sort_values("log_time_ns", kind="stable")
-        triggers = _table(self.triggers, TRIGGER_COLUMNS)
+        triggers = _table(trigger_rows, TRIGGER_COLUMNS)
         return CameraTables(
             cam.name,
             images,
             frames.reset_index(drop=True),
             triggers,
-            self.exposures[0][-1] if self.exposures else None,
-            self.triggers[0][-1] if self.triggers else None,
+            exposure_rows[0][-1] if exposure_rows else None,
+            trigger_rows[0][-1] if trigger_rows else None,
+            warnings,
         )
+
+
+_Row = TypeVar("_Row", bound=tuple[Any, ...])
+
+
+def _readable(camera: str, rows: list[_Row | DamagedRow]) -> tuple[list[_Row], str | None]:
+    """The readable rows of one topic, and a warning counting the damaged ones.
+
+    Raises LogReadError where every row is damaged: nothing of that topic can be judged.
+    """
+    good = [r for r in rows if not isinstance(r, DamagedRow)]
+    bad = [r for r in rows if isinstance(r, DamagedRow)]
+    if not bad:
+        return good, None
+    first = bad[0]
+    where = f"first at log time {first.log_time_ns / 1e9:.9f} s: {first.reason}"
+    if not good:
+        raise LogReadError(
+            f"camera {camera}: all {len(bad)} messages on {first.topic} are damaged ({where})"
+        )
+    noun = "message" if len(bad) == 1 else "messages"
+    return good, f"camera {camera}: {len(bad)} damaged {noun} skipped on {first.topic} ({where})"
 
 
 def _table(rows: list[tuple[Any, ...]], columns: dict[str, Any]) -> pd.DataFrame:

@@ -196,6 +196,8 @@ def run(job: Callable[[], T]) -> T:
     """Run a command body: known errors become one line on stderr and their exit code."""
     try:
         return job()
+    except typer.Exit:  # a job that already said why (`fail`) and chose its code
+        raise
     except SyncauditError as exc:
         fail(" ".join(str(exc).split()), exc.exit_code)
     except (KeyboardInterrupt, Interrupted):

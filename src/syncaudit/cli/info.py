@@ -2,24 +2,39 @@
 
 from __future__ import annotations
 
-from syncaudit.cli.common import JsonFlag, LogArgument, RigOption, app, emit, print_json, run
+from syncaudit.cli.common import (
+    JsonFlag,
+    LogArgument,
+    RigOption,
+    app,
+    emit,
+    fail,
+    print_json,
+    run,
+)
 
 
 @app.command()
 def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> None:
-    """Summarise a log: topics, each LiDAR (measured RPM, drops, clock) and each camera."""
+    """Summarise a log: topics, each LiDAR (measured RPM, drops, clock) and each camera.
+
+    A LiDAR topic that `audit` could not read is printed as far as it was read, then
+    `info` exits with the code `audit` would give.
+    """
 
     def job() -> None:
         from syncaudit.inspect_log import inspect_log
         from syncaudit.rig import load_rig
 
-        report = inspect_log(log, load_rig(rig) if rig else None)
+        report = inspect_log(log, load_rig(rig) if rig else None, partial=True)
         if as_json:
             print_json(report.to_dict())
-            return
-        from syncaudit.cli.common import stdout_console
-        from syncaudit.report.console import render_info
+        else:
+            from syncaudit.cli.common import stdout_console
+            from syncaudit.report.console import render_info
 
-        emit(lambda: render_info(report, stdout_console()))
+            emit(lambda: render_info(report, stdout_console()))
+        if report.error is not None:
+            fail(" ".join(report.error.split()), report.exit_code)
 
     run(job)

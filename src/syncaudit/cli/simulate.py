@@ -50,6 +50,9 @@ _OPTION_OF_FIELD: dict[str, str] = {
     "clock_offset_ns": "--clock-offset-s",
     "delay_error_us": "--delay-error-us",
     "lidar_model": "--lidar",
+    "trigger_packet_offset": "--trigger-packet-offset",
+    "trigger_packet": "--trigger-packet",
+    "ros1_header_seq": "--ros1-seq",
     "log_format": "--format",
     "n_stops": "--stops",
     "scans_per_stop": "--scans-per-stop",
@@ -119,6 +122,30 @@ def simulate_sync(
     compressed: Annotated[
         bool, typer.Option("--compressed", help="CompressedImage instead of Image.")
     ] = False,
+    trigger_packet: Annotated[
+        str,
+        typer.Option(
+            "--trigger-packet",
+            help="Packet the triggers are issued from: 'containing' the zero crossing, or "
+            "'first_after' it (a driver that cuts revolutions by packet).",
+        ),
+    ] = "containing",
+    trigger_packet_offset: Annotated[
+        int,
+        typer.Option(
+            "--trigger-packet-offset",
+            min=-32,
+            max=32,
+            help="Move the trigger packet by this many delivered packets (+ later, - earlier).",
+        ),
+    ] = 0,
+    ros1_seq: Annotated[
+        bool,
+        typer.Option(
+            "--ros1-seq/--no-ros1-seq",
+            help="ROS 1 formats: number header seq per frame, or write 0 as some drivers do.",
+        ),
+    ] = True,
     overwrite: OverwriteFlag = False,
 ) -> None:
     """Write a LiDAR + three cameras log, its truth (OUT.truth.json) and rig (OUT.rig.yaml)."""
@@ -146,6 +173,9 @@ def simulate_sync(
                 log_format=infer_format(target, log_format),
                 overwrite=overwrite,
                 packet_drop_fraction=drop_fraction,
+                trigger_packet=trigger_packet,
+                trigger_packet_offset=trigger_packet_offset,
+                ros1_header_seq=ros1_seq,
             )
         except ConfigError as exc:
             raise _usage(exc) from None

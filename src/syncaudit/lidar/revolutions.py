@@ -75,7 +75,9 @@ class RevolutionTracker:
     _period_ns: float = math.nan
     _last_packet_ns: int | None = None
     _zero: dict[int, tuple[int, int, int]] = field(default_factory=dict)
-    _targets: dict[tuple[int, int], int] = field(default_factory=dict)
+    _targets: dict[int, NDArray[np.int64]] = field(default_factory=dict)
+    """Per revolution k: each target's crossing time (-1 where not seen)."""
+    _offsets_deg: NDArray[np.float64] | None = None
     _packets: dict[int, int] = field(default_factory=dict)
     _dropped: dict[int, int] = field(default_factory=dict)
     _gaps: list[tuple[int, float, int]] = field(default_factory=list)
@@ -190,28 +192,48 @@ class RevolutionTracker:
             packet_of = np.concatenate(([-1], packet_of))
         z = self._zero_oriented
         lo, hi = float(unwrapped[0]), float(unwrapped[-1])
-        offsets = [0.0] + [
-            (self.direction * t - z) % FULL_TURN_DEG for t in self.target_azimuth_deg
-        ]
-        for j, offset in enumerate(offsets):
-            k_lo = math.ceil((lo - z - offset) / FULL_TURN_DEG)
-            k_hi = math.floor((hi - z - offset) / FULL_TURN_DEG)
-            if k_hi < k_lo:
-                continue
-            ks = np.arange(k_lo, k_hi + 1)
-            angles = (z + offset + FULL_TURN_DEG * ks).astype(np.float64)
-            at = np.searchsorted(unwrapped, angles, side="left")  # first sample at/after
-            t_cross = _interpolate(angles, unwrapped, times, at)
-            if j > 0:
-                for k, t in zip(ks.tolist(), t_cross.tolist(), strict=True):
-                    self._targets[(k, j - 1)] = t
-                continue
-            at = np.minimum(at, packet_of.size - 1)
-            for k, t, p in zip(ks.tolist(), t_cross.tolist(), packet_of[at].tolist(), strict=True):
-                if p < 0 and self._carry is not None:
-                    self._zero[k] = (t, self._carry.packet_sensor_ns, self._carry.packet_driver_ns)
-                else:
-                    self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
+        # Every boundary (j = 0: the zero crossing, j > 0: target j - 1) at once: the
+        # revolutions k whose crossing angle falls in [lo, hi], flattened to (j, k) pairs,
+        # so the work per chunk is a few numpy calls however many cameras the rig has.
+        offsets = self._offsets()
+        k_lo = np.ceil((lo - z - offsets) / FULL_TURN_DEG).astype(np.int64)
+        k_hi = np.floor((hi - z - offsets) / FULL_TURN_DEG).astype(np.int64)
+        counts = np.maximum(k_hi - k_lo + 1, 0)
+        if not counts.any():
+            return
+        j_of = np.repeat(np.arange(offsets.size), counts)
+        first = np.repeat(np.cumsum(counts) - counts, counts)
+        ks = np.repeat(k_lo, counts) + (np.arange(j_of.size) - first)
+        angles = (z + offsets[j_of] + FULL_TURN_DEG * ks).astype(np.float64)
+        at = np.searchsorted(unwrapped, angles, side="left")  # first sample at/after
+        t_cross = _interpolate(angles, unwrapped, times, at)
+        zero = j_of == 0
+        at_zero = np.minimum(at[zero], packet_of.size - 1)
+        for k, t, p in zip(
+            ks[zero].tolist(), t_cross[zero].tolist(), packet_of[at_zero].tolist(), strict=True
+        ):
+            if p < 0 and self._carry is not None:
+                self._zero[k] = (t, self._carry.packet_sensor_ns, self._carry.packet_driver_ns)
+            else:
+                self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
+        target_k, target_j, target_t = ks[~zero], j_of[~zero] - 1, t_cross[~zero]
+        n_targets = offsets.size - 1
+        for k in np.unique(target_k).tolist():
+            row = self._targets.get(k)
+            if row is None:
+                row = self._targets[k] = np.full(n_targets, -1, dtype=np.int64)
+            mine = target_k == k
+            row[target_j[mine]] = target_t[mine]
+
+    def _offsets(self) -> NDArray[np.float64]:
+        """Angle of each boundary past the zero crossing: 0, then each target's."""
+        if self._offsets_deg is None or self._offsets_deg.size != len(self.target_azimuth_deg) + 1:
+            z = self._zero_oriented
+            self._offsets_deg = np.array(
+                [0.0] + [(self.direction * t - z) % FULL_TURN_DEG for t in self.target_azimuth_deg],
+                dtype=np.float64,
+            )
+        return self._offsets_deg
 
     @property
     def omega_blocks_deg_s(self) -> float:
@@ -252,10 +274,12 @@ class RevolutionTracker:
             period_s = np.diff(zero).astype(np.float64) / 1e9
             omega[:-1] = np.where(consecutive, FULL_TURN_DEG / period_s, np.nan)
         n_targets = len(self.target_azimuth_deg)
-        crossings = np.array(
-            [[self._targets.get((k, j), -1) for j in range(n_targets)] for k in ks],
-            dtype=np.int64,
-        ).reshape(len(ks), n_targets)
+        unseen = np.full(n_targets, -1, dtype=np.int64)
+        crossings = (
+            np.stack([self._targets.get(k, unseen) for k in ks])
+            if ks
+            else np.empty((0, n_targets), dtype=np.int64)
+        )
         return RevolutionColumns(
             zero_crossing_sensor_ns=zero,
             omega_deg_s=omega,

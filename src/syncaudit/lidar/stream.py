@@ -14,7 +14,7 @@ from typing import Any, Literal, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.errors import DecodeError, NoDataError
+from syncaudit.errors import DecodeError, NoDataError, UnknownTypeError
 from syncaudit.lidar import hesai, ouster, velodyne
 from syncaudit.lidar.packets import PacketTiming
 from syncaudit.logs import LogReader, RawMessage
@@ -98,7 +98,11 @@ def iter_packet_chunks(
 
 
 def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
-    """Decode one multi-packet scan message (None when it holds no packet)."""
+    """Decode one multi-packet scan message (None when it holds no packet).
+
+    Raises UnknownTypeError where the message encoding is not cdr/ros1.
+    """
+    _check_encoding(msg)
     if family == "velodyne":
         stamps, data = velodyne.velodyne_scan_packets(msg.data, msg.encoding)
         if stamps.size == 0:
@@ -120,6 +124,15 @@ def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
     return PacketChunk(index, log_time, stamps.astype(np.int64), timing)
 
 
+def _check_encoding(msg: RawMessage) -> None:
+    """UnknownTypeError (exit 4) for a packet message not in cdr/ros1 (the decoders' two)."""
+    if msg.encoding not in ("cdr", "ros1"):
+        raise UnknownTypeError(
+            f"{msg.topic}: message encoding {msg.encoding!r} is not ROS (cdr/ros1); "
+            "cannot decode its LiDAR packets"
+        )
+
+
 def _looks_velodyne(data: NDArray[np.uint8], sizes: NDArray[np.integer[Any]]) -> bool:
     """Nebula packets can be Velodyne: 1206 bytes starting with the 0xFFEE block flag."""
     return bool(
@@ -136,6 +149,7 @@ def _ouster_chunks(
     times: list[int] = []
     index = 0
     for msg in messages:
+        _check_encoding(msg)
         buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
         if buf.size != size:
             continue
@@ -150,6 +164,7 @@ def _ouster_chunks(
 
 def decode_ouster_message(msg: RawMessage, meta: ouster.OusterMetadata) -> PacketChunk | None:
     """Decode one single-packet Ouster message (None for other packet sizes, e.g. IMU)."""
+    _check_encoding(msg)
     buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
     if buf.size != meta.packet_bytes:
         return None

@@ -1,0 +1,191 @@
+"""Damaged camera messages: read without raising, skipped with a counted warning.
+
+A CameraExposure / TriggerEvent / ImageMetaData cut at any byte, an empty payload, an
+Image of 7 bytes, bit flips in strings or in stamps: the struct readers and the header
+reader say what is wrong instead of raising `struct.error` or `UnicodeDecodeError`, and
+the table builder drops those rows with one warning per topic (LogReadError only where
+a topic holds nothing readable).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
+from syncaudit.camera.extract import (
+    CameraTableBuilder,
+    DamagedRow,
+    exposure_row,
+    image_row,
+    trigger_row,
+)
+from syncaudit.errors import LogReadError
+from syncaudit.logs import RawMessage, open_log
+from syncaudit.rig import CameraConfig, load_rig
+from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"
+
+
+@pytest.fixture(scope="module")
+def messages(tmp_path_factory: pytest.TempPathFactory) -> dict[str, RawMessage]:
+    """One real message of each fast-read type, and one image, from a simulated log."""
+    out = tmp_path_factory.mktemp("damaged") / "log.mcap"
+    simulate_sync_log(out, SyncSimConfig(seed=82, duration_s=0.5))
+    found: dict[str, RawMessage] = {}
+    with open_log(out) as log:
+        for msg in log.messages():
+            if msg.msgtype not in found:
+                found[msg.msgtype] = RawMessage(
+                    msg.topic, msg.msgtype, msg.log_time_ns, bytes(msg.data), msg.encoding
+                )
+    return found
+
+
+def _row(msg: RawMessage, fields: object) -> object:
+    if msg.msgtype.endswith("TriggerEvent"):
+        return trigger_row(msg, fields, "front")
+    return exposure_row(msg, fields, "front", "exposure_start")
+
+
+@pytest.mark.parametrize("msgtype", sorted(FAST_READERS))
+def test_every_cut_is_damaged_not_an_exception(
+    messages: dict[str, RawMessage], msgtype: str
+) -> None:
+    whole = messages[msgtype]
+    expected = _row(whole, read_fast(whole.data, msgtype, "cdr"))
+    assert not isinstance(expected, DamagedRow)
+    readable = []
+    for cut in range(len(whole.data)):
+        msg = RawMessage(whole.topic, msgtype, whole.log_time_ns, whole.data[:cut], "cdr")
+        fields = read_fast(msg.data, msgtype, "cdr")
+        assert fields is not None
+        row = _row(msg, fields)
+        if not isinstance(row, DamagedRow):
+            # Only fields after the last one the audit reads may be cut (ImageMetaData).
+            assert row == expected
+            readable.append(cut)
+            continue
+        assert row.topic == whole.topic
+        assert row.log_time_ns == whole.log_time_ns
+        assert str(len(msg.data)) in row.reason
+    assert not readable or min(readable) >= 40
+
+
+def test_reasons_name_the_type_and_the_field(messages: dict[str, RawMessage]) -> None:
+    data = messages["syncaudit_msgs/msg/CameraExposure"].data
+    assert read_fast(b"", "syncaudit_msgs/msg/CameraExposure", "cdr").damaged == (
+        "CameraExposure of 0 bytes has no CDR encapsulation header (nothing)"
+    )
+    cut = read_fast(data[:7], "syncaudit_msgs/msg/CameraExposure", "cdr")
+    assert cut.damaged == (
+        "truncated CameraExposure (7 bytes): a 4-byte field at byte 4 is missing or cut"
+    )
+    hostile = bytearray(data)
+    hostile[12:16] = (2**31).to_bytes(4, "little")  # frame_id length past the end
+    assert (
+        "a string of 2147483648 bytes at byte 12"
+        in read_fast(bytes(hostile), "syncaudit_msgs/msg/CameraExposure", "cdr").damaged
+    )
+
+
+def test_bit_flips_in_strings_decode_leniently(messages: dict[str, RawMessage]) -> None:
+    msg = messages["syncaudit_msgs/msg/TriggerEvent"]
+    data = bytearray(msg.data)
+    frame_id_at = 16  # encapsulation 4 + stamp 8 + length 4
+    data[frame_id_at] ^= 0x80  # an invalid UTF-8 start byte
+    fields = read_fast(bytes(data), msg.msgtype, "cdr")
+    assert "\ufffd" in fields.header.frame_id
+    assert trigger_row(msg, fields, "front") == trigger_row(
+        msg, read_fast(msg.data, msg.msgtype, "cdr"), "front"
+    )
+
+
+def test_nan_durations_and_negative_stamps_are_damaged(messages: dict[str, RawMessage]) -> None:
+    msg = messages["syncaudit_msgs/msg/CameraExposure"]
+    fields = read_fast(msg.data, msg.msgtype, "cdr")
+    fields.exposure_duration = float("nan")
+    assert "exposure_duration nan s is not a duration" in _row(msg, fields).reason
+    fields = read_fast(msg.data, msg.msgtype, "cdr")
+    fields.exposure_start.sec = -5
+    assert "out of range" in _row(msg, fields).reason
+
+
+def test_images_too_short_for_a_stamp(messages: dict[str, RawMessage]) -> None:
+    image = messages["sensor_msgs/msg/Image"]
+    assert isinstance(image_row(image), tuple)
+    for cut in (0, 7, 11):
+        msg = RawMessage(image.topic, image.msgtype, 5, image.data[:cut], "cdr")
+        row = image_row(msg)
+        assert isinstance(row, DamagedRow)
+        assert row.reason == f"{cut} bytes cannot hold a header stamp"
+    ros1 = RawMessage(image.topic, image.msgtype, 5, b"\x01\x00\x00", "ros1")
+    assert isinstance(image_row(ros1), DamagedRow)
+
+
+def test_builder_skips_damaged_rows_with_one_warning_per_topic(
+    messages: dict[str, RawMessage],
+) -> None:
+    cam = CameraConfig(name="front", image_topic="/img", exposure_topic="/exp")
+    image = messages["sensor_msgs/msg/Image"]
+    good = image_row(image)
+    builder = CameraTableBuilder(cam)
+    builder.images = [good, DamagedRow("/img", 2_000_000_000, "7 bytes"), good]
+    builder.images.append(DamagedRow("/img", 3_000_000_000, "0 bytes"))
+    tables = builder.build()
+    assert len(tables.images) == 2
+    assert tables.warnings == (
+        "camera front: 2 damaged messages skipped on /img "
+        "(first at log time 2.000000000 s: 7 bytes)",
+    )
+    builder.images = [DamagedRow("/img", 2_000_000_000, "7 bytes")]
+    with pytest.raises(LogReadError, match="camera front: all 1 messages on /img are damaged"):
+        builder.build()
+
+
+def test_audit_of_a_log_with_cut_exposures_goes_on(tmp_path: Path) -> None:
+    """End to end: every third CameraExposure of one camera cut to 7 bytes."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    from syncaudit.audit import audit_log
+
+    src = SAMPLE
+    dst = tmp_path / "cut.mcap"
+    cut = 0
+    with src.open("rb") as f_in, dst.open("wb") as f_out:
+        writer = Writer(f_out)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(f_in).iter_messages():
+            assert schema is not None
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(
+                    schema.name, schema.encoding, schema.data
+                )
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id]
+                )
+            data = message.data
+            if channel.topic == "/cameras/front/exposure" and message.sequence % 3 == 0:
+                data, cut = data[:7], cut + 1
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time)
+        writer.finish()
+    assert cut > 5
+    rig = load_rig(Path(f"{SAMPLE}.rig.yaml"))
+    whole = audit_log(src, rig, jobs=1)
+    damaged = audit_log(dst, rig, jobs=1)
+    (line,) = [w for w in damaged.warnings if "damaged" in w]
+    assert line.startswith(
+        f"camera front: {cut} damaged messages skipped on /cameras/front/exposure (first at"
+    )
+    assert "truncated CameraExposure (7 bytes)" in line
+    assert [c.sync.camera for c in damaged.cameras] == ["front", "rear_left", "rear_right"]
+    front, whole_front = damaged.cameras[0].sync, whole.cameras[0].sync
+    assert len(front.frames) == len(whole_front.frames) - cut
+    # The other cameras are audited exactly as on the whole log.
+    assert damaged.cameras[1].to_dict() == whole.cameras[1].to_dict()
