@@ -153,6 +153,14 @@ def register(app: typer.Typer) -> None:
         overwrite: Annotated[
             bool, typer.Option("--overwrite", help="Replace existing output files.")
         ] = False,
+        cluster: Annotated[
+            str | None,
+            typer.Option(
+                "--cluster",
+                help="Run the audits on this Dask scheduler (tcp://host:8786); "
+                "needs syncaudit[cluster] here and on the workers.",
+            ),
+        ] = None,
     ) -> None:
         """Judge many logs against a policy: JUnit, summaries, reports, results database."""
         if jobs is not None and jobs < 1:
@@ -186,6 +194,7 @@ def register(app: typer.Typer) -> None:
                 tries,
                 force,
                 overwrite,
+                cluster,
             )
         )
         raise typer.Exit(code)
@@ -278,6 +287,7 @@ def _gate(
     tries: int,
     force: bool,
     overwrite: bool,
+    cluster: str | None = None,
 ) -> int:
     from syncaudit.fleet.gate import GateOptions, run_gate
     from syncaudit.fleet.policy import load_policy
@@ -296,6 +306,7 @@ def _gate(
         max_tries=tries,
         force=force,
         overwrite=overwrite,
+        cluster=cluster,
     )
     update, finish = _progress_printer()
     try:

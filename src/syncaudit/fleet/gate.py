@@ -27,6 +27,8 @@ from syncaudit.fleet.junit import render_junit
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, log_key
 from syncaudit.fleet.summary import render_json, render_markdown
+from syncaudit.remote.fetch import is_url, public_url
+from syncaudit.remote.job import run_any_log_job
 from syncaudit.writers.atomic import write_text_atomic
 
 DB_BATCH_LOGS = 32
@@ -47,6 +49,8 @@ class GateOptions:
     max_tries: int = DEFAULT_MAX_TRIES
     force: bool = False
     overwrite: bool = False
+    cluster: str | None = None
+    """Dask scheduler address (`tcp://host:8786`): audits run there, not here."""
 
 
 @dataclass(slots=True)
@@ -102,9 +106,12 @@ def _judge(
     outcome: LogOutcome, policy: Policy, fp: str, rig_fp: str | None, policy_fp: str
 ) -> JudgedLog:
     checks = evaluate(outcome, policy, outcome.job.vehicle)
+    job = outcome.job
+    if is_url(job.path):  # the database and outputs never keep a query string (tokens)
+        job = LogJob(public_url(job.path), job.vehicle, job.rig_path, job.tags, job.source)
     return JudgedLog(
-        job=outcome.job,
-        key=log_key(fp, outcome.job.path, __version__, rig_fp, policy_fp),
+        job=job,
+        key=log_key(fp, job.path, __version__, rig_fp, policy_fp),
         fingerprint=fp,
         rig_fingerprint=rig_fp,
         policy_fingerprint=policy_fp,
@@ -119,13 +126,19 @@ def _judge(
         elapsed_s=outcome.elapsed_s,
         html=outcome.html,
         camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
+        remote_read=outcome.remote_read,
     )
+
+
+def _stored(path: str) -> str:
+    """How a log is named in the database: absolute path, or URL without query string."""
+    return public_url(path) if is_url(path) else os.path.abspath(path)
 
 
 def _error_log(job: LogJob, error: SyncauditError, policy_fp: str) -> JudgedLog:
     return JudgedLog(
         job=job,
-        key=log_key("missing", os.path.abspath(job.path), __version__, None, policy_fp),
+        key=log_key("missing", _stored(job.path), __version__, None, policy_fp),
         fingerprint="-",
         rig_fingerprint=None,
         policy_fingerprint=policy_fp,
@@ -142,10 +155,16 @@ def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
     One worker per core auditing whole logs; only with fewer logs than cores does each
     audit also read its chunks in parallel (cores shared out between the logs).
     """
+    if options.cluster is not None:
+        from syncaudit.fleet.dask_executor import DaskExecutor
+
+        return DaskExecutor(options.cluster, timeout_s=options.timeout_s, task=run_any_log_job), 1
     cores = options.jobs or default_jobs()
     workers = max(1, min(cores, pending))
     audit_jobs = max(1, cores // workers) if pending < cores else 1
-    executor = LocalExecutor(workers, timeout_s=options.timeout_s, max_tries=options.max_tries)
+    executor = LocalExecutor(
+        workers, timeout_s=options.timeout_s, max_tries=options.max_tries, task=run_any_log_job
+    )
     return executor, audit_jobs
 
 
@@ -178,7 +197,10 @@ def run_gate(
         pending.append((job, fp, file_fingerprint(job.rig_path)))
     db = ResultsDB(options.db) if options.db is not None else None
     if db is not None and not options.force:
-        keys = {log_key(fp, job.path, __version__, rig, policy_fp): job for job, fp, rig in pending}
+        keys = {
+            log_key(fp, _stored(job.path), __version__, rig, policy_fp): job
+            for job, fp, rig in pending
+        }
         # Error rows are judged again: a timeout or a dead worker may not recur.
         known = {k: v for k, v in db.known(keys).items() if v.verdict != "error"}
         for key, stored in known.items():
@@ -188,7 +210,7 @@ def run_gate(
         pending = [
             p
             for p in pending
-            if log_key(p[1], p[0].path, __version__, p[2], policy_fp) not in known
+            if log_key(p[1], _stored(p[0].path), __version__, p[2], policy_fp) not in known
         ]
     total = len(judged) + len(pending)
     for index, log in enumerate(judged, 1):

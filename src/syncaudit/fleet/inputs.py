@@ -22,6 +22,8 @@ import yaml
 
 from syncaudit.errors import ConfigError, LogOpenError
 from syncaudit.fleet.policy import Policy
+from syncaudit.remote.fetch import is_url, public_url
+from syncaudit.remote.listing import list_logs, remote_fingerprint
 
 LOG_SUFFIXES = (".mcap", ".bag", ".db3")
 MANIFEST_SUFFIXES = (".csv", ".jsonl")
@@ -183,6 +185,12 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
     found = Discovery()
     raw: list[LogJob] = []
     for item in inputs:
+        if is_url(item):
+            urls = list_logs(item)
+            if not urls:
+                found.problems.append(f"{public_url(item)}: matches no log")
+            raw.extend(LogJob(path=url) for url in urls)
+            continue
         paths = _expand(item)
         if paths is None:
             raw.extend(read_manifest(Path(item)))
@@ -193,12 +201,13 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
     pattern = re.compile(policy.vehicle_pattern) if policy.vehicle_pattern else None
     seen: set[str] = set()
     for job in raw:
-        key = os.path.abspath(job.path)
+        remote = is_url(job.path)
+        key = public_url(job.path) if remote else os.path.abspath(job.path)
         if key in seen:
             continue
         seen.add(key)
         path = Path(job.path)
-        vehicle = job.vehicle or log_metadata_vehicle(path)
+        vehicle = job.vehicle or (None if remote else log_metadata_vehicle(path))
         if vehicle is None and pattern is not None:
             match = pattern.search(path.as_posix())
             vehicle = match.group("vehicle") if match else None
@@ -224,6 +233,8 @@ def fingerprint(path: str | Path) -> str:
     changes them; hashing every byte of a fleet's terabytes would cost more than the
     audit. Raises LogOpenError when nothing is there.
     """
+    if isinstance(path, str) and is_url(path):
+        return remote_fingerprint(path)
     path = Path(path)
     digest = hashlib.blake2b(digest_size=16)
     if path.is_dir():

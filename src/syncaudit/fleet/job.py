@@ -51,6 +51,8 @@ class LogOutcome:
     error_code: int | None = None
     attempts: int = 1
     elapsed_s: float = 0.0
+    remote_read: dict[str, Any] | None = None
+    """For a URL: bytes fetched against the file size (`remote.fetch.FetchStats`)."""
 
     @property
     def ok(self) -> bool:

@@ -52,6 +52,8 @@ class JudgedLog:
     html: str | None = None
     camera_count: int | None = None
     """Cameras the audit judged (None for error rows and rows read from the database)."""
+    remote_read: dict[str, Any] | None = None
+    """For a URL: what the ranged reads fetched (bytes, requests, chunks)."""
 
     @property
     def path(self) -> str:

@@ -37,6 +37,7 @@ def summary_dict(logs: list[JudgedLog], policy_fingerprint: str) -> dict[str, An
                 "error": log.error,
                 "error_code": log.error_code,
                 "checks": [c.to_dict() for c in log.checks],
+                **({"remote_read": log.remote_read} if log.remote_read else {}),
             }
             for log in sorted(logs, key=lambda item: item.path)
         ],

@@ -1,0 +1,66 @@
+"""The gate's task for a log that may be a URL: fetch what the audit needs, then audit it.
+
+The sparse copy goes to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows:
+writing it is the slowest step on a busy disk), else the system temp folder. Runs in the worker (a local process or a cluster worker), so the bytes travel from the
+object store to where the audit runs, never through the driver. The temporary copy is
+removed when the audit ends.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from syncaudit.errors import SyncauditError
+from syncaudit.fleet.inputs import LogJob
+from syncaudit.fleet.job import JobOptions, LogOutcome, run_log_job
+from syncaudit.remote.fetch import fetch_log, is_url
+
+
+def rig_topics(rig_path: str | None) -> frozenset[str] | None:
+    """Every topic a rig names (LiDAR, its metadata, each camera's) and /tf_static, /tf
+    (camera yaws); None without a rig (then every chunk is fetched)."""
+    if rig_path is None:
+        return None
+    from syncaudit.rig import load_rig
+
+    rig = load_rig(rig_path)
+    topics: set[str] = {"/tf_static", "/tf"}
+    for part in (rig.lidar, *rig.cameras):
+        for name in type(part).model_fields:
+            value = getattr(part, name)
+            if name.endswith("topic") and isinstance(value, str):
+                topics.add(value)
+    return frozenset(topics)
+
+
+def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
+    """`run_log_job` for local paths; for URLs, a ranged fetch into a temporary folder first."""
+    if not is_url(job.path):
+        return run_log_job(job, options)
+    try:
+        topics = rig_topics(job.rig_path)
+    except SyncauditError as exc:
+        return LogOutcome(job=job, error=str(exc).splitlines()[0], error_code=exc.exit_code)
+    outcome = _fetch_and_audit(job, options, topics)
+    if topics is not None and outcome.remote_read is not None and outcome.error_code in (3, 7):
+        # The rig's topics missed something the audit reads (a chunk hole): every chunk.
+        outcome = _fetch_and_audit(job, options, None)
+    return outcome
+
+
+def _fetch_and_audit(job: LogJob, options: JobOptions, topics: frozenset[str] | None) -> LogOutcome:
+    scratch = os.environ.get("SYNCAUDIT_REMOTE_TMPDIR") or None
+    with tempfile.TemporaryDirectory(prefix="syncaudit-remote-", dir=scratch) as folder:
+        try:
+            local, stats = fetch_log(job.path, Path(folder), topics=topics)
+        except SyncauditError as exc:
+            return LogOutcome(job=job, error=str(exc).splitlines()[0], error_code=exc.exit_code)
+        outcome = run_log_job(replace(job, path=str(local)), options)
+        outcome.job = job
+        outcome.remote_read = stats.to_dict()
+        if outcome.error:
+            outcome.error = outcome.error.replace(str(local), stats.url)
+        return outcome

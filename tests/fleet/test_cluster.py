@@ -1,0 +1,238 @@
+"""`syncaudit gate --cluster`: the sample logs audited on a real local Dask cluster.
+
+The cluster is a scheduler and two nanny-supervised worker processes talking TCP on
+loopback, as `dask scheduler` + `dask worker` would run them; the tests kill worker
+processes for real and check what the driver records.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from syncaudit.fleet.gate import GateOptions, run_gate
+from syncaudit.fleet.policy import parse_policy
+
+from .conftest import SAMPLES
+
+distributed = pytest.importorskip("distributed")
+dask = pytest.importorskip("dask")
+
+POLICY = {
+    "vehicle_pattern": r"uploads/(?P<vehicle>[^/]+)/",
+    "defaults": {
+        "camera": {"error_mean_us": {"max": 2500}, "error_var_us2": {"max": 1e7}},
+        "lidar": {"rpm": {"min": 500, "max": 700}},
+    },
+    "vehicles": {"car1": {"cameras": {"front": {"error_mean_us": {"max": 1000}}}}},
+}
+ALLOWED_FAILURES = 1
+"""The test scheduler gives a log whose worker died one more try (Dask's default is 3)."""
+
+
+@pytest.fixture(scope="module")
+def hooks(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder for the slow-log hook's PID file."""
+    return tmp_path_factory.mktemp("cluster-hooks")
+
+
+@pytest.fixture(scope="module")
+def cluster(hooks: Path) -> Iterator[str]:
+    """A scheduler and two single-threaded worker processes on 127.0.0.1 (TCP)."""
+    from distributed import LocalCluster
+
+    saved = dict(os.environ)
+    # Read by the workers (spawned now, and respawned by their nannies after a kill).
+    os.environ["SYNCAUDIT_FLEET_TEST_CRASH"] = "crashme"
+    os.environ["SYNCAUDIT_FLEET_TEST_HANG"] = "hangme"
+    os.environ["SYNCAUDIT_FLEET_TEST_SLOW"] = f"slowme:{hooks / 'slow.pid'}"
+    settings = {
+        "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+        # One log per worker thread at a time: a log queued behind a dying one is not
+        # charged with its deaths (Dask's default 1.1 sends two per 1-thread worker).
+        "distributed.scheduler.worker-saturation": 1.0,
+    }
+    with dask.config.set(settings):
+        local = LocalCluster(
+            processes=True,
+            n_workers=2,
+            threads_per_worker=1,
+            host="127.0.0.1",
+            dashboard_address=":0",
+            protocol="tcp",
+        )
+    try:
+        assert local.scheduler_address.startswith("tcp://127.0.0.1:")
+        yield local.scheduler_address
+    finally:
+        local.close()
+        os.environ.clear()
+        os.environ.update(saved)
+
+
+@pytest.fixture()
+def whole(cluster: str) -> str:
+    """The cluster with both workers up (a previous test may have had one restarted)."""
+    from distributed import Client
+
+    with Client(cluster, set_as_default=False) as client:
+        client.wait_for_workers(2, timeout=30)
+    return cluster
+
+
+def _fleet(root: Path, logs: dict[str, str]) -> Path:
+    """uploads/<vehicle>/<name> symlinks to sample logs (and their rigs)."""
+    for target, sample in logs.items():
+        path = root / "uploads" / target
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.symlink_to(SAMPLES / sample)
+        Path(f"{path}.rig.yaml").symlink_to(SAMPLES / f"{sample}.rig.yaml")
+    return root / "uploads"
+
+
+def _rows(db: Path, table: str) -> list[tuple[Any, ...]]:
+    """A table's rows, without the columns that hold wall-clock times."""
+    import duckdb
+
+    with duckdb.connect(str(db), read_only=True) as con:
+        columns = [
+            c[0]
+            for c in con.execute(f"DESCRIBE SELECT * FROM {table}").fetchall()
+            if c[0] not in {"elapsed_s", "judged_at"}
+        ]
+        query = f"SELECT {', '.join(columns)} FROM {table} ORDER BY ALL"
+        return con.execute(query).fetchall()
+
+
+def test_cluster_run_writes_what_a_local_run_writes(whole: str, tmp_path: Path) -> None:
+    uploads = _fleet(
+        tmp_path,
+        {
+            "car1/vlp16_three_cameras.mcap": "vlp16_three_cameras.mcap",
+            "car2/pandar40p_adaptive.mcap": "pandar40p_adaptive.mcap",
+            "car2/vlp16_short.bag": "vlp16_short.bag",
+        },
+    )
+    policy = parse_policy(POLICY, "policy.yaml")
+    outputs = {}
+    for name, address in (("local", None), ("cluster", whole)):
+        out = tmp_path / name
+        out.mkdir()
+        options = GateOptions(
+            db=out / "fleet.duckdb",
+            json_out=out / "gate.json",
+            junit=out / "gate.xml",
+            summary=out / "gate.md",
+            jobs=2,
+            cluster=address,
+        )
+        run = run_gate([str(uploads)], policy, options)
+        assert run.exit_code == 10  # car1's front camera is over its 1000 us limit
+        assert [log.verdict for log in run.logs] == ["fail", "warn", "pass"]
+        outputs[name] = out
+    for name in ("gate.json", "gate.md"):
+        local = (outputs["local"] / name).read_bytes()
+        assert local == (outputs["cluster"] / name).read_bytes(), name
+    # JUnit carries each log's audit time; everything else is the same.
+    untimed = [
+        re.sub(rb'time="[0-9.]+"', b"", (outputs[name] / "gate.xml").read_bytes())
+        for name in ("local", "cluster")
+    ]
+    assert untimed[0] == untimed[1]
+    for table, count in (("logs", 3), ("cameras", 9)):
+        local_rows = _rows(outputs["local"] / "fleet.duckdb", table)
+        assert len(local_rows) == count, table
+        assert local_rows == _rows(outputs["cluster"] / "fleet.duckdb", table), table
+
+
+def test_killed_worker_costs_a_retry_not_the_run(whole: str, hooks: Path, tmp_path: Path) -> None:
+    uploads = _fleet(
+        tmp_path,
+        {
+            "car1/slowme.mcap": "vlp16_three_cameras.mcap",
+            "car2/pandar40p_adaptive.mcap": "pandar40p_adaptive.mcap",
+        },
+    )
+    pid_file = hooks / "slow.pid"
+    killed: list[int] = []
+
+    def killer() -> None:
+        deadline = time.monotonic() + 30
+        while not pid_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        pid = int(pid_file.read_text())
+        os.kill(pid, signal.SIGKILL)  # the worker process auditing slowme.mcap
+        killed.append(pid)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    options = GateOptions(db=None, cluster=whole, timeout_s=60)
+    run = run_gate([str(uploads)], parse_policy(POLICY, "policy.yaml"), options)
+    thread.join(timeout=5)
+    assert killed, "the slow log never started"
+    by_name = {Path(log.path).name: log for log in run.logs}
+    slow = by_name["slowme.mcap"]
+    assert slow.error is None and slow.verdict == "fail"  # audited on the retry
+    assert slow.attempts == 2
+    assert by_name["pandar40p_adaptive.mcap"].attempts == 1
+    assert by_name["pandar40p_adaptive.mcap"].verdict == "warn"
+
+
+def test_log_that_kills_workers_becomes_an_error_row(whole: str, tmp_path: Path) -> None:
+    uploads = _fleet(
+        tmp_path,
+        {
+            "car1/crashme.mcap": "vlp16_three_cameras.mcap",
+            "car2/pandar40p_adaptive.mcap": "pandar40p_adaptive.mcap",
+        },
+    )
+    out = tmp_path / "gate.json"
+    run = run_gate(
+        [str(uploads)],
+        parse_policy(POLICY, "policy.yaml"),
+        GateOptions(db=None, json_out=out, cluster=whole),
+    )
+    assert run.exit_code == 3
+    by_name = {Path(log.path).name: log for log in run.logs}
+    crash = by_name["crashme.mcap"]
+    assert crash.verdict == "error" and crash.error_code == 3
+    assert crash.attempts == ALLOWED_FAILURES + 1
+    assert crash.error is not None and "KilledWorker" in crash.error
+    assert by_name["pandar40p_adaptive.mcap"].verdict == "warn"
+
+
+def test_per_log_timeout_on_the_cluster(whole: str, tmp_path: Path) -> None:
+    # The hung log alone: under load a real audit can outlast a short timeout too.
+    uploads = _fleet(tmp_path, {"car1/hangme.mcap": "vlp16_three_cameras.mcap"})
+    started = time.monotonic()
+    run = run_gate(
+        [str(uploads)],
+        parse_policy(POLICY, "policy.yaml"),
+        GateOptions(db=None, cluster=whole, timeout_s=3),
+    )
+    assert time.monotonic() - started < 300  # far below the hook's 3600 s sleep, even loaded
+    (hung,) = run.logs
+    assert hung.verdict == "error" and hung.error is not None and "timed out" in hung.error
+    assert run.exit_code == 3
+    # The hung worker was restarted: the cluster still has two workers to audit with.
+    from distributed import Client
+
+    with Client(whole, set_as_default=False) as client:
+        client.wait_for_workers(2, timeout=30)
+
+
+def test_unreachable_scheduler_is_a_usage_error() -> None:
+    from syncaudit.errors import UsageError
+    from syncaudit.fleet.dask_executor import DaskExecutor
+
+    with pytest.raises(UsageError, match="cannot reach the scheduler") as caught:
+        DaskExecutor("tcp://127.0.0.1:9", connect_timeout_s=1)
+    assert caught.value.exit_code == 64

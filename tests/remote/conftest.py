@@ -1,0 +1,126 @@
+"""A real HTTP server on loopback that honours Range requests (and can misbehave)."""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+RANGE = re.compile(r"bytes=(\d+)-(\d*)$")
+
+
+@dataclass
+class ServerState:
+    """What the handler does, and what it served (for the tests' byte counts)."""
+
+    root: Path
+    drop_after_bytes: int | None = None
+    """Close the connection after sending this many body bytes of a ranged reply."""
+    drop_min_length: int = 1 << 16
+    """Only replies at least this long are dropped (the small footer read goes through)."""
+    delay_s: float = 0.0
+    served_bytes: int = 0
+    requests: list[str] = field(default_factory=list)
+    ranged_bytes: int = 0
+    """Bytes asked for by the Range headers of 206 replies."""
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+class RangeHandler(SimpleHTTPRequestHandler):
+    """Static files with single-range `Range: bytes=a-b` support (RFC 9110 206 replies)."""
+
+    state: ServerState
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, directory=str(self.state.root), **kwargs)
+
+    def log_message(self, format: str, *args: Any) -> None:
+        """Quiet."""
+
+    def do_GET(self) -> None:
+        state = self.state
+        with state.lock:
+            state.requests.append(f"{self.path} {self.headers.get('Range')}")
+        if state.delay_s:
+            time.sleep(state.delay_s)
+        path = Path(self.translate_path(self.path))
+        if path.is_dir() or not path.is_file():
+            super().do_GET()
+            return
+        size = path.stat().st_size
+        match = RANGE.match(self.headers.get("Range", "") or "")
+        if not match:
+            start, end = 0, size
+            self.send_response(200)
+        else:
+            start = int(match.group(1))
+            end = min(size, int(match.group(2)) + 1) if match.group(2) else size
+            if start >= size:
+                self.send_response(416)
+                self.send_header("Content-Range", f"bytes */{size}")
+                self.end_headers()
+                return
+            with state.lock:
+                state.ranged_bytes += end - start
+            self.send_response(206)
+            self.send_header("Content-Range", f"bytes {start}-{end - 1}/{size}")
+        self.send_header("Content-Length", str(end - start))
+        self.send_header("Accept-Ranges", "bytes")
+        self.send_header("Content-Type", "application/octet-stream")
+        self.end_headers()
+        length = end - start
+        drop = state.drop_after_bytes
+        with path.open("rb") as handle:
+            handle.seek(start)
+            sent = 0
+            while sent < length:
+                block = handle.read(min(1 << 20, length - sent))
+                if drop is not None and length >= state.drop_min_length and match:
+                    block = block[: max(0, drop - sent)]
+                    self.wfile.write(block)
+                    sent += len(block)
+                    with state.lock:
+                        state.served_bytes += len(block)
+                    self.wfile.flush()
+                    self.close_connection = True
+                    self.connection.shutdown(2)  # mid-chunk: the client sees a short body
+                    return
+                self.wfile.write(block)
+                sent += len(block)
+                with state.lock:
+                    state.served_bytes += len(block)
+
+    def do_HEAD(self) -> None:
+        path = Path(self.translate_path(self.path))
+        if not path.is_file():
+            super().do_HEAD()
+            return
+        self.send_response(200)
+        self.send_header("Content-Length", str(path.stat().st_size))
+        self.send_header("Accept-Ranges", "bytes")
+        self.end_headers()
+
+
+@pytest.fixture()
+def http_root(tmp_path: Path) -> Iterator[tuple[str, ServerState]]:
+    """(base URL, state) of a threaded Range server over a fresh folder, on 127.0.0.1."""
+    root = tmp_path / "www"
+    root.mkdir()
+    state = ServerState(root)
+    handler = type("Handler", (RangeHandler,), {"state": state})
+    server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    server.daemon_threads = True
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}", state
+    finally:
+        server.shutdown()
+        server.server_close()
