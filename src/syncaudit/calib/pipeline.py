@@ -976,6 +976,22 @@ def _extrinsic(
     )
 
 
+def _limits_out(config: CalibConfig) -> Limits:
+    """The validation limits as the result reports them."""
+    return Limits(
+        max_rotation_deg=config.validation.max_rotation_deg,
+        max_translation_cm=config.validation.max_translation_cm,
+    )
+
+
+def _stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
+    """The vehicle's stops as the result reports them."""
+    return [
+        VehicleStopOut(index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs))
+        for s in stops
+    ]
+
+
 def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
     uses = []
     for stop in stops:
@@ -1105,16 +1121,8 @@ def _refusal(
         extrinsics_source=recorded.source,
         reference_stop=None,
         anchor_stops=[],
-        limits=Limits(
-            max_rotation_deg=config.validation.max_rotation_deg,
-            max_translation_cm=config.validation.max_translation_cm,
-        ),
-        stops=[
-            VehicleStopOut(
-                index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs)
-            )
-            for s in stops
-        ],
+        limits=_limits_out(config),
+        stops=_stops_out(stops),
         lidars=[_lidar_out(lidar, stops) for lidar in lidars],
         extrinsics=extrinsics,
         notes=notes,
@@ -1202,16 +1210,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         extrinsics_source=recorded.source,
         reference_stop=reference,
         anchor_stops=anchors,
-        limits=Limits(
-            max_rotation_deg=config.validation.max_rotation_deg,
-            max_translation_cm=config.validation.max_translation_cm,
-        ),
-        stops=[
-            VehicleStopOut(
-                index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs)
-            )
-            for s in stops
-        ],
+        limits=_limits_out(config),
+        stops=_stops_out(stops),
         lidars=[_lidar_out(lidar, stops) for lidar in lidars],
         extrinsics=extrinsics,
         notes=notes,
