@@ -33,7 +33,7 @@ RANGE = re.compile(r"bytes=(\d+)-(\d*)$")
 class _Handler(SimpleHTTPRequestHandler):
     """Static files with single-range support; quiet."""
 
-    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
+    def log_message(self, format: str, *args: Any) -> None:
         """Quiet."""
 
     def do_GET(self) -> None:
