@@ -144,6 +144,40 @@ class PoseGraphOut(_Out):
     iterations: int
 
 
+class StopPointsOut(_Out):
+    """One stop's points of a LiDAR seen from above, in the map frame (decimated)."""
+
+    stop: int
+    x_m: list[float]
+    y_m: list[float]
+
+
+class TopViewOut(_Out):
+    """A LiDAR's local map from above: every used stop's points placed by its estimated pose.
+
+    For the report's map coloured by stop; decimated to one point per `cell_m` square per
+    stop so a session stays a few hundred KB of JSON.
+    """
+
+    frame: str
+    """What x/y are in, e.g. "base_link at stop 3" (the map's anchor)."""
+    cell_m: float
+    stops: list[StopPointsOut]
+
+
+class DegeneracyOut(_Out):
+    """The direction a refused scene or alignment does not constrain, for drawing it."""
+
+    kind: str
+    """"translation" (the scene slides along `direction`) or "rotation" (about it)."""
+    direction: tuple[float, float, float]
+    """Unit vector in `frame`."""
+    frame: str
+    information: float
+    """Mean squared constraint along `direction` (0 = none); compare with `limit`."""
+    limit: float
+
+
 class LidarOut(_Out):
     """Per-LiDAR part of the result: scans, stops, pairs, pose graph, local map."""
 
@@ -162,6 +196,8 @@ class LidarOut(_Out):
     map_points: int
     aligned: bool
     reason: str | None
+    top_view: TopViewOut | None = None
+    """This LiDAR's used stops from above (None when no stop was placed)."""
 
 
 class MapPairOut(_Out):
@@ -235,6 +271,8 @@ class CalibrationResult(_Out):
     anchor_stops: list[int] = []
     """Stops at which local maps were anchored and aligned (the first is `reference_stop`)."""
     limits: Limits
+    degeneracy: DegeneracyOut | None = None
+    """Set when the scene was refused as degenerate: the free direction, structured."""
     stops: list[VehicleStopOut]
     lidars: list[LidarOut]
     extrinsics: list[ExtrinsicOut]
