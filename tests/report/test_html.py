@@ -11,7 +11,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from syncaudit.audit import AuditResult
-from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.cli import app
 from syncaudit.report.html import render_audit_html, render_report_html
 
@@ -140,8 +140,24 @@ def test_combined_report_of_audit_and_calibration(audit: AuditResult, calibratio
     refused = calibration("calib_ground_and_wall")
     page = _parse(render_report_html(None, refused))
     kinds = [k for k, _ in page.figures]
-    assert kinds.count("degenerate") == len(refused.lidars)  # one direction per LiDAR
+    # Refused before any alignment and without a structured direction: nothing to draw
+    # (the reasons' text is not parsed); the scene's direction is drawn when the field is set.
+    assert "degenerate" not in kinds and "scene-degeneracy" not in kinds
     assert "error" not in kinds and "NOT CALIBRATABLE" in " ".join(page.text)
+    free = DegeneracyOut(
+        kind="translation",
+        direction=(-0.70, 0.71, 0.0),
+        frame="base_link",
+        information=0.002,
+        limit=0.01,
+    )
+    kinds = [
+        k
+        for k, _ in _parse(
+            render_report_html(None, refused.model_copy(update={"degeneracy": free}))
+        ).figures
+    ]
+    assert kinds.count("scene-degeneracy") == 1
 
 
 def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> None:

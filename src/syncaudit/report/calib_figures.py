@@ -9,11 +9,17 @@ weakest (degenerate) translation direction and rotation axis.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
-from syncaudit.calib.result import AlignmentOut, CalibrationResult, TransformOut
+from syncaudit.calib.result import (
+    AlignmentOut,
+    CalibrationResult,
+    DegeneracyOut,
+    LidarOut,
+    TransformOut,
+)
 from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
+from syncaudit.report.topview import top_view_svg
 
 SIZE = 420
 MARGIN = 40
@@ -87,12 +93,6 @@ def mounts_svg(result: CalibrationResult) -> str:
     return "".join(out)
 
 
-_DEGENERATE = re.compile(
-    r"translation along \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+); "
-    r"rotation about \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+)"
-)
-
-
 @dataclass(frozen=True, slots=True)
 class Weakest:
     """The least constrained translation direction and rotation axis of an alignment."""
@@ -116,16 +116,6 @@ class Weakest:
             c.weakest_rotation_axis,
             c.rotation_information,
         )
-
-
-def weakest_from_reason(label: str, reason: str) -> Weakest | None:
-    """The directions a 'degenerate view (translation along (..): i; rotation about (..): i)'
-    reason names (stops refused before any pair alignment keep only that text)."""
-    match = _DEGENERATE.search(reason)
-    if match is None:
-        return None
-    v = [float(g) for g in match.groups()]
-    return Weakest(label, reason, (v[0], v[1], v[2]), v[3], (v[4], v[5], v[6]), v[7])
 
 
 def degenerate_svg(w: Weakest) -> str:
@@ -152,6 +142,71 @@ def degenerate_svg(w: Weakest) -> str:
     )
 
 
+def scene_degeneracy_svg(degeneracy: DegeneracyOut) -> str:
+    """A degenerate scene's free direction from above, and its information against the limit.
+
+    A translation is drawn as a double arrow along the direction the scene lets everything
+    slide; a rotation as a dashed circle about the axis (its tilt as text). A direction
+    that is mostly vertical shows as a ring with a dot (pointing out of the page).
+    """
+    size, mid, radius = 260, 120, 88
+    dx, dy, dz = degeneracy.direction
+    horizontal = math.hypot(dx, dy)
+    colour = "#b00020"
+    if degeneracy.kind == "rotation":
+        drawing = (
+            f'<circle class="free-rotation" cx="{mid}" cy="{mid}" r="{radius * 0.7:.0f}" '
+            f'fill="none" stroke="{colour}" stroke-width="3" stroke-dasharray="10 5"/>'
+            + _arrow(mid, mid, -radius * dy, -radius * dx, "#9c3fbf", "axis")
+        )
+    elif horizontal < 0.3:
+        drawing = (
+            f'<circle class="free-translation" cx="{mid}" cy="{mid}" r="12" fill="none" '
+            f'stroke="{colour}" stroke-width="3"/><circle cx="{mid}" cy="{mid}" r="3" '
+            f'fill="{colour}"/>'
+        )
+    else:
+        drawing = _arrow(mid, mid, -radius * dy, -radius * dx, colour, "free-translation") + _arrow(
+            mid, mid, radius * dy, radius * dx, colour, "free-translation"
+        )
+    ratio = degeneracy.information / degeneracy.limit if degeneracy.limit > 0 else math.nan
+    bar_w = 200
+    filled = bar_w * min(ratio, 2.0) / 2.0 if math.isfinite(ratio) else 0.0
+    verb = "slides along" if degeneracy.kind == "translation" else "turns freely about"
+    return (
+        f'<figure class="xy" data-kind="scene-degeneracy" data-free="{esc(degeneracy.kind)}" '
+        f'data-direction="{dx:.4f} {dy:.4f} {dz:.4f}">'
+        f"<figcaption>Degenerate scene: everything {verb} ({dx:+.2f}, {dy:+.2f}, {dz:+.2f}) "
+        f'in {esc(degeneracy.frame)} <span class="unit">[from above; x forward up, y left]'
+        "</span></figcaption>"
+        f'<svg class="plot" width="{size}" height="{size + 40}" viewBox="0 0 {size} {size + 40}" '
+        'role="img" aria-label="degenerate direction of the scene">'
+        f'<rect x="0" y="0" width="{size}" height="{size + 40}" fill="#fff" stroke="#bbb"/>'
+        f'<circle cx="{mid}" cy="{mid}" r="{radius}" fill="none" stroke="#ececec"/>'
+        f'<line x1="{mid}" y1="{mid - radius}" x2="{mid}" y2="{mid + radius}" class="grid"/>'
+        f'<line x1="{mid - radius}" y1="{mid}" x2="{mid + radius}" y2="{mid}" class="grid"/>'
+        f'<text x="{mid + 4}" y="{mid - radius + 10}" class="legend">+x</text>'
+        f'<text x="{mid - radius + 2}" y="{mid - 4}" class="legend">+y</text>'
+        + drawing
+        + f'<text x="8" y="{size - 8}" class="legend">{esc(degeneracy.kind)} '
+        f"({dx:+.2f}, {dy:+.2f}, {dz:+.2f}), z {dz:+.2f}</text>"
+        f'<text x="8" y="{size + 8}" class="legend">information {degeneracy.information:.4g} '
+        f"vs limit {degeneracy.limit:.4g}</text>"
+        f'<rect x="8" y="{size + 16}" width="{bar_w}" height="10" fill="#f3f3f3" stroke="#bbb"/>'
+        f'<rect class="information" x="8" y="{size + 16}" width="{filled:.1f}" height="10" '
+        f'fill="{colour}"/><line x1="{8 + bar_w / 2}" x2="{8 + bar_w / 2}" y1="{size + 12}" '
+        f'y2="{size + 30}" class="limit"/></svg></figure>'
+    )
+
+
+def _on_map(result: CalibrationResult, lidar: LidarOut) -> DegeneracyOut | None:
+    """The scene's free direction when it can be drawn on this LiDAR's map (same frame)."""
+    d = result.degeneracy
+    if d is None or lidar.top_view is None:
+        return None
+    return d if lidar.top_view.frame.split(" at ")[0].strip() == d.frame else None
+
+
 def _degenerate(alignment: AlignmentOut) -> bool:
     """Refused because the scene left a direction unconstrained (not for overlap or fit)."""
     return not alignment.accepted and "degenerate" in (alignment.reason or "")
@@ -160,6 +215,8 @@ def _degenerate(alignment: AlignmentOut) -> bool:
 def calibration_figures(result: CalibrationResult) -> str:
     """The calibration's figures as an HTML fragment (inline SVG)."""
     parts = [mounts_svg(result)]
+    if result.degeneracy is not None:
+        parts.append(scene_degeneracy_svg(result.degeneracy))
     limits = result.limits
     rot = [
         Bar(e.frame_id, e.rotation_diff_deg if e.rotation_diff_deg is not None else math.nan)
@@ -226,6 +283,13 @@ def calibration_figures(result: CalibrationResult) -> str:
                     kind="graph-residuals",
                 )
             )
+    maps = [
+        top_view_svg(result, lidar.frame_id, lidar.top_view, degeneracy=_on_map(result, lidar))
+        for lidar in result.lidars
+        if lidar.top_view is not None and lidar.top_view.stops
+    ]
+    if maps:
+        parts.append("<h3>Each LiDAR's map from above, coloured by stop</h3>" + "".join(maps))
     refused = [
         Weakest.of(f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
         for e in result.extrinsics
@@ -238,16 +302,6 @@ def calibration_figures(result: CalibrationResult) -> str:
         for p in lidar.pairs
         if _degenerate(p.alignment)
     ]
-    # Refused before any pair alignment: only the reasons name the directions. One per
-    # LiDAR (its own reason), else one per stop.
-    for lidar in result.lidars:
-        texts = [(lidar.frame_id, lidar.reason or "")]
-        texts += [(f"{lidar.frame_id} stop {st.stop}", st.reason or "") for st in lidar.stops]
-        for label, reason in texts:
-            weak = weakest_from_reason(label, reason)
-            if weak is not None:
-                refused.append(weak)
-                break
     if refused:
         parts.append(
             "<h3>Alignments refused as degenerate: the directions the scene did not constrain</h3>"

@@ -30,6 +30,11 @@ svg.plot .sel{fill:#1f5fbf;fill-opacity:.12}svg.plot .hit{fill:transparent;curso
 .tip{position:fixed;pointer-events:none;background:#fffffff0;border:1px solid #999;
 padding:.25rem .45rem;font-size:12px;white-space:pre;box-shadow:0 1px 4px #0003;z-index:5}
 .hint{color:#666;font-size:12px}
+svg.map path.stop{stroke-width:2.4px;stroke-linecap:round;fill:none}
+ul.legend-list{list-style:none;padding:0;margin:.3rem 0;font-size:12px;line-height:1.6}
+.swatch,.mark{display:inline-block;width:10px;height:10px;margin-right:.4rem;vertical-align:-1px}
+.swatch,.mark.disc,.mark.ring{border-radius:50%}.mark.ring{width:6px;height:6px;border:2px solid}
+.mark.bar{height:3px;vertical-align:3px}
 """
 
 SCRIPT = r"""
