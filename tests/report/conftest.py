@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from syncaudit.audit import AuditResult, audit_log
-from syncaudit.calib.result import CalibrationResult, StopPointsOut, TopViewOut
+from syncaudit.calib.result import CalibrationResult, StopPointsOut, TopViewOut, TransformOut
 from syncaudit.rig import load_rig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -81,12 +81,15 @@ def with_top_views(
     spacing_m: float = 0.1,
     sector_deg: float = 140.0,
     frames: dict[str, str] | None = None,
+    base_from_reference: np.ndarray | None = None,
 ) -> CalibrationResult:
     """`result` with a top view per LiDAR, as the pipeline would place its stops.
 
-    The truth: the hall of `room_points_m` in the reference LiDAR's frame; each LiDAR's
-    map is in its own frame at stop 0 (the reference's recorded pose of it), and stop k
-    holds the walls within `sector_deg` around the turntable angle of stop k.
+    The truth: the hall of `room_points_m` in the reference LiDAR's frame. Each LiDAR's
+    map is in its own frame at stop 0 (the reference's recorded pose of it), or with
+    `base_from_reference` in the base frame as the pipeline draws them (and the result
+    then keeps that mount as `reference_mount`); stop k holds the walls the LiDAR sees
+    within `sector_deg` around the turntable angle of stop k.
     """
     room = room_points_m(spacing_m)
     lidars = []
@@ -96,8 +99,10 @@ def with_top_views(
         else:
             ext = next(e for e in result.extrinsics if e.frame_id == lidar.frame_id)
             pose = np.linalg.inv(np.asarray(ext.recorded.matrix))
-        xy = (pose[:2, :2] @ room.T).T + pose[:2, 3]
-        bearing = np.degrees(np.arctan2(xy[:, 1], xy[:, 0]))
+        own = (pose[:2, :2] @ room.T).T + pose[:2, 3]
+        bearing = np.degrees(np.arctan2(own[:, 1], own[:, 0]))
+        base = base_from_reference
+        xy = own if base is None else (base[:2, :2] @ room.T).T + base[:2, 3]
         stops = []
         for use in lidar.stops:
             if not use.used or use.angle_deg is None:
@@ -107,10 +112,18 @@ def with_top_views(
             stops.append(
                 StopPointsOut(stop=use.stop, x_m=xy[keep, 0].tolist(), y_m=xy[keep, 1].tolist())
             )
-        frame = (frames or {}).get(lidar.frame_id, f"{lidar.frame_id} at stop 0")
+        default = (
+            f"{lidar.frame_id} at stop 0"
+            if base is None
+            else f"{result.base_frame} at stop 0, {lidar.frame_id} placed by the recorded extrinsic"
+        )
+        frame = (frames or {}).get(lidar.frame_id, default)
         view = TopViewOut(frame=frame, cell_m=spacing_m, stops=stops)
         lidars.append(lidar.model_copy(update={"top_view": view}))
-    return result.model_copy(update={"lidars": lidars})
+    update: dict[str, object] = {"lidars": lidars}
+    if base_from_reference is not None:
+        update["reference_mount"] = TransformOut.of(base_from_reference)
+    return result.model_copy(update=update)
 
 
 @pytest.fixture()

@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from syncaudit.calib import se3
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut, StopPointsOut, TopViewOut
 from syncaudit.report.calib_figures import calibration_figures
 from syncaudit.report.html import render_report_html
@@ -124,16 +125,33 @@ def test_mounts_recorded_and_estimated_on_each_map(calibration: Load, top_views:
     assert 'data-mount="estimated"' in html and "estimated mount</li>" in html
 
 
-def test_maps_in_the_base_frame_say_the_mounts_are_not_drawn(
+def test_maps_in_the_base_frame_place_the_mounts_by_the_reference_mount(
     calibration: Load, top_views: TopViews
 ) -> None:
-    frames = {"lidar_front": "base_link at stop 0", "lidar_rear": "base_link at stop 0"}
-    result = top_views(calibration("calib_turntable_32"), frames=frames)
+    base_from_reference = se3.make_transform(se3.rot_z(math.radians(2.0)), (1.2, -0.1, 1.9))
+    result = top_views(calibration("calib_turntable_32"), base_from_reference=base_from_reference)
+    ext = result.extrinsics[0]
+    assert ext.result is not None and result.reference_mount is not None
+    expected = {
+        ("lidar_front", "reference"): base_from_reference,
+        ("lidar_rear", "recorded"): base_from_reference @ np.asarray(ext.recorded.matrix),
+        ("lidar_rear", "estimated"): base_from_reference @ np.asarray(ext.result.matrix),
+    }
     figures = _figure(calibration_figures(result), "top-view")
     assert len(figures) == 2
     for figure in figures:
-        assert '<g class="mount"' not in figure
-        assert "mounts not drawn" in figure and "in base_link at stop 0" in figure
+        assert "in base_link at stop 0, lidar_" in figure
+        marks = {
+            (a["data-name"], a["data-mount"]): (float(a["data-x-m"]), float(a["data-y-m"]))
+            for a in map(_attrs, re.findall(r'<g class="mount"[^>]*>', figure))
+        }
+        assert set(marks) == set(expected)
+        for key, pose in expected.items():
+            assert marks[key] == pytest.approx((pose[0, 3], pose[1, 3]), abs=1e-4), key
+    # Without the reference LiDAR's mount the base frame cannot hold the mounts: said so.
+    unplaced = result.model_copy(update={"reference_mount": None})
+    for figure in _figure(calibration_figures(unplaced), "top-view"):
+        assert '<g class="mount"' not in figure and "mounts not drawn" in figure
 
 
 def test_a_dense_map_is_thinned_under_the_budget_keeping_its_extent(
@@ -242,16 +260,20 @@ def test_scene_degeneracy_is_drawn_from_the_structured_field(
 
 
 def test_degeneracy_drawn_on_the_map_in_its_frame(calibration: Load, top_views: TopViews) -> None:
-    frames = {"lidar_front": "base_link at stop 0", "lidar_rear": "lidar_rear at stop 0"}
+    frames = {
+        "lidar_front": "base_link at stop 0, lidar_front placed by the recorded extrinsic",
+        "lidar_rear": "base_link at stop 5, lidar_rear placed by the recorded extrinsic",
+    }
     result = top_views(calibration("calib_turntable_32"), frames=frames)
     free = DegeneracyOut(
         kind="translation",
         direction=(1.0, 0.0, 0.0),
-        frame="base_link",
+        frame="base_link at stop 0",
         information=0.0,
         limit=0.01,
     )
     maps = _figure(calibration_figures(result.model_copy(update={"degeneracy": free})), "top-view")
+    # Only the map in the same frame (the base at the same stop) carries the arrow.
     assert ["free-translation" in m for m in maps] == [True, False]
 
 

@@ -204,7 +204,8 @@ def _on_map(result: CalibrationResult, lidar: LidarOut) -> DegeneracyOut | None:
     d = result.degeneracy
     if d is None or lidar.top_view is None:
         return None
-    return d if lidar.top_view.frame.split(" at ")[0].strip() == d.frame else None
+    # "base_link at stop 3, lidar_rear placed by ...": the frame is what precedes the comma.
+    return d if lidar.top_view.frame.split(",")[0].strip() == d.frame.strip() else None
 
 
 def _degenerate(alignment: AlignmentOut) -> bool:

@@ -122,19 +122,21 @@ def _matrix(rows: Sequence[Sequence[float]]) -> NDArray[np.float64]:
 
 
 def frame_from_reference(result: CalibrationResult, frame: str) -> NDArray[np.float64] | None:
-    """The reference LiDAR's pose in a map's `frame` ("<frame id> at stop k"), or None.
+    """The reference LiDAR's pose in a map's `frame` ("<frame id> at stop k[, ...]"), or None.
 
-    A map in the reference LiDAR's own frame holds it at the origin; a map in another
-    LiDAR's frame holds it where that LiDAR's recorded extrinsic puts it. A map in the base
-    frame needs the reference LiDAR's pose on the base, which a result does not keep: no
-    mounts are drawn there.
+    A map in the reference LiDAR's own frame holds it at the origin; one in another LiDAR's
+    frame holds it where the inverse of that LiDAR's recorded extrinsic puts it; one in the
+    base frame (at whichever stop: the mount does not move) at `result.reference_mount`,
+    the recorded base_from_reference. Without that, a base-frame map gets no mounts.
     """
-    name = frame.split(" at ")[0].strip()
+    name = frame.split(",")[0].split(" at ")[0].strip()
     if name == result.reference_frame_id:
         return np.eye(4)
     for ext in result.extrinsics:
         if ext.frame_id == name:
             return np.asarray(np.linalg.inv(_matrix(ext.recorded.matrix)), dtype=np.float64)
+    if name == result.base_frame and result.reference_mount is not None:
+        return _matrix(result.reference_mount.matrix)
     return None
 
 
@@ -374,8 +376,8 @@ def _legend(stops: list[StopPoints], mounts: list[Mount], degeneracy: Degeneracy
         ]
     else:
         items.append(
-            "<li class=unit>mounts not drawn: the map's frame is not a LiDAR's, and the result "
-            "does not place the reference LiDAR on the base</li>"
+            "<li class=unit>mounts not drawn: the map is not in a LiDAR's frame, and the result "
+            "does not give the reference LiDAR's mount on the base (reference_mount)</li>"
         )
     if degeneracy is not None:
         items.append(
