@@ -146,14 +146,14 @@ def test_same_typed_schema_without_cameras_or_paired_frames(
         assert list(back.columns) == list(reference.columns)
         assert back.dtypes.to_dict() == reference.dtypes.to_dict()
         described = "SELECT column_name, column_type FROM (DESCRIBE FROM '{}')"
-        assert (
-            duckdb.sql(described.format(other)).fetchall()
-            == duckdb.sql(described.format(whole)).fetchall()
-        )
+        with duckdb.connect() as con:
+            types = con.execute(described.format(other)).fetchall()
+            assert types == con.execute(described.format(whole)).fetchall()
     frames, cameras = pd.read_parquet(odd[0]), pd.read_parquet(odd[1])
     if case == "no cameras":
         assert len(frames) == 0 and len(cameras) == 0
-        assert duckdb.sql(f"SELECT count(*) FROM '{odd[0]}'").fetchone() == (0,)
+        with duckdb.connect() as con:
+            assert con.execute(f"SELECT count(*) FROM '{odd[0]}'").fetchone() == (0,)
         assert len(frames.columns) == len(audit.frames().columns) == 24
         assert json.loads(pq.read_schema(odd[0]).metadata[b"syncaudit"])["verdict"] == "no cameras"
     else:
@@ -162,6 +162,6 @@ def test_same_typed_schema_without_cameras_or_paired_frames(
         # Missing statistics are nulls of a number column, not strings.
         assert cameras["error_mean_us"].isna().all() and cameras["t5_mean_us"].isna().all()
         assert list(cameras["unpaired_no exposure metadata"]) == [99, 99, 99]
-        assert duckdb.sql(
-            f"SELECT count(*) FROM '{odd[1]}' WHERE error_mean_us IS NULL AND t1_mean_us > 0"
-        ).fetchone() == (3,)
+        query = f"SELECT count(*) FROM '{odd[1]}' WHERE error_mean_us IS NULL AND t1_mean_us > 0"
+        with duckdb.connect() as con:
+            assert con.execute(query).fetchone() == (3,)
