@@ -142,6 +142,11 @@ def degenerate_svg(w: Weakest) -> str:
     )
 
 
+def _vector(v: tuple[float, float, float]) -> str:
+    """(+0.18, +0.98, +0.00): signed, two decimals, no negative zero."""
+    return "(" + ", ".join(f"{round(c, 2) + 0.0:+.2f}" for c in v) + ")"
+
+
 def scene_degeneracy_svg(degeneracy: DegeneracyOut) -> str:
     """A degenerate scene's free direction from above, and its information against the limit.
 
@@ -176,7 +181,7 @@ def scene_degeneracy_svg(degeneracy: DegeneracyOut) -> str:
     return (
         f'<figure class="xy" data-kind="scene-degeneracy" data-free="{esc(degeneracy.kind)}" '
         f'data-direction="{dx:.4f} {dy:.4f} {dz:.4f}">'
-        f"<figcaption>Degenerate scene: everything {verb} ({dx:+.2f}, {dy:+.2f}, {dz:+.2f}) "
+        f"<figcaption>Degenerate scene: everything {verb} {_vector(degeneracy.direction)} "
         f'in {esc(degeneracy.frame)} <span class="unit">[from above; x forward up, y left]'
         "</span></figcaption>"
         f'<svg class="plot" width="{size}" height="{size + 40}" viewBox="0 0 {size} {size + 40}" '
@@ -189,7 +194,7 @@ def scene_degeneracy_svg(degeneracy: DegeneracyOut) -> str:
         f'<text x="{mid - radius + 2}" y="{mid - 4}" class="legend">+y</text>'
         + drawing
         + f'<text x="8" y="{size - 8}" class="legend">{esc(degeneracy.kind)} '
-        f"({dx:+.2f}, {dy:+.2f}, {dz:+.2f}), z {dz:+.2f}</text>"
+        f"{_vector(degeneracy.direction)} (x, y, z)</text>"
         f'<text x="8" y="{size + 8}" class="legend">information {degeneracy.information:.4g} '
         f"vs limit {degeneracy.limit:.4g}</text>"
         f'<rect x="8" y="{size + 16}" width="{bar_w}" height="10" fill="#f3f3f3" stroke="#bbb"/>'
