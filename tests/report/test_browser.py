@@ -40,8 +40,8 @@ def test_audit_report_renders_with_every_plot_and_point(audit: AuditResult, tmp_
     figures = _figures(shown.dom)
     time_plots = [f for f in figures if f.get("class") == "tplot"]
     assert (
-        len(time_plots) == 3 + 3 * 9
-    )  # LiDAR 3; per camera error, Eq. 5, Eq. 6, t1..t4, t5, delay
+        len(time_plots) == 4 + 3 * 9
+    )  # LiDAR 4; per camera error, Eq. 5, Eq. 6, t1..t4, t5, delay
     assert len([f for f in figures if f.get("data-kind") == "histogram"]) == 3
     # The script read every point of every series back from the drawn SVG.
     for figure, drawn in zip(
@@ -223,7 +223,7 @@ def test_drag_zooms_every_time_plot_and_double_click_resets(
         y = box["top"] + box["height"] / 2
         browser.drag((_screen_x(box, 3.0), y), (_screen_x(box, 5.5), y))
         zoomed = _time_windows(browser)
-        assert len(zoomed) == 3 + 3 * 9
+        assert len(zoomed) == 4 + 3 * 9
         for start, width in zoomed:
             assert start == pytest.approx(3.0, abs=pixel_s)
             assert start + width == pytest.approx(5.5, abs=pixel_s)

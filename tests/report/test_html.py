@@ -26,7 +26,7 @@ CAMERA_PLOTS = (
     "exposure",
     "delay",
 )
-LIDAR_PLOTS = ("lidar-rpm", "lidar-packets", "lidar-clock")
+LIDAR_PLOTS = ("lidar-rpm", "lidar-packets", "lidar-drops", "lidar-clock")
 THREE_CAMERAS = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"
 Load = Callable[[str], CalibrationResult]
 
@@ -113,6 +113,19 @@ def test_plotted_values_are_the_audits(audit: AuditResult) -> None:
     np.testing.assert_allclose(
         _path_values(rpm["d"])[1], omega[np.isfinite(omega)] / 6.0, atol=0.0051
     )
+    # Drops: a dot per revolution that lost packets, at the count lost (own axis).
+    drops = next(a for kind, a in page.paths if kind == "lidar-drops")
+    lost = audit.revolutions.dropped_packets
+    assert int(drops["data-n"]) == (lost > 0).sum() > 0
+    nums = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?", drops["d"])]
+    np.testing.assert_allclose(-np.array(nums[1::4]), lost[lost > 0])
+    # The clock: host - sensor per revolution, and its rolling minimum over a second.
+    host, low = [a for kind, a in page.paths if kind == "lidar-clock"]
+    raw = audit.revolutions.zero_packet_driver_ns - audit.revolutions.zero_packet_sensor_ns
+    np.testing.assert_allclose(_path_values(host["d"])[1], raw / 1e3, atol=0.0051)
+    assert low["data-label"] == "minimum over 10 revolutions (the offset, t1 jitter removed)"
+    expected = [raw[max(0, i - 9) : i + 1].min() / 1e3 for i in range(raw.size)]
+    np.testing.assert_allclose(_path_values(low["d"])[1], expected, atol=0.0051)
 
 
 def test_log_text_is_escaped(hostile_audit: AuditResult, hostile: str) -> None:
