@@ -194,9 +194,10 @@ def latency_plots(cam: CameraAudit, origin_ns: float) -> list[TimePlot]:
     return plots
 
 
-CLOCK_WINDOW_S = 1.0
+CLOCK_WINDOW_S = 10.0
 """Span of the rolling minimum of host - sensor: the fastest packet in it had about no
-queueing, so the minimum follows the clock offset and its drift without the t1 jitter."""
+queueing, so the minimum follows the clock offset and its drift (minutes) without the t1
+jitter (one revolution's zero packet per point: 100 points at 10 Hz)."""
 
 
 def rolling_min(values: NDArray[np.float64], window: int) -> NDArray[np.float64]:
@@ -218,7 +219,10 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     rpm = TimePlot("Rotation rate per revolution", "RPM", kind="lidar-rpm")
     rpm.series.append(Series("RPM", t_s, revs.omega_deg_s / 6.0, COLOURS[0]))
     packets = TimePlot(
-        "Packets per revolution (the first and last are partial)", "packets", kind="lidar-packets"
+        "Packets per revolution (the first and last are partial)",
+        "packets",
+        kind="lidar-packets",
+        counts=True,
     )
     packets.series.append(Series("packets", t_s, revs.packets.astype(np.float64), COLOURS[0]))
     dropped = revs.dropped_packets
@@ -230,6 +234,7 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
         "packets",
         kind="lidar-drops",
         height=170,
+        counts=True,
     )
     drops.series.append(
         Series("dropped", t_s[hit], dropped[hit].astype(np.float64), COLOURS[4], dots=True)
@@ -247,7 +252,8 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     clock.series += [
         Series("host - sensor", t_s, (raw - ref) / 1e3, COLOURS[0]),
         Series(
-            f"minimum over {window} revolutions (the offset, t1 jitter removed)",
+            f"minimum over {window} revolutions ({window * period_s:.0f} s): the offset, "
+            "t1 jitter removed",
             t_s,
             rolling_min(raw - ref, window) / 1e3,
             COLOURS[1],
