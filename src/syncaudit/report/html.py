@@ -227,10 +227,14 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     packets.series.append(Series("packets", t_s, revs.packets.astype(np.float64), COLOURS[0]))
     dropped = revs.dropped_packets
     hit = dropped > 0
+    counted = (
+        f"{int(dropped.sum()):,} in {int(hit.sum()):,} of {revs.count:,} revolutions"
+        if hit.any()
+        else f"none in {revs.count:,} revolutions"
+    )
     drops = TimePlot(
         "Packets dropped: gaps in the packet cadence, per revolution "
-        f"({int(dropped.sum()):,} in {int(hit.sum()):,} of {revs.count:,} revolutions; "
-        "a FOV crop is not counted)",
+        f"({counted}; a FOV crop is not counted)",
         "packets",
         kind="lidar-drops",
         height=170,
