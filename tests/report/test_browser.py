@@ -90,7 +90,7 @@ def test_combined_report_with_maps_and_a_refused_calibration(
     top_views: Callable[..., CalibrationResult],
     tmp_path: Path,
 ) -> None:
-    mapped = top_views(calibration("calib_turntable_32"))
+    mapped = top_views(calibration("calib_turntable_32"), sector_deg=28.0)  # stops apart
     page = tmp_path / "combined.html"
     page.write_text(render_report_html(audit, mapped))
     with Session(height=1000) as browser:
@@ -112,9 +112,34 @@ def test_combined_report_with_maps_and_a_refused_calibration(
             assert drawn["across"] == pytest.approx(drawn["up"], rel=0.005)
             assert len(drawn["paths"]) == drawn["legend"] == 12
             assert len({colour for _, colour, _ in drawn["paths"]}) == 12
-        browser.evaluate(
-            "document.querySelector('figure[data-kind=\"top-view\"]').scrollIntoView()"
+        # Hover a point only one stop holds: the read-out names that stop and the point.
+        view = mapped.lidars[0].top_view
+        assert view is not None
+        seen: dict[tuple[float, float], list[int]] = {}
+        for stop in view.stops:
+            for xy in zip(stop.x_m, stop.y_m, strict=True):
+                seen.setdefault((round(xy[0], 2), round(xy[1], 2)), []).append(stop.stop)
+        (x_m, y_m), (only,) = next((xy, s) for xy, s in seen.items() if len(s) == 1)
+        at = browser.evaluate(
+            f"""(() => {{
+              const f = document.querySelector('figure[data-kind="top-view"]');
+              f.scrollIntoView({{block: 'center'}});
+              const m = f.querySelector('svg.points').getScreenCTM();
+              const p = new DOMPoint({-y_m}, {-x_m}).matrixTransform(m);
+              return [p.x, p.y, Number(f.dataset.renderedPoints), Number(f.dataset.n)];
+            }})()"""
         )
+        assert at[2] == at[3] == sum(len(stop.x_m) for stop in view.stops)
+        browser.mouse("mouseMoved", at[0], at[1])
+        tip = _tip(browser)
+        assert tip is not None
+        cursor, nearest = tip.split("\n")
+        assert nearest == f"stop {only}: x {x_m:.2f} m, y {y_m:.2f} m"
+        read = re.fullmatch(r"x (-?[\d.]+) m, y (-?[\d.]+) m", cursor)
+        assert read is not None, cursor
+        # The cursor's own position, to a pixel (CDP rounds mouse coordinates).
+        assert float(read.group(1)) == pytest.approx(x_m, abs=0.1)
+        assert float(read.group(2)) == pytest.approx(y_m, abs=0.1)
         shot = browser.screenshot("report/calibration-map.png")
     assert shot.stat().st_size > 20_000
 

@@ -1,4 +1,4 @@
-"""The reports' inline style and script: hover read-outs and linked zoom on time.
+"""The reports' inline style and script: hover read-outs, linked zoom on time, map read-out.
 
 Plain DOM code, no library: it reads each time plot's own SVG (the path data are in
 data units), so there is no second copy of the data in the page. Text from the log is
@@ -180,6 +180,41 @@ SCRIPT = r"""
     plots.forEach(function (p) { setRange(p, a, b); });
     try { history.replaceState(null, '', '#t=' + a.toFixed(3) + '-' + b.toFixed(3)); } catch (e) { /* no history */ }
   }
+  // Maps from above: hover reads the cursor's x, y and the nearest point's stop.
+  var mapPoints = 0;
+  document.querySelectorAll('figure[data-kind="top-view"]').forEach(function (fig) {
+    var map = fig.querySelector('svg.map'), inner = map.querySelector('svg.points');
+    var xs = [], ys = [], stops = [];
+    inner.querySelectorAll('path.stop').forEach(function (path) {
+      var d = path.getAttribute('d') || '', stop = path.getAttribute('data-stop'), mm;
+      var dot = /M(-?\d+(?:\.\d+)?),(-?\d+(?:\.\d+)?)h0/g;  // u = -y, v = -x
+      while ((mm = dot.exec(d)) !== null) {
+        xs.push(-Number(mm[2])); ys.push(-Number(mm[1])); stops.push(stop);
+      }
+    });
+    fig.setAttribute('data-rendered-points', String(xs.length));
+    mapPoints += xs.length;
+    map.addEventListener('mousemove', function (ev) {
+      var m = inner.getScreenCTM();
+      if (!m) return;
+      var at = new DOMPoint(ev.clientX, ev.clientY).matrixTransform(m.inverse());
+      var x = -at.y, y = -at.x, best = -1, bestD = Infinity;
+      for (var i = 0; i < xs.length; i++) {
+        var d = (xs[i] - x) * (xs[i] - x) + (ys[i] - y) * (ys[i] - y);
+        if (d < bestD) { bestD = d; best = i; }
+      }
+      var lines = ['x ' + x.toFixed(2) + ' m, y ' + y.toFixed(2) + ' m'];
+      if (best >= 0 && Math.sqrt(bestD) * m.a <= 12) {
+        lines.push('stop ' + stops[best] + ': x ' + xs[best].toFixed(2) + ' m, y ' + ys[best].toFixed(2) + ' m');
+      }
+      tip.textContent = lines.join('\n');
+      tip.hidden = false;
+      tip.style.left = (ev.clientX + 14) + 'px';
+      tip.style.top = (ev.clientY + 14) + 'px';
+    });
+    map.addEventListener('mouseleave', function () { tip.hidden = true; });
+  });
+  document.body.setAttribute('data-map-points', String(mapPoints));
   // A link to a time window: report.html#t=12.5-14 opens zoomed to 12.5 s .. 14 s.
   var linked = /^#t=(-?[\d.]+)-(-?[\d.]+)$/.exec(location.hash);
   if (linked && Number(linked[2]) > Number(linked[1])) zoom(Number(linked[1]), Number(linked[2]));
