@@ -112,7 +112,10 @@ def test_mounts_recorded_and_estimated_on_each_map(calibration: Load, top_views:
             ("lidar_rear", "estimated"): np.linalg.inv(recorded) @ estimated,
         },
     }
-    for figure in _figure(html, "top-view"):
+    # The mounts figure (no points) holds them as the reference LiDAR's map does.
+    (mounts,) = _figure(html, "mounts")
+    as_map = mounts.replace('data-kind="mounts"', 'data-lidar="lidar_front"', 1)
+    for figure in [as_map, *_figure(html, "top-view")]:
         lidar = _attrs(figure[: figure.index(">")])["data-lidar"]
         marks = {
             (a["data-name"], a["data-mount"]): (float(a["data-x-m"]), float(a["data-y-m"]))

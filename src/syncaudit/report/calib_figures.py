@@ -16,81 +16,10 @@ from syncaudit.calib.result import (
     CalibrationResult,
     DegeneracyOut,
     LidarOut,
-    TransformOut,
 )
 from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
-from syncaudit.report.topview import top_view_svg
-
-SIZE = 420
-MARGIN = 40
-
-
-def _arrow(x: float, y: float, dx: float, dy: float, colour: str, cls: str) -> str:
-    """A line with a head, screen units."""
-    end_x, end_y = x + dx, y + dy
-    length = math.hypot(dx, dy) or 1.0
-    ux, uy = dx / length, dy / length
-    left = (end_x - 8 * ux + 4 * uy, end_y - 8 * uy - 4 * ux)
-    right = (end_x - 8 * ux - 4 * uy, end_y - 8 * uy + 4 * ux)
-    return (
-        f'<g class="{cls}"><line x1="{x:.1f}" y1="{y:.1f}" x2="{end_x:.1f}" y2="{end_y:.1f}" '
-        f'stroke="{colour}" stroke-width="2"/><polygon points="{end_x:.1f},{end_y:.1f} '
-        f'{left[0]:.1f},{left[1]:.1f} {right[0]:.1f},{right[1]:.1f}" fill="{colour}"/></g>'
-    )
-
-
-def mounts_svg(result: CalibrationResult) -> str:
-    """Top view (x forward, y left) of every LiDAR's mount: recorded and estimated."""
-    mounts: list[tuple[str, TransformOut, TransformOut | None]] = [
-        (e.frame_id, e.recorded, e.result) for e in result.extrinsics
-    ]
-    xs = [0.0] + [t.translation_m[0] for _, r, e in mounts for t in (r, e) if t is not None]
-    ys = [0.0] + [t.translation_m[1] for _, r, e in mounts for t in (r, e) if t is not None]
-    span = max(max(map(abs, xs)), max(map(abs, ys)), 0.5) * 1.25
-    scale = (SIZE / 2 - MARGIN) / span
-    cx = cy = SIZE / 2
-
-    def pos(x: float, y: float) -> tuple[float, float]:
-        # x forward is up, y left is left on the screen.
-        return cx - y * scale, cy - x * scale
-
-    out = [
-        f'<figure class="xy" data-kind="mounts" data-n="{len(mounts)}">'
-        "<figcaption>Mounts in the reference LiDAR's frame, top view "
-        '<span class="unit">[m; x forward up, y left; arrow = yaw]</span></figcaption>'
-        f'<svg class="plot" width="{SIZE}" height="{SIZE}" viewBox="0 0 {SIZE} {SIZE}" role="img" '
-        'aria-label="mounts top view">',
-        f'<rect x="0" y="0" width="{SIZE}" height="{SIZE}" fill="#fff" stroke="#bbb"/>',
-        f'<line x1="{cx}" y1="0" x2="{cx}" y2="{SIZE}" class="grid"/>'
-        f'<line x1="0" y1="{cy}" x2="{SIZE}" y2="{cy}" class="grid"/>',
-        f'<text x="{SIZE - 4}" y="{SIZE - 6}" class="yt">±{span:.2f} m</text>',
-        _arrow(cx, cy, 0, -24, "#444", "reference"),
-        f'<text x="{cx + 6}" y="{cy + 14}" class="legend">{esc(result.reference_frame_id)} (reference)</text>',
-    ]
-    for name, recorded, estimated in mounts:
-        for transform, colour, cls in (
-            (recorded, COLOURS[0], "recorded"),
-            (estimated, COLOURS[1], "estimated"),
-        ):
-            if transform is None:
-                continue
-            x, y = pos(transform.translation_m[0], transform.translation_m[1])
-            yaw = math.radians(transform.rpy_deg[2])
-            out.append(
-                f'<circle cx="{x:.1f}" cy="{y:.1f}" r="4" fill="{colour}"><title>{esc(name)} {cls}: '
-                f"xyz {', '.join(f'{v:.3f}' for v in transform.translation_m)} m, rpy "
-                f"{', '.join(f'{v:.2f}' for v in transform.rpy_deg)} deg</title></circle>"
-                + _arrow(x, y, -30 * math.sin(yaw), -30 * math.cos(yaw), colour, cls)
-            )
-        x, y = pos(recorded.translation_m[0], recorded.translation_m[1])
-        out.append(f'<text x="{x + 8:.1f}" y="{y + 16:.1f}" class="legend">{esc(name)}</text>')
-    out.append(
-        f'<rect x="8" y="8" width="10" height="3" fill="{COLOURS[0]}"/>'
-        '<text x="22" y="13" class="legend">recorded</text>'
-        f'<rect x="8" y="22" width="10" height="3" fill="{COLOURS[1]}"/>'
-        '<text x="22" y="27" class="legend">estimated</text></svg></figure>'
-    )
-    return "".join(out)
+from syncaudit.report.topview import arrow as _arrow
+from syncaudit.report.topview import mounts_svg, top_view_svg
 
 
 @dataclass(frozen=True, slots=True)

@@ -177,13 +177,14 @@ class _Frame:
         )
 
 
-def _frame(xs: list[float], ys: list[float]) -> _Frame:
+def _frame(xs: list[float], ys: list[float], *, size: int = PLOT_SIZE, pad: float = 0.04) -> _Frame:
+    """Equal scales fitting the points, `pad` of the longer span around them."""
     x_low, x_high = min(xs), max(xs)
     y_low, y_high = min(ys), max(ys)
     span = max(x_high - x_low, y_high - y_low, 1.0)
-    pad = span * 0.04
-    x_low, x_high, y_low, y_high = x_low - pad, x_high + pad, y_low - pad, y_high + pad
-    scale = PLOT_SIZE / max(x_high - x_low, y_high - y_low)
+    margin = span * pad
+    x_low, x_high, y_low, y_high = x_low - margin, x_high + margin, y_low - margin, y_high + margin
+    scale = size / max(x_high - x_low, y_high - y_low)
     return _Frame(
         x_low,
         x_high,
@@ -222,9 +223,7 @@ def _dots_path(x_m: NDArray[np.float64], y_m: NDArray[np.float64], decimals: int
     )
 
 
-def _arrow(
-    x: float, y: float, dx: float, dy: float, colour: str, cls: str, width: float = 2
-) -> str:
+def arrow(x: float, y: float, dx: float, dy: float, colour: str, cls: str, width: float = 2) -> str:
     """A line with a head, screen units."""
     end_x, end_y = x + dx, y + dy
     length = math.hypot(dx, dy) or 1.0
@@ -260,7 +259,7 @@ def _mount_mark(frame: _Frame, mount: Mount) -> str:
         f'<g class="mount" data-name="{esc(mount.name)}" data-mount="{mount.kind}" '
         f'data-x-m="{mount.x_m:.4f}" data-y-m="{mount.y_m:.4f}">'
         + shape
-        + _arrow(x, y, dx, dy, colour, "yaw", 1.5)
+        + arrow(x, y, dx, dy, colour, "yaw", 1.5)
         + "</g>"
     )
 
@@ -276,8 +275,68 @@ def direction_arrows(frame: _Frame, degeneracy: DegeneracyOut, origin: tuple[flo
             'fill="none" stroke="#b00020" stroke-width="3" stroke-dasharray="10 5"/>'
         )
     sx, sy = -dy * length, -dx * length  # screen right is -y, down is -x
-    return _arrow(ox, oy, sx, sy, "#b00020", "free-translation", 3) + _arrow(
+    return arrow(ox, oy, sx, sy, "#b00020", "free-translation", 3) + arrow(
         ox, oy, -sx, -sy, "#b00020", "free-translation", 3
+    )
+
+
+def _axes(frame: _Frame) -> list[str]:
+    """Metre grid, ticks and axis labels of a map (x forward up, y left to the left)."""
+    w, h = frame.width, frame.height
+    out = []
+    x_ticks, y_ticks = _axis_ticks(frame)
+    for tick, text in zip(x_ticks, tick_labels(x_ticks), strict=True):
+        _, sy = frame.screen(tick, 0.0)
+        out.append(
+            f'<line x1="{MAP_LEFT}" x2="{MAP_LEFT + w}" y1="{sy:.1f}" y2="{sy:.1f}" class="grid"/>'
+            f'<text x="{MAP_LEFT - 5}" y="{sy + 4:.1f}" class="yt">{esc(text)}</text>'
+        )
+    for tick, text in zip(y_ticks, tick_labels(y_ticks), strict=True):
+        sx, _ = frame.screen(0.0, tick)
+        out.append(
+            f'<line x1="{sx:.1f}" x2="{sx:.1f}" y1="{MAP_TOP}" y2="{MAP_TOP + h}" class="grid"/>'
+            f'<text x="{sx:.1f}" y="{MAP_TOP + h + 14}" class="xtick">{esc(text)}</text>'
+        )
+    out.append(
+        f'<text x="{MAP_LEFT + w / 2:.0f}" y="{MAP_TOP + h + MAP_BOTTOM - 6}" class="xlabel">'
+        "y, left [m] (grows to the left)</text>"
+        f'<text x="14" y="{MAP_TOP + h / 2:.0f}" class="ylabel" '
+        f'transform="rotate(-90 14 {MAP_TOP + h / 2:.0f})">x, forward [m]</text>'
+    )
+    return out
+
+
+def mounts_svg(result: CalibrationResult) -> str:
+    """Every LiDAR's mount from above in the reference LiDAR's frame: recorded, estimated."""
+    mounts = mounts_on_map(result, result.reference_frame_id)
+    xs, ys = [m.x_m for m in mounts], [m.y_m for m in mounts]
+    # A square view centred on the mounts (they often stand in a line).
+    half = max(max(xs) - min(xs), max(ys) - min(ys), 1.0) / 2
+    cx, cy = (max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2
+    frame = _frame([cx - half, cx + half], [cy - half, cy + half], size=300, pad=0.3)
+    w, h = frame.width, frame.height
+    total_w, total_h = MAP_LEFT + w + MAP_RIGHT, MAP_TOP + h + MAP_BOTTOM
+    names = []
+    for m in mounts:
+        if m.kind in ("reference", "recorded"):
+            x, y = frame.screen(m.x_m, m.y_m)
+            names.append(
+                f'<text x="{x + 9:.1f}" y="{y + 16:.1f}" class="legend">{esc(m.name)}</text>'
+            )
+    return (
+        f'<figure class="xy" data-kind="mounts" data-n="{len(result.extrinsics)}">'
+        "<figcaption>Mounts in the reference LiDAR's frame, from above "
+        f'<span class="unit">[m, equal scales; in {esc(result.reference_frame_id)}; x forward up, '
+        "y left; arrow = yaw]</span></figcaption>"
+        f'<div class="row"><svg class="plot map" width="{total_w}" height="{total_h}" '
+        f'viewBox="0 0 {total_w} {total_h}" role="img" aria-label="mounts from above">'
+        f'<rect x="{MAP_LEFT}" y="{MAP_TOP}" width="{w}" height="{h}" fill="#fff" stroke="#bbb"/>'
+        + "".join(_axes(frame))
+        + "".join(_mount_mark(frame, m) for m in mounts)
+        + "".join(names)
+        + "</svg>"
+        + _legend([], mounts, None)
+        + "</div></figure>"
     )
 
 
@@ -316,25 +375,7 @@ def top_view_svg(
         f'viewBox="0 0 {total_w} {total_h}" role="img" aria-label="{esc(frame_id)} map from above">',
         f'<rect x="{MAP_LEFT}" y="{MAP_TOP}" width="{w}" height="{h}" fill="#fff" stroke="#bbb"/>',
     ]
-    x_ticks, y_ticks = _axis_ticks(frame)
-    for tick, text in zip(x_ticks, tick_labels(x_ticks), strict=True):
-        _, sy = frame.screen(tick, 0.0)
-        out.append(
-            f'<line x1="{MAP_LEFT}" x2="{MAP_LEFT + w}" y1="{sy:.1f}" y2="{sy:.1f}" class="grid"/>'
-            f'<text x="{MAP_LEFT - 5}" y="{sy + 4:.1f}" class="yt">{esc(text)}</text>'
-        )
-    for tick, text in zip(y_ticks, tick_labels(y_ticks), strict=True):
-        sx, _ = frame.screen(0.0, tick)
-        out.append(
-            f'<line x1="{sx:.1f}" x2="{sx:.1f}" y1="{MAP_TOP}" y2="{MAP_TOP + h}" class="grid"/>'
-            f'<text x="{sx:.1f}" y="{MAP_TOP + h + 14}" class="xtick">{esc(text)}</text>'
-        )
-    out.append(
-        f'<text x="{MAP_LEFT + w / 2:.0f}" y="{total_h - 6}" class="xlabel">'
-        "y, left [m] (grows to the left)</text>"
-        f'<text x="14" y="{MAP_TOP + h / 2:.0f}" class="ylabel" '
-        f'transform="rotate(-90 14 {MAP_TOP + h / 2:.0f})">x, forward [m]</text>'
-    )
+    out += _axes(frame)
     # The points in metres: u = -y, v = -x, so the viewBox maps them at the same scale.
     out.append(
         f'<svg class="points" x="{MAP_LEFT}" y="{MAP_TOP}" width="{w}" height="{h}" '
