@@ -253,10 +253,11 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     clock = TimePlot(title, "µs", kind="lidar-clock")
     period_s = float(np.median(np.diff(t_s))) if t_s.size > 1 else math.nan
     window = max(1, round(CLOCK_WINDOW_S / period_s)) if period_s > 0 else 1
+    window = min(window, revs.count)  # a short log: over all of it
     clock.series += [
         Series("host - sensor", t_s, (raw - ref) / 1e3, COLOURS[0]),
         Series(
-            f"minimum over {window} revolutions ({window * period_s:.0f} s): the offset, "
+            f"minimum over {window} revolutions ({window * period_s:.3g} s): the offset, "
             "t1 jitter removed",
             t_s,
             rolling_min(raw - ref, window) / 1e3,
