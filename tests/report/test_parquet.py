@@ -165,3 +165,22 @@ def test_same_typed_schema_without_cameras_or_paired_frames(
         query = f"SELECT count(*) FROM '{odd[1]}' WHERE error_mean_us IS NULL AND t1_mean_us > 0"
         with duckdb.connect() as con:
             assert con.execute(query).fetchone() == (3,)
+
+
+def test_real_lidar_log_without_cameras(
+    audit: AuditResult, tmp_path: Path, lidar_data: Path
+) -> None:
+    """A real VLP-16 recording (no cameras): the typed tables with zero rows, and a report."""
+    log = lidar_data / "velodyne_vlp16" / "1673400471837873222"
+    out = tmp_path / "vlp16.parquet"
+    run = CliRunner().invoke(
+        app, ["audit", str(log), "--parquet", str(out), "--html", str(tmp_path / "r.html")]
+    )
+    assert run.exit_code == 0, run.output
+    full = write_parquet(audit, tmp_path / "full.parquet")
+    for whole, other in zip(full, (out, cameras_path(out)), strict=True):
+        assert pq.read_schema(other).remove_metadata() == pq.read_schema(whole).remove_metadata()
+        assert pq.read_metadata(other).num_rows == 0
+    page = (tmp_path / "r.html").read_text()
+    assert "NO CAMERAS" in page and "less the median +1,531.183 s" in page
+    assert 'data-kind="lidar-drops"' in page and "none in 4 revolutions" in page
