@@ -1,9 +1,11 @@
-"""Figures of a calibration result: mounts (recorded vs estimated), residuals, degeneracy.
+"""Figures of a calibration result: mounts, residuals, maps by stop, degenerate directions.
 
-Drawn from `syncaudit.calib.result` data only: the top view of every LiDAR's recorded and
-estimated mount in the reference frame, the estimate's difference against the limits,
-each cross-scan pair's residual after alignment, and for each refused alignment its
-weakest (degenerate) translation direction and rotation axis.
+Drawn from `syncaudit.calib.result` data only: every LiDAR's recorded and estimated mount
+from above in the reference frame, the estimate's difference against the limits, each
+cross-scan pair's residual after alignment, each LiDAR's map from above coloured by stop
+(`syncaudit.report.topview`), a degenerate scene's free direction (`degeneracy`), and for
+each alignment refused as degenerate its weakest translation direction and rotation axis
+(its structured conditioning; reasons are never parsed for numbers).
 """
 
 from __future__ import annotations
