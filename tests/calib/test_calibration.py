@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import multiprocessing
 import os
+import re
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -246,6 +248,28 @@ def test_degenerate_scene_is_refused_early_naming_the_free_direction(
     assert "along (" in result.reason
     assert cpu_s < 10.0, cpu_s
     assert "NOT CALIBRATABLE" in html_section(result)
+    # The same direction, structured: along the walls (world) seen from the named stop.
+    deg = result.degeneracy
+    assert deg is not None and deg.kind == "translation"
+    assert deg.information < deg.limit == pytest.approx(0.02)
+    match = re.fullmatch(r"base_link at stop (\d+)", deg.frame)
+    assert match is not None, deg.frame
+    world_from_base = np.array(truth["stops"][int(match[1])]["world_from_base"]["matrix"])
+    direction = world_from_base[:3, :3] @ np.array(deg.direction)
+    wall_yaw = math.radians(truth["scene"]["objects"][0]["yaw_deg"])
+    # ground_and_wall boxes are long along their y axis, corridor walls along x.
+    along = (
+        np.array([-math.sin(wall_yaw), math.cos(wall_yaw), 0.0])
+        if scene == "ground_and_wall"
+        else np.array([math.cos(wall_yaw), math.sin(wall_yaw), 0.0])
+    )
+    angle_deg = math.degrees(math.acos(min(1.0, abs(float(direction @ along)))))
+    assert angle_deg < 5.0, (scene, angle_deg)
+    assert f"({deg.direction[0]:.2f}, {deg.direction[1]:.2f}, {deg.direction[2]:.2f})" in (
+        result.reason
+    )
+    assert all(lidar.top_view is None for lidar in result.lidars)
+    assert result.to_json_dict()["degeneracy"]["kind"] == "translation"
 
 
 def test_too_few_stops_is_a_result_not_nothing_to_audit(tmp_path: Path) -> None:
@@ -314,3 +338,81 @@ def test_log_and_config_errors(tmp_path: Path) -> None:
     nested.write_text("registration: {limits: {min_overlap_ratio: 0.5}}\n")
     loaded: CalibConfig = load_config(nested, CalibConfig)
     assert loaded.registration.limits.min_overlap_ratio == 0.5
+
+
+def _footprint_distance_m(xy_m: np.ndarray, objects: list[dict[str, Any]]) -> np.ndarray:
+    """Distance in the ground plane from each point to the nearest object's footprint
+    (0 inside it): where a top-view point of the true scene must lie."""
+    best = np.full(xy_m.shape[0], np.inf)
+    for obj in objects:
+        if obj["type"] == "pole":
+            d = np.linalg.norm(xy_m - np.array(obj["center_xy_m"]), axis=1) - obj["radius_m"]
+        else:
+            yaw = math.radians(obj["yaw_deg"])
+            rot = np.array([[math.cos(yaw), math.sin(yaw)], [-math.sin(yaw), math.cos(yaw)]])
+            local = (xy_m - np.array(obj["center_m"][:2])) @ rot.T
+            outside = np.maximum(np.abs(local) - np.array(obj["size_m"][:2]) / 2.0, 0.0)
+            d = np.linalg.norm(outside, axis=1)
+        best = np.minimum(best, np.maximum(d, 0.0))
+    return best
+
+
+def _top_view_in_world(
+    top: Any, truth: dict[str, Any], shift_m: float = 0.0
+) -> dict[int, np.ndarray]:
+    """Each stop's top-view points in the simulator's world, through the true vehicle pose
+    at the stop the view is anchored at (the frame text names it)."""
+    match = re.match(r"base_link at stop (\d+), ", top.frame)
+    assert match is not None, top.frame
+    world_from_base = np.array(truth["stops"][int(match[1])]["world_from_base"]["matrix"])
+    out = {}
+    for stop in top.stops:
+        xy = np.c_[stop.x_m, stop.y_m] + shift_m
+        out[stop.stop] = xy @ world_from_base[:2, :2].T + world_from_base[:2, 3]
+    return out
+
+
+def test_top_view_places_every_stop_on_the_true_scene(matrix_runs: dict[str, Any]) -> None:
+    """Each LiDAR's top view puts every used stop's points on the scene's objects (the
+    poses and the mount are right), the same wall seen from several stops draws one line,
+    and the JSON stays small."""
+    _path, truth, result = matrix_runs["drive-32-left-right"]
+    objects = truth["scene"]["objects"]
+    for lidar in result.lidars:
+        top = lidar.top_view
+        assert top is not None and top.cell_m == pytest.approx(0.2)
+        assert [s.stop for s in top.stops] == [s.stop for s in lidar.stops if s.used]
+        via = "recorded" if lidar.topic == result.reference_topic else "calibrated"
+        assert top.frame.endswith(f"{lidar.frame_id} placed by the {via} extrinsic"), top.frame
+        world = _top_view_in_world(top, truth)
+        for points in top.stops:
+            # One point per 0.2 m cell (the 1 cm rounding may move a point across a border).
+            xy = np.c_[points.x_m, points.y_m]
+            assert np.allclose(xy, np.round(xy, 2))
+            assert len(np.unique(np.floor(xy / 0.2), axis=0)) >= 0.95 * len(xy)
+        for stop, xy in world.items():
+            assert xy.shape[0] >= 50, (lidar.topic, stop)
+            on_scene = float(np.mean(_footprint_distance_m(xy, objects) < 0.05))
+            assert on_scene > 0.97, (lidar.topic, stop, on_scene)
+        # The check can fail: the same points 10 cm off are mostly off the walls.
+        shifted = _top_view_in_world(top, truth, shift_m=0.1)
+        off = np.concatenate([_footprint_distance_m(xy, objects) for xy in shifted.values()])
+        assert float(np.mean(off < 0.05)) < 0.7
+        # Each wall seen from several stops: the stops' mean offsets from its face agree.
+        for wall in (o for o in objects if o["type"] == "wall"):
+            yaw = math.radians(wall["yaw_deg"])
+            thin = 0 if wall["size_m"][0] < wall["size_m"][1] else 1
+            axis = np.array(
+                [math.cos(yaw), math.sin(yaw)] if thin == 0 else [-math.sin(yaw), math.cos(yaw)]
+            )
+            half = wall["size_m"][thin] / 2.0
+            offsets = []
+            for xy in world.values():
+                across = np.abs((xy - np.array(wall["center_m"][:2])) @ axis) - half
+                near = (_footprint_distance_m(xy, [wall]) < 0.3) & (across > -half)
+                if near.sum() >= 20:
+                    offsets.append(float(np.mean(across[near])))
+            if len(offsets) >= 2:
+                assert max(offsets) - min(offsets) < 0.03, (lidar.topic, offsets)
+    size = len(json.dumps(result.to_json_dict()))
+    assert size < 40_000 * len(truth["stops"]), size

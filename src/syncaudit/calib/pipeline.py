@@ -48,8 +48,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import io, posegraph, se3, selection
+from syncaudit.calib import io, posegraph, se3, selection, topview
 from syncaudit.calib.config import CalibConfig
+from syncaudit.calib.ground import remove_ground
 from syncaudit.calib.registration import (
     Alignment,
     Cloud,
@@ -65,6 +66,7 @@ from syncaudit.calib.registration import (
 from syncaudit.calib.result import (
     AlignmentOut,
     CalibrationResult,
+    DegeneracyOut,
     ExtrinsicOut,
     LidarOut,
     Limits,
@@ -72,6 +74,7 @@ from syncaudit.calib.result import (
     PairOut,
     PoseGraphOut,
     StopUse,
+    TopViewOut,
     TransformOut,
     VehicleStopOut,
 )
@@ -299,34 +302,6 @@ def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtr
         if stop in lidar.stop_scan
     ]
     return np.concatenate(parts)
-
-
-_GROUND_BAND_M = 0.3
-_GROUND_KEEP_M = 0.2
-
-
-def remove_ground(points_m: F64) -> F64:
-    """Points of a base-frame cloud that are not on the ground plane.
-
-    The plane is fitted (least squares, then once more on its inliers) to the low points
-    -- within a band above the 5th height percentile -- and points within 0.2 m of it are
-    dropped. Flat ground overlaps itself at any turn, so only the rest can tell turns apart.
-    """
-    if points_m.shape[0] < 50:
-        return points_m
-    z = points_m[:, 2]
-    low = points_m[z < float(np.percentile(z, 5)) + _GROUND_BAND_M]
-    design = np.c_[points_m[:, :2], np.ones(points_m.shape[0])]
-    low_design = np.c_[low[:, :2], np.ones(low.shape[0])]
-    coef: F64 = np.asarray(np.linalg.lstsq(low_design, low[:, 2], rcond=None)[0], dtype=np.float64)
-    for _ in range(2):
-        resid = z - design @ coef
-        inl = np.abs(resid) < _GROUND_KEEP_M
-        if inl.sum() < 3:
-            break
-        coef = np.asarray(np.linalg.lstsq(design[inl], z[inl], rcond=None)[0], dtype=np.float64)
-    keep = np.abs(z - design @ coef) > _GROUND_KEEP_M
-    return points_m[keep] if keep.sum() >= 50 else points_m
 
 
 _MIN_STRUCTURE_OVERLAP = 0.3
@@ -992,7 +967,9 @@ def _stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
     ]
 
 
-def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
+def _lidar_out(
+    lidar: _Lidar, stops: list[selection.VehicleStop], top: TopViewOut | None = None
+) -> LidarOut:
     uses = []
     for stop in stops:
         run = stop.runs.get(lidar.topic)
@@ -1028,7 +1005,39 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
         map_points=lidar.map_points,
         aligned=bool(lidar.graphs),
         reason=lidar.reason,
+        top_view=top,
     )
+
+
+def _top_views(
+    lidars: list[_Lidar],
+    anchors: list[int],
+    extrinsics: list[ExtrinsicOut],
+    recorded: extr.RecordedExtrinsics,
+) -> list[TopViewOut | None]:
+    """Each LiDAR's placed stops from above, in the base frame at the first anchor its
+    pose graph holds; a non-reference LiDAR is mounted through its calibrated extrinsic
+    when there is one, else the recorded one (the frame text says which)."""
+    ref = lidars[0]
+    base_from_ref = recorded.base_from_frame[ref.frame_id]
+    calibrated = {e.topic: np.array(e.result.matrix) for e in extrinsics if e.result is not None}
+    out: list[TopViewOut | None] = []
+    for lidar in lidars:
+        found = next(((a, p) for a in anchors if (p := _poses_at(lidar, a)) is not None), None)
+        if found is None:
+            out.append(None)
+            continue
+        anchor, poses = found
+        if lidar is ref:
+            mount, via = base_from_ref, "the recorded extrinsic"
+        elif lidar.topic in calibrated:
+            mount, via = base_from_ref @ calibrated[lidar.topic], "the calibrated extrinsic"
+        else:
+            mount, via = recorded.base_from_frame[lidar.frame_id], "the recorded extrinsic"
+        scans = {k: lidar.scans[lidar.stop_scan[k]].points_m for k in poses}
+        frame = f"{recorded.base_frame} at stop {anchor}, {lidar.frame_id} placed by {via}"
+        out.append(topview.top_view(scans, poses, mount, frame))
+    return out
 
 
 _DEGENERATE_INFORMATION = 0.02
@@ -1040,16 +1049,17 @@ Measured on the simulator's sessions: ground plus one wall and corridors 0.0005-
 
 def _degenerate_scene(
     lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
-) -> str | None:
-    """Why the scene itself cannot constrain an alignment, or None.
+) -> tuple[str, DegeneracyOut] | None:
+    """Why the scene itself cannot constrain an alignment, and its free direction; or None.
 
     Per stop, the normals of all LiDARs' points (base frame) give sum(n n^T); a direction
     with (almost) no constraint -- along a corridor, along a lone wall over flat ground --
-    makes every alignment slide. Refused before any registration when most stops show it.
+    makes every alignment slide. Refused before any registration when most stops show it;
+    the direction named is the weakest stop's, in the base frame at that stop.
     """
     reg = config.registration
     order = sorted({k for lidar in lidars for k in lidar.stop_scan})
-    free: list[tuple[float, F64]] = []
+    free: list[tuple[float, F64, int]] = []
     for k in order:
         cloud = prepare(
             _vehicle_points(lidars, k, recorded), reg.coarse_voxel_m, 20, reg.num_threads
@@ -1058,18 +1068,25 @@ def _degenerate_scene(
         if normals.shape[0] < 10:
             continue
         values, vectors = np.linalg.eigh(normals.T @ normals / normals.shape[0])
-        free.append((float(values[0]), vectors[:, 0]))
-    weak = [(v, d) for v, d in free if v < _DEGENERATE_INFORMATION]
+        free.append((float(values[0]), vectors[:, 0], k))
+    weak = [w for w in free if w[0] < _DEGENERATE_INFORMATION]
     if not free or len(weak) * 2 <= len(free):
         return None
-    value, direction = min(weak, key=lambda w: w[0])
+    value, direction, stop = min(weak, key=lambda w: w[0])
     direction = direction if direction[int(np.argmax(np.abs(direction)))] >= 0 else -direction
     x, y, z = (float(v) for v in direction)
-    return (
+    reason = (
         f"degenerate scene: at {len(weak)} of {len(free)} stops nothing constrains translation "
         f"along ({x:.2f}, {y:.2f}, {z:.2f}) in {recorded.base_frame} (information {value:.4f} "
         f"< {_DEGENERATE_INFORMATION}): a corridor or a lone wall over flat ground; "
         "calibrate where the LiDARs see structure facing several directions"
+    )
+    return reason, DegeneracyOut(
+        kind="translation",
+        direction=(x, y, z),
+        frame=f"{recorded.base_frame} at stop {stop}",
+        information=value,
+        limit=_DEGENERATE_INFORMATION,
     )
 
 
@@ -1082,8 +1099,11 @@ def _refusal(
     notes: list[str],
     timer: _Timer,
     config: CalibConfig,
+    *,
+    degeneracy: DegeneracyOut | None = None,
 ) -> CalibrationResult:
-    """A not-calibratable result for a log that has scans but cannot be calibrated."""
+    """A not-calibratable result for a log that has scans but cannot be calibrated
+    (`degeneracy`: the scene's free direction when that is why)."""
     for lidar in lidars:
         lidar.reason = why
     ref = lidars[0]
@@ -1122,6 +1142,7 @@ def _refusal(
         reference_stop=None,
         anchor_stops=[],
         limits=_limits_out(config),
+        degeneracy=degeneracy,
         stops=_stops_out(stops),
         lidars=[_lidar_out(lidar, stops) for lidar in lidars],
         extrinsics=extrinsics,
@@ -1150,7 +1171,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
     with timer.stage("degeneracy"):
-        refusal = _degenerate_scene(lidars, recorded, config)
+        degenerate = _degenerate_scene(lidars, recorded, config)
+    refusal, degeneracy = degenerate if degenerate is not None else (None, None)
     short = [
         f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
         for lidar in lidars
@@ -1162,7 +1184,9 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
             f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
         )
     if refusal is not None:
-        return _refusal(path, lidars, recorded, stops, refusal, notes, timer, config)
+        return _refusal(
+            path, lidars, recorded, stops, refusal, notes, timer, config, degeneracy=degeneracy
+        )
     reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         odometry = io.read_odometry(path, recorded.base_frame)
@@ -1180,6 +1204,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         for lidar in lidars:
             local = _map_at(lidar, reference, config)
             lidar.map_points = 0 if local is None else local[0].size
+    with timer.stage("top_views"):
+        tops = _top_views(lidars, anchors, extrinsics, recorded)
     limits = config.validation
     for ext in extrinsics:
         spread_deg, spread_cm = ext.estimate_spread_deg, ext.estimate_spread_cm
@@ -1212,7 +1238,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         anchor_stops=anchors,
         limits=_limits_out(config),
         stops=_stops_out(stops),
-        lidars=[_lidar_out(lidar, stops) for lidar in lidars],
+        lidars=[_lidar_out(lidar, stops, top) for lidar, top in zip(lidars, tops, strict=True)],
         extrinsics=extrinsics,
         notes=notes,
         timings_s=dict(timer.seconds),
