@@ -386,18 +386,19 @@ def test_top_view_places_every_stop_on_the_true_scene(matrix_runs: dict[str, Any
         assert top.frame.endswith(f"{lidar.frame_id} placed by the {via} extrinsic"), top.frame
         world = _top_view_in_world(top, truth)
         for points in top.stops:
-            # One point per 0.2 m cell (the 1 cm rounding may move a point across a border).
-            xy = np.c_[points.x_m, points.y_m]
-            assert np.allclose(xy, np.round(xy, 2))
-            assert len(np.unique(np.floor(xy / 0.2), axis=0)) >= 0.95 * len(xy)
+            # Whole centimetres, one point per 0.2 m cell.
+            xy_cm = np.round(np.c_[points.x_m, points.y_m] * 100.0)
+            assert np.allclose(xy_cm / 100.0, np.c_[points.x_m, points.y_m], rtol=0, atol=1e-9)
+            cells = np.floor_divide(xy_cm.astype(np.int64), 20)
+            assert len(np.unique(cells, axis=0)) == len(cells)
         for stop, xy in world.items():
             assert xy.shape[0] >= 50, (lidar.topic, stop)
             on_scene = float(np.mean(_footprint_distance_m(xy, objects) < 0.05))
             assert on_scene > 0.97, (lidar.topic, stop, on_scene)
-        # The check can fail: the same points 10 cm off are mostly off the walls.
-        shifted = _top_view_in_world(top, truth, shift_m=0.1)
+        # The check can fail: the same points 5 cm off (in x and y) are not on the scene.
+        shifted = _top_view_in_world(top, truth, shift_m=0.05)
         off = np.concatenate([_footprint_distance_m(xy, objects) for xy in shifted.values()])
-        assert float(np.mean(off < 0.05)) < 0.7
+        assert float(np.mean(off < 0.05)) < 0.9
         # Each wall seen from several stops: the stops' mean offsets from its face agree.
         for wall in (o for o in objects if o["type"] == "wall"):
             yaw = math.radians(wall["yaw_deg"])
@@ -414,5 +415,6 @@ def test_top_view_places_every_stop_on_the_true_scene(matrix_runs: dict[str, Any
                     offsets.append(float(np.mean(across[near])))
             if len(offsets) >= 2:
                 assert max(offsets) - min(offsets) < 0.03, (lidar.topic, offsets)
-    size = len(json.dumps(result.to_json_dict()))
-    assert size < 40_000 * len(truth["stops"]), size
+    # The written file (indented): measured 198 KB for these 8 stops, 25 KB per stop.
+    size = len(json.dumps(result.to_json_dict(), indent=2))
+    assert size < 35_000 * len(truth["stops"]), size

@@ -23,18 +23,21 @@ F64 = NDArray[np.float64]
 
 TOP_VIEW_CELL_M = 0.2
 """Side of the square cell one top-view point stands for."""
-_ROUND_DECIMALS = 2
+_RESOLUTION_M = 0.01
 """x/y are rounded to 1 cm (far below the cell size; it only shortens the JSON)."""
 
 
 def decimate_xy(xy_m: F64, cell_m: float) -> F64:
-    """One point per `cell_m` x `cell_m` square: the first point (in input order) of each
-    occupied cell, in that order."""
+    """One point per `cell_m` x `cell_m` square (cells aligned on multiples of `cell_m`),
+    rounded to 1 cm: the first point (in input order) of each occupied cell, in that
+    order. Cells are taken on the rounded centimetres, in integers, so two points drawn
+    never share a cell."""
     if xy_m.shape[0] == 0:
         return np.zeros((0, 2))
-    cells = np.floor(xy_m / cell_m).astype(np.int64)
+    xy_cm = np.round(xy_m / _RESOLUTION_M).astype(np.int64)
+    cells = np.floor_divide(xy_cm, max(1, round(cell_m / _RESOLUTION_M)))
     _unique, first = np.unique(cells, axis=0, return_index=True)
-    return xy_m[np.sort(first)]
+    return np.asarray(xy_cm[np.sort(first)] * _RESOLUTION_M, dtype=np.float64)
 
 
 def top_view(
@@ -59,6 +62,6 @@ def top_view(
         # The ground is fitted in the stop's own base frame (z up wherever the vehicle stood).
         local = se3.apply(base_from_lidar, scans_m[stop])
         keep = off_ground(local)
-        xy = np.round(decimate_xy(placed[keep, :2], cell_m), _ROUND_DECIMALS)
+        xy = np.round(decimate_xy(placed[keep, :2], cell_m), 2)
         stops.append(StopPointsOut(stop=stop, x_m=xy[:, 0].tolist(), y_m=xy[:, 1].tolist()))
     return TopViewOut(frame=frame, cell_m=cell_m, stops=stops)
