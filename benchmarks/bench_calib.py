@@ -17,6 +17,7 @@ is printed because on a shared machine wall time also measures the other users.
 
     python benchmarks/bench_calib.py                       # every case, seeds 0-9
     python benchmarks/bench_calib.py --cases drive-64-bumper --seeds 3
+    python benchmarks/bench_calib.py --jobs 2               # two sessions at once
 
 Needs the `calib` extra (`pip install -e '.[calib]'`).
 """
@@ -24,6 +25,7 @@ Needs the `calib` extra (`pip install -e '.[calib]'`).
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import platform
 import resource
@@ -31,6 +33,7 @@ import statistics
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -109,20 +112,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", nargs="+", default=list(MATRIX), choices=list(MATRIX))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 per case")
     parser.add_argument("--stops", type=int, default=12)
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="sessions calibrated at once (each in its own process); above 1 the sessions "
+        "share the cores, so wall seconds grow; CPU seconds stay each session's own",
+    )
     args = parser.parse_args(argv)
     print(
         f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "
         f"load average {_load()} (1/5/15 min); {args.stops} stops, two LiDARs, "
-        "1 cm range noise",
+        f"1 cm range noise; {args.jobs} session(s) at once",
         flush=True,
     )
     rows = []
     ok = True
     with tempfile.TemporaryDirectory(prefix="bench_calib_") as tmp:
         # Seeds outer, cases inner: an interrupted run still covers every case.
-        for seed in range(args.seeds):
-            for case in args.cases:
-                row = _run(Path(tmp), case, seed, args.stops)
+        runs = [(case, seed) for seed in range(args.seeds) for case in args.cases]
+        context = multiprocessing.get_context("spawn")  # small_gicp's OpenMP must not fork
+        with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
+            futures = [pool.submit(_run, Path(tmp), case, seed, args.stops) for case, seed in runs]
+            for (case, seed), future in zip(runs, futures, strict=True):
+                row = future.result()
                 rows.append(row)
                 err = (
                     f"{row['rot_deg']:.4f} deg {row['trans_cm']:.3f} cm"
