@@ -18,6 +18,8 @@ is printed because on a shared machine wall time also measures the other users.
     python benchmarks/bench_calib.py                       # every case, seeds 0-9
     python benchmarks/bench_calib.py --cases drive-64-bumper --seeds 3
     python benchmarks/bench_calib.py --jobs 2               # two sessions at once
+    python benchmarks/bench_calib.py --log-dir D --simulate-only   # write the sessions once
+    python benchmarks/bench_calib.py --log-dir D                   # then time on them
 
 Needs the `calib` extra (`pip install -e '.[calib]'`).
 """
@@ -25,6 +27,7 @@ Needs the `calib` extra (`pip install -e '.[calib]'`).
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing
 import os
 import platform
@@ -35,13 +38,13 @@ import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from syncaudit.calib import CalibConfig, calibrate_log, se3
 from syncaudit.calib.config import calib_scene_config
-from syncaudit.simulate.calib_session import MATRIX, simulate_calib_session
+from syncaudit.simulate.calib_session import MATRIX, simulate_calib_session, truth_path
 
 TARGET_S = 30.0
 REFUSAL_TARGET_S = 10.0
@@ -61,10 +64,21 @@ def _cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _run(root: Path, case: str, seed: int, stops: int) -> dict[str, Any]:
-    path = root / f"{case}_s{seed}.mcap"
-    spec = MATRIX[case]
-    truth = simulate_calib_session(path, calib_scene_config(seed=seed, n_stops=stops, **spec))
+def _session(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[str, Any]:
+    """Simulate one session (not timed) and return its truth; with `keep`, a session left
+    in `root` by an earlier run with the same configuration is reused."""
+    path = root / f"{case}_s{seed}_{stops}stops.mcap"
+    config = calib_scene_config(seed=seed, n_stops=stops, **MATRIX[case])
+    if keep and path.exists() and truth_path(path).exists():
+        truth: dict[str, Any] = json.loads(truth_path(path).read_text())
+        if truth["config"] == json.loads(json.dumps(config.model_dump(mode="json"))):
+            return truth
+    return simulate_calib_session(path, config)
+
+
+def _run(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[str, Any]:
+    path = root / f"{case}_s{seed}_{stops}stops.mcap"
+    truth = _session(root, case, seed, stops, keep=keep)
     wall0, cpu0 = time.perf_counter(), _cpu_s()
     result = calibrate_log(path, CalibConfig())
     wall, cpu = time.perf_counter() - wall0, _cpu_s() - cpu0
@@ -85,12 +99,15 @@ def _run(root: Path, case: str, seed: int, stops: int) -> dict[str, Any]:
         true = np.array(rear[f"true_{truth['reference_lidar']}_from_lidar"]["matrix"])
         rot_deg, trans_m = se3.transform_difference(true, np.array(ext.result.matrix))
         row["rot_deg"], row["trans_cm"] = rot_deg, trans_m * 100.0
-    for extra in path.parent.glob(path.name + "*"):
-        extra.unlink()
+    if not keep:
+        for extra in path.parent.glob(path.name + "*"):
+            extra.unlink()
     return row
 
 
-def _refusal(root: Path, scene: str) -> tuple[float, float, str, bool]:
+def _refusal(
+    root: Path, scene: Literal["ground_and_wall", "corridor"]
+) -> tuple[float, float, str, bool]:
     """Wall and CPU seconds of refusing a degenerate 12-stop session, its reason, and
     whether the result names the free direction (structured `degeneracy`)."""
     path = root / f"{scene}.mcap"
@@ -113,6 +130,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 per case")
     parser.add_argument("--stops", type=int, default=12)
     parser.add_argument(
+        "--log-dir",
+        type=Path,
+        help="keep the simulated sessions here and reuse them in later runs (default: a "
+        "temporary folder, removed)",
+    )
+    parser.add_argument(
+        "--simulate-only",
+        action="store_true",
+        help="only write the sessions into --log-dir (no calibration, no table)",
+    )
+    parser.add_argument(
         "--jobs",
         type=int,
         default=1,
@@ -128,12 +156,25 @@ def main(argv: list[str] | None = None) -> int:
     )
     rows = []
     ok = True
+    if args.simulate_only and args.log_dir is None:
+        parser.error("--simulate-only needs --log-dir")
     with tempfile.TemporaryDirectory(prefix="bench_calib_") as tmp:
+        root = args.log_dir or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        keep = args.log_dir is not None
         # Seeds outer, cases inner: an interrupted run still covers every case.
         runs = [(case, seed) for seed in range(args.seeds) for case in args.cases]
         context = multiprocessing.get_context("spawn")  # small_gicp's OpenMP must not fork
         with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
-            futures = [pool.submit(_run, Path(tmp), case, seed, args.stops) for case, seed in runs]
+            if args.simulate_only:
+                sims = [pool.submit(_session, root, c, s, args.stops, keep=True) for c, s in runs]
+                for sim in sims:
+                    sim.result()
+                print(f"{len(runs)} sessions in {root}")
+                return 0
+            futures = [
+                pool.submit(_run, root, case, seed, args.stops, keep=keep) for case, seed in runs
+            ]
             for (case, seed), future in zip(runs, futures, strict=True):
                 row = future.result()
                 rows.append(row)
@@ -147,7 +188,10 @@ def main(argv: list[str] | None = None) -> int:
                     f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f}",
                     flush=True,
                 )
-        refusals = {scene: _refusal(Path(tmp), scene) for scene in ("ground_and_wall", "corridor")}
+        refusals = {
+            "ground_and_wall": _refusal(Path(tmp), "ground_and_wall"),
+            "corridor": _refusal(Path(tmp), "corridor"),
+        }
     print()
     print(
         f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
