@@ -127,7 +127,10 @@ def _load() -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--cases", nargs="+", default=list(MATRIX), choices=list(MATRIX))
-    parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 per case")
+    parser.add_argument("--seeds", type=int, default=10, help="N seeds per case")
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="the seeds are K..K+N-1 (run a matrix in parts)"
+    )
     parser.add_argument("--stops", type=int, default=12)
     parser.add_argument(
         "--log-dir",
@@ -163,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
         root.mkdir(parents=True, exist_ok=True)
         keep = args.log_dir is not None
         # Seeds outer, cases inner: an interrupted run still covers every case.
-        runs = [(case, seed) for seed in range(args.seeds) for case in args.cases]
+        seeds = range(args.first_seed, args.first_seed + args.seeds)
+        runs = [(case, seed) for seed in seeds for case in args.cases]
         context = multiprocessing.get_context("spawn")  # small_gicp's OpenMP must not fork
         with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
             if args.simulate_only:
