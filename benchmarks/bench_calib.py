@@ -139,6 +139,11 @@ def main(argv: list[str] | None = None) -> int:
         "temporary folder, removed)",
     )
     parser.add_argument(
+        "--skip-refusals",
+        action="store_true",
+        help="leave out the corridor and ground-plus-wall refusals (a part of a split run)",
+    )
+    parser.add_argument(
         "--simulate-only",
         action="store_true",
         help="only write the sessions into --log-dir (no calibration, no table)",
@@ -192,10 +197,14 @@ def main(argv: list[str] | None = None) -> int:
                     f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f}",
                     flush=True,
                 )
-        refusals = {
-            "ground_and_wall": _refusal(Path(tmp), "ground_and_wall"),
-            "corridor": _refusal(Path(tmp), "corridor"),
-        }
+        refusals = (
+            {}
+            if args.skip_refusals
+            else {
+                "ground_and_wall": _refusal(Path(tmp), "ground_and_wall"),
+                "corridor": _refusal(Path(tmp), "corridor"),
+            }
+        )
     print()
     print(
         f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
