@@ -31,6 +31,7 @@ import json
 import multiprocessing
 import os
 import platform
+import re
 import resource
 import statistics
 import sys
@@ -124,6 +125,66 @@ def _load() -> str:
     return f"{one:.1f} {five:.1f} {fifteen:.1f}"
 
 
+def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
+    """Print the per-case table; True when every case met its targets."""
+    ok = True
+    print(
+        f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
+        f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s}  target  verdict"
+    )
+    for case in cases:
+        mine = [r for r in rows if r["case"] == case]
+        done = [r for r in mine if r["rot_deg"] is not None]
+        lim_rot, lim_cm = tolerance(MATRIX[case]["beams"])
+        rot = [r["rot_deg"] for r in done] or [float("nan")]
+        cm = [r["trans_cm"] for r in done] or [float("nan")]
+        walls = [r["wall_s"] for r in mine]
+        cpus = [r["cpu_s"] for r in mine]
+        good = (
+            len(done) == len(mine)
+            and max(rot) <= lim_rot
+            and max(cm) <= lim_cm
+            and max(cpus) < TARGET_S
+        )
+        ok &= good
+        print(
+            f"{case:24s} {len(mine):3d} {max(rot):8.4f} {statistics.median(rot):8.4f} "
+            f"{max(cm):7.3f} {statistics.median(cm):7.3f} {max(walls):8.1f} "
+            f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f}  "
+            f"{lim_rot}/{lim_cm}  {'OK' if good else 'MISSED'}"
+            + ("" if len(done) == len(mine) else f" ({len(mine) - len(done)} not calibrated)")
+        )
+    return ok
+
+
+_ROW = re.compile(
+    r"^(?P<case>\S+) seed (?P<seed>\d+): wall +(?P<wall>[\d.]+) s, cpu +(?P<cpu>[\d.]+) s; "
+    r"(?:(?P<rot>[\d.]+) deg (?P<cm>[\d.]+) cm|not calibrated: (?P<reason>.*?)); stops used"
+)
+
+
+def _rows_from(paths: list[Path]) -> list[dict[str, Any]]:
+    """The per-session lines of earlier runs' output (a matrix run in parts)."""
+    rows = []
+    for path in paths:
+        for line in path.read_text().splitlines():
+            m = _ROW.match(line)
+            if m is None:
+                continue
+            rows.append(
+                {
+                    "case": m["case"],
+                    "seed": int(m["seed"]),
+                    "wall_s": float(m["wall"]),
+                    "cpu_s": float(m["cpu"]),
+                    "rot_deg": None if m["rot"] is None else float(m["rot"]),
+                    "trans_cm": None if m["cm"] is None else float(m["cm"]),
+                    "reason": m["reason"],
+                }
+            )
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--cases", nargs="+", default=list(MATRIX), choices=list(MATRIX))
@@ -155,7 +216,19 @@ def main(argv: list[str] | None = None) -> int:
         help="sessions calibrated at once (each in its own process); above 1 the sessions "
         "share the cores, so wall seconds grow; CPU seconds stay each session's own",
     )
+    parser.add_argument(
+        "--table-from",
+        type=Path,
+        nargs="+",
+        help="print the table of the sessions listed in earlier runs' output (no new run)",
+    )
     args = parser.parse_args(argv)
+    if args.table_from:
+        rows_read = _rows_from(args.table_from)
+        seen = sorted({r["seed"] for r in rows_read})
+        print(f"{len(rows_read)} sessions (seeds {seen}) from {len(args.table_from)} run(s)")
+        cases = [c for c in args.cases if any(r["case"] == c for r in rows_read)]
+        return 0 if _table(rows_read, cases) else 1
     print(
         f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "
         f"load average {_load()} (1/5/15 min); {args.stops} stops, two LiDARs, "
@@ -163,7 +236,6 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     rows = []
-    ok = True
     if args.simulate_only and args.log_dir is None:
         parser.error("--simulate-only needs --log-dir")
     with tempfile.TemporaryDirectory(prefix="bench_calib_") as tmp:
@@ -206,32 +278,7 @@ def main(argv: list[str] | None = None) -> int:
             }
         )
     print()
-    print(
-        f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
-        f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s}  target  verdict"
-    )
-    for case in args.cases:
-        mine = [r for r in rows if r["case"] == case]
-        done = [r for r in mine if r["rot_deg"] is not None]
-        lim_rot, lim_cm = tolerance(MATRIX[case]["beams"])
-        rot = [r["rot_deg"] for r in done] or [float("nan")]
-        cm = [r["trans_cm"] for r in done] or [float("nan")]
-        walls = [r["wall_s"] for r in mine]
-        cpus = [r["cpu_s"] for r in mine]
-        good = (
-            len(done) == len(mine)
-            and max(rot) <= lim_rot
-            and max(cm) <= lim_cm
-            and max(cpus) < TARGET_S
-        )
-        ok &= good
-        print(
-            f"{case:24s} {len(mine):3d} {max(rot):8.4f} {statistics.median(rot):8.4f} "
-            f"{max(cm):7.3f} {statistics.median(cm):7.3f} {max(walls):8.1f} "
-            f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f}  "
-            f"{lim_rot}/{lim_cm}  {'OK' if good else 'MISSED'}"
-            + ("" if len(done) == len(mine) else f" ({len(mine) - len(done)} not calibrated)")
-        )
+    ok = _table(rows, args.cases)
     for scene, (wall, cpu, reason, named) in refusals.items():
         good = cpu < REFUSAL_TARGET_S and "degenerate scene" in reason and named
         ok &= good
