@@ -91,6 +91,7 @@ def _run(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[st
         "calibratable": result.calibratable,
         "reason": result.reason,
         "stops_used": [sum(s.used for s in lidar.stops) for lidar in result.lidars],
+        "cross_check": [n for n in result.notes if n.startswith("cross-LiDAR check")],
         "rot_deg": None,
         "trans_cm": None,
     }
@@ -269,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
                     f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f}",
                     flush=True,
                 )
+                for note in row["cross_check"]:
+                    print(f"    {note}", flush=True)
         refusals = (
             {}
             if args.skip_refusals
