@@ -44,10 +44,17 @@ def _frame_time_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
     return np.where(present(start), start, header)
 
 
-def _trigger_time_ns(triggers: pd.DataFrame) -> NDArray[np.int64]:
-    """When a trigger started its exposure: checkpoint 248, else 246."""
+def _trigger_time_ns(triggers: pd.DataFrame, *, at_trigger: bool = False) -> NDArray[np.int64]:
+    """When a trigger started its exposure: checkpoint 248, else 246.
+
+    `at_trigger`: checkpoint 246 wherever recorded, to pair with frames whose time is the
+    trigger itself (header stamps marking the trigger, before t4 is known).
+    """
     start = stamps_ns(triggers, "exposure_start_ns")
-    return start if present(start).any() else stamps_ns(triggers, "camera_sensor_ns")
+    sensor = stamps_ns(triggers, "camera_sensor_ns")
+    if at_trigger and present(sensor).any():
+        return sensor
+    return start if present(start).any() else sensor
 
 
 def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None:
@@ -104,12 +111,16 @@ def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.DataFrame, str | None]:
+def pair_triggers(
+    frames: pd.DataFrame, triggers: pd.DataFrame, *, trigger_stamped: bool = False
+) -> tuple[pd.DataFrame, str | None]:
     """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
 
     By sequence number where `sequence_problem` finds none, else by time: the latest
     trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
-    where it has no exposure metadata).
+    where it has no exposure metadata). `trigger_stamped`: the frames' times are their
+    triggers (checkpoint 246, the rig's `stamp: trigger`), so they pair with the
+    triggers' 246 rather than their 248, which lies t4 after.
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
     triggers = _unset_as_missing(triggers)
@@ -131,7 +142,7 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.Data
     when = _frame_time_ns(frames)
     left = frames.assign(_t=when, _row=np.arange(len(frames)))
     timed = left[present(when)].sort_values("_t", kind="stable")
-    trig_when = _trigger_time_ns(triggers)
+    trig_when = _trigger_time_ns(triggers, at_trigger=trigger_stamped)
     right = (
         trig.drop(columns="trig_frame_sequence")
         .assign(_t=trig_when)[present(trig_when)]
