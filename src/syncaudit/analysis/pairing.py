@@ -21,6 +21,10 @@ from syncaudit.columns.lidar import RevolutionColumns
 
 PAIR_TOLERANCE_NS = 50_000_000
 """A trigger belongs to a frame when it precedes the exposure by less than this."""
+PAIR_LEAD_NS = 1_000_000
+"""...or follows it by at most this: a frame's exposure start derived from its header stamp
+and a rounded exposure (ImageMetaData holds whole microseconds: `exposure_end` stamps give a
+start up to 0.5 us early) may fall just before the trigger's own record of it (248)."""
 SEQUENCE_AGREEMENT = 0.9
 """Sequence pairing is trusted when this share of its pairs also agree in time."""
 PHASE_FROM_TRIGGER = "trigger packet"
@@ -118,9 +122,10 @@ def pair_triggers(
 
     By sequence number where `sequence_problem` finds none, else by time: the latest
     trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
-    where it has no exposure metadata). `trigger_stamped`: the frames' times are their
-    triggers (checkpoint 246, the rig's `stamp: trigger`), so they pair with the
-    triggers' 246 rather than their 248, which lies t4 after.
+    where it has no exposure metadata), or at most `PAIR_LEAD_NS` after it.
+    `trigger_stamped`: the frames' times are their triggers (checkpoint 246, the rig's
+    `stamp: trigger`), so they pair with the triggers' 246 rather than their 248, which
+    lies t4 after.
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
     triggers = _unset_as_missing(triggers)
@@ -140,7 +145,8 @@ def pair_triggers(
     if frames["frame_sequence"].notna().any() and triggers["frame_sequence"].notna().any():
         warning = f"frames paired with triggers by time, not sequence number: {problem}"
     when = _frame_time_ns(frames)
-    left = frames.assign(_t=when, _row=np.arange(len(frames)))
+    lead = np.where(present(when), when + PAIR_LEAD_NS, when)
+    left = frames.assign(_t=lead, _row=np.arange(len(frames)))
     timed = left[present(when)].sort_values("_t", kind="stable")
     trig_when = _trigger_time_ns(triggers, at_trigger=trigger_stamped)
     right = (
@@ -148,7 +154,8 @@ def pair_triggers(
         .assign(_t=trig_when)[present(trig_when)]
         .sort_values("_t", kind="stable")
     )
-    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=PAIR_TOLERANCE_NS)
+    window = PAIR_TOLERANCE_NS + PAIR_LEAD_NS
+    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=window)
     untimed = left[~present(when)]
     if not untimed.empty:
         merged = pd.concat([merged, untimed], ignore_index=True)
