@@ -1225,14 +1225,16 @@ def sync_sim_config(
     clock_offset_s: float = 0.0,
     compressed: bool = False,
     controller: bool = False,
+    stamp: str = "exposure_start",
     **settings: Any,
 ) -> SyncSimConfig:
     """A SyncSimConfig from the settings `syncaudit simulate sync` offers.
 
     `lidar` accepts the names users write (`XT32`, `vlp-16`); `tunnel=False` keeps the
     exposure bright all along; `delay_error_us` offsets every camera's applied delay from the
-    ideal; `clock_offset_s` is the LiDAR clock minus the host clock. Every other keyword is a
-    SyncSimConfig field (`seed`, `duration_s`, `log_format`, `packet_drop_fraction`, ...).
+    ideal; `clock_offset_s` is the LiDAR clock minus the host clock; `stamp` is what every
+    camera's image header stamp marks. Every other keyword is a SyncSimConfig field (`seed`,
+    `duration_s`, `log_format`, `packet_drop_fraction`, `shared_topics`, ...).
 
     Raises:
         ConfigError: naming the first setting out of range.
@@ -1249,8 +1251,12 @@ def sync_sim_config(
             "lidar_model": lidar_model(lidar),
             "clock_offset_ns": round(clock_offset_s * 1e9),
             "light": light,
-            "cameras": [
-                camera.model_copy(update={"delay_error_us": delay_error_us})
+            "cameras": [  # as mappings, so that the settings are validated
+                {
+                    **camera.model_dump(),
+                    "delay_error_us": delay_error_us,
+                    "stamp_semantics": stamp,
+                }
                 for camera in base.cameras
             ],
             "image_kind": "compressed" if compressed else "raw",
