@@ -67,9 +67,11 @@ class CameraConfig(_Strict):
     """What the header stamp of the camera's images (and of exposure metadata without an
     explicit start: flir ImageMetaData, WFOVImage) marks. Drivers differ:
     'exposure_start' (the default: the sensor's start-of-exposure timestamp, what the
-    method's checkpoint 248 is), 'exposure_middle' (NVIDIA DriveWorks' moeTimestampUs),
+    method's checkpoint 248 is), 'exposure_middle' (NVIDIA DriveWorks' moeTimestampUs;
+    ntnu-arl's blackfly_nodelet: its end-of-exposure event less half the exposure),
     'exposure_end' (FlyCapture's 1394 cycle time, latched when the shutter closes),
-    'trigger' (the trigger reaching the camera, checkpoint 246). A driver stamping on
+    'trigger' (the trigger reaching the camera, checkpoint 246; the exposure starts t4
+    later: the trigger record's 248, else analysis.assumed_t4_us). A driver stamping on
     arrival at the host (spinnaker_camera_driver without adjust_timestamp) has none of
     these: give it exposure metadata with a start, or expect errors of the readout time."""
     assumed_exposure_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
