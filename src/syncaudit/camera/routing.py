@@ -117,8 +117,8 @@ class _SharedTopic:
                     f"rig there (the rig's frame_ids: {claimed}); they were not used"
                 )
         for builder in self.builders:
-            if self.routed[builder.camera.name] or self.kind == "trigger":
-                continue
+            if not readable or self.routed[builder.camera.name] or self.kind == "trigger":
+                continue  # an empty topic says nothing of the cameras sharing it
             others = ", ".join(b.camera.name for b in self.builders if b is not builder)
             if builder.camera.frame_id is None:
                 why = "the rig gives the camera no frame_id to find its messages by"
