@@ -140,13 +140,14 @@ class Rig(_Strict):
                 for cam in cams:
                     if cam.frame_id is None:
                         continue
-                    if cam.frame_id in seen:
+                    frame = cam.frame_id.lstrip("/")  # ROS 1 "/cam" is tf2's "cam"
+                    if frame in seen:
                         raise ValueError(
-                            f"cameras {seen[cam.frame_id]!r} and {cam.name!r} share {key} "
+                            f"cameras {seen[frame]!r} and {cam.name!r} share {key} "
                             f"{topic} and frame_id {cam.frame_id!r}: their messages cannot "
                             "be told apart; give each the header.frame_id its messages carry"
                         )
-                    seen[cam.frame_id] = cam.name
+                    seen[frame] = cam.name
         return self
 
 

@@ -109,3 +109,11 @@ def test_a_topic_of_one_camera_takes_every_row_as_it_is() -> None:
     router.feed("image", "/solo/image", _image("something_else"))
     router.feed("image", "/solo/image", _image(""))
     assert router.finish() == [] and len(builder.images) == 2
+
+
+def test_a_leading_slash_of_ros1_frame_ids_is_ignored() -> None:
+    router, (a, b) = _router("a_optical", "/b_optical")
+    router.feed("image", "/shared/image", _image("/a_optical"))
+    router.feed("image", "/shared/image", _image("b_optical"))
+    assert router.finish() == []
+    assert (len(a.images), len(b.images)) == (1, 1)

@@ -5,7 +5,8 @@ spinnaker_camera_driver, Autoware's `/sensing/camera/cameraN/...`) or one topic 
 cameras, each message naming its camera only in `header.frame_id` (a driver node serving a
 multi-camera board). A row of a topic one camera owns goes to that camera. A row of a
 shared topic goes to the camera its message names: the `camera` field of the syncaudit
-types (the rig's camera name), else its `header.frame_id` (the rig camera's `frame_id`).
+types (the rig's camera name), else its `header.frame_id` (the rig camera's `frame_id`; a
+leading "/", which ROS 1 tf allowed and tf2 strips, is ignored).
 
 A row that names no camera cannot be told apart: image and exposure rows are then left out
 (each would be a frame of every camera) with one warning per topic, and the cameras that
@@ -67,7 +68,10 @@ class _SharedTopic:
         if name:
             target = next((b for b in self.builders if b.camera.name == name), None)
         if target is None and frame:
-            target = next((b for b in self.builders if b.camera.frame_id == frame), None)
+            bare = frame.lstrip("/")
+            target = next(
+                (b for b in self.builders if (b.camera.frame_id or "").lstrip("/") == bare), None
+            )
         if target is not None:
             _rows_of(target, self.kind).append(row)
             self.routed[target.camera.name] += 1
