@@ -89,7 +89,7 @@ def header_frame_id(msg: RawMessage) -> str:
     """
     data = msg.data
     if msg.encoding == "ros1":
-        unpack = _ROS1_SEQ.unpack_from  # little-endian u32 after seq + stamp
+        unpack = _U32.unpack_from  # ROS 1 is little-endian; strings have no terminator
         terminator = 0
     else:
         little = bytes(data[1:2]) in (b"\x01", b"\x03")
@@ -158,6 +158,7 @@ def _named_camera(msg: RawMessage, m: Any, camera: str) -> str:
 
 
 def _frame_id(m: Any) -> str:
+    """`header.frame_id` of a deserialised message ("" where it has no header)."""
     header = getattr(m, "header", None)
     return str(getattr(header, "frame_id", "")) if header is not None else ""
 
@@ -168,8 +169,8 @@ def exposure_row(
     """A FRAME_COLUMNS row from one deserialised exposure message; DamagedRow if unreadable.
 
     Its `camera` is the one the message names (CameraExposure.camera), else `camera`; its
-    exposure start follows `semantics` where the message states none (see
-    `restamp_exposure_start`).
+    exposure start follows `semantics` where the message states none (the builder derives
+    it again with its own camera's `stamp`: a shared topic's cameras may differ).
     """
     damage = getattr(m, "damaged", None)
     if damage is not None:
