@@ -22,7 +22,16 @@ import pytest
 
 from .test_gate import POLICY
 
-ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07")
+REDRAW = re.compile(r"\r|\x1b\[2K")
+"""Carriage return and erase-line: where the live display starts drawing a line again."""
+
+
+def _screen_lines(raw: str) -> str:
+    """What was drawn, one drawn line per text line (redraws on lines of their own)."""
+    return ANSI.sub("", REDRAW.sub("\n", raw))
+
+
 WIDTH = 160
 
 
@@ -78,7 +87,7 @@ def test_a_terminal_gets_the_rich_bar_with_per_log_status(
     code, raw = _run_in_pty(_argv(tmp_path), small_fleet.parent)
     assert code == 10, raw
     assert "\x1b[" in raw  # styled and redrawn: a live display, not plain lines
-    screen = ANSI.sub("", raw)
+    screen = _screen_lines(raw)
     car1 = "uploads/car1/vlp16_three_cameras.mcap"
     car2 = "uploads/car2/pandar40p_adaptive.mcap"
     # Per-log status above the bar for every log that did not pass ...
