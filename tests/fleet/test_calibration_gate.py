@@ -90,11 +90,13 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return {"root": root, "good": good, "bad": bad, "drive": drive, "truths": truths}
 
 
-def test_sessions_are_judged_on_their_calibration_checks(sessions: dict[str, Any]) -> None:
+def test_sessions_are_judged_on_their_calibration_checks(
+    sessions: dict[str, Any], tmp_path: Path
+) -> None:
     run = run_gate(
         [str(sessions["good"]), str(sessions["bad"]), str(sessions["drive"])],
         parse_policy(POLICY, "p"),
-        GateOptions(jobs=2),
+        GateOptions(jobs=2, html_dir=tmp_path / "html"),
     )
     logs = {Path(log.path).name: log for log in run.logs}
     good, bad = logs["session_good.mcap"], logs["session_bad.mcap"]
@@ -124,6 +126,12 @@ def test_sessions_are_judged_on_their_calibration_checks(sessions: dict[str, Any
     failed = [(c.scope, c.check) for c in drive.failed_checks]
     assert failed == [("calibration", "rotation_deg"), ("calibration", "translation_cm")]
     assert drive.verdict == "fail"
+
+    # Reports: a session's holds its calibration; the drive log's its audit and calibration.
+    session_page = Path(good.report or "").read_text()
+    assert 'class="sa-calib"' in session_page and "Policy checks" in session_page
+    drive_page = Path(drive.report or "").read_text()
+    assert 'class="sa-calib"' in drive_page and "rear_left" in drive_page
 
 
 def test_calibration_is_behind_the_policy_switch(sessions: dict[str, Any]) -> None:
