@@ -20,6 +20,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from typer.testing import CliRunner
 
+from syncaudit.calib import CalibConfig, calibrate_log
 from syncaudit.cli import app
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
@@ -34,6 +35,8 @@ POLICY: dict[str, Any] = {
     }
 }
 STOPS = "8"
+TIMEOUT_S = 120.0
+"""Per log: a calibration takes seconds; a deadlocked worker fails the test, not CI."""
 
 
 def _simulate(out: Path, *extra: str) -> dict[str, Any]:
@@ -82,12 +85,23 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "good": _simulate(good),  # the rear LiDAR's recorded extrinsic off by 0.05 deg, 0.3 cm
         "bad": _simulate(bad, "--rotation-error-deg", "1.0", "--translation-error-cm", "5"),
     }
+    # Calibrated here too: the gate's values must be the library's, and this process's
+    # OpenMP runtime has now run, as in a program that calibrates and then calls run_gate
+    # (workers forked from such a process deadlocked: they start fresh now).
+    direct = calibrate_log(good, CalibConfig())
     drive = root / "drive_with_scans.mcap"
     _merge(drive, THREE_CAMERAS, bad)
     (root / "drive_with_scans.mcap.rig.yaml").write_text(
         Path(f"{THREE_CAMERAS}.rig.yaml").read_text()
     )
-    return {"root": root, "good": good, "bad": bad, "drive": drive, "truths": truths}
+    return {
+        "root": root,
+        "good": good,
+        "bad": bad,
+        "drive": drive,
+        "truths": truths,
+        "direct": direct,
+    }
 
 
 def test_sessions_are_judged_on_their_calibration_checks(
@@ -96,7 +110,7 @@ def test_sessions_are_judged_on_their_calibration_checks(
     run = run_gate(
         [str(sessions["good"]), str(sessions["bad"]), str(sessions["drive"])],
         parse_policy(POLICY, "p"),
-        GateOptions(jobs=2, html_dir=tmp_path / "html"),
+        GateOptions(jobs=2, html_dir=tmp_path / "html", timeout_s=TIMEOUT_S),
     )
     logs = {Path(log.path).name: log for log in run.logs}
     good, bad = logs["session_good.mcap"], logs["session_bad.mcap"]
@@ -114,6 +128,11 @@ def test_sessions_are_judged_on_their_calibration_checks(
         values = {c.check: c.value for c in log.checks}
         assert values["rotation_deg"] == pytest.approx(error["relative_rotation_deg"], abs=0.1)
         assert values["translation_cm"] == pytest.approx(error["relative_translation_cm"], abs=1.0)
+    (ext,) = sessions["direct"].extrinsics
+    assert {c.check: c.value for c in good.checks} == pytest.approx(
+        {"rotation_deg": ext.rotation_diff_deg, "translation_cm": ext.translation_diff_cm},
+        rel=1e-6,  # OpenMP sums in GICP: the last digits vary from run to run
+    )
     assert all(c.passed for c in good.checks)
     assert not any(c.passed for c in bad.checks)
     assert "limit <= 0.3 deg" in next(c.message for c in bad.checks if c.check == "rotation_deg")
@@ -141,7 +160,7 @@ def test_calibration_is_behind_the_policy_switch(sessions: dict[str, Any]) -> No
     run = run_gate(
         [str(sessions["bad"]), str(sessions["drive"])],
         parse_policy(sync_only, "p"),
-        GateOptions(jobs=2),
+        GateOptions(jobs=2, timeout_s=TIMEOUT_S),
     )
     logs = {Path(log.path).name: log for log in run.logs}
     session = logs["session_bad.mcap"]
@@ -156,6 +175,10 @@ def test_calibration_is_behind_the_policy_switch(sessions: dict[str, Any]) -> No
         "vehicle_pattern": r"(?P<vehicle>session)_bad",
         "vehicles": {"session": {"calibration": TOLERANCE}},
     }
-    run = run_gate([str(sessions["bad"])], parse_policy(per_vehicle, "p"), GateOptions(jobs=1))
+    run = run_gate(
+        [str(sessions["bad"])],
+        parse_policy(per_vehicle, "p"),
+        GateOptions(jobs=1, timeout_s=TIMEOUT_S),
+    )
     (log,) = run.logs
     assert log.verdict == "fail" and {c.scope for c in log.checks} == {"calibration"}

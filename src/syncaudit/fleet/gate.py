@@ -152,11 +152,14 @@ def _error_log(job: LogJob, error: SyncauditError, policy_fp: str) -> JudgedLog:
     )
 
 
-def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
+def make_executor(
+    options: GateOptions, pending: int, *, calibrates: bool = False
+) -> tuple[Executor, int]:
     """A local executor sized for `pending` logs, and the chunk jobs each audit gets.
 
     One worker per core auditing whole logs; only with fewer logs than cores does each
-    audit also read its chunks in parallel (cores shared out between the logs).
+    audit also read its chunks in parallel (cores shared out between the logs). Workers
+    that may calibrate start as fresh interpreters (see `LocalExecutor`).
     """
     if options.cluster is not None:
         from syncaudit.fleet.dask_executor import DaskExecutor
@@ -166,7 +169,11 @@ def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
     workers = max(1, min(cores, pending))
     audit_jobs = max(1, cores // workers) if pending < cores else 1
     executor = LocalExecutor(
-        workers, timeout_s=options.timeout_s, max_tries=options.max_tries, task=run_any_log_job
+        workers,
+        timeout_s=options.timeout_s,
+        max_tries=options.max_tries,
+        task=run_any_log_job,
+        fresh_workers=calibrates,
     )
     return executor, audit_jobs
 
@@ -257,7 +264,9 @@ def _run(
     if pending:
         own = executor is None
         if executor is None:
-            executor, audit_jobs = make_executor(options, len(pending))
+            executor, audit_jobs = make_executor(
+                options, len(pending), calibrates=policy.calibrates()
+            )
         else:
             audit_jobs = 1
         job_options = JobOptions(
