@@ -1,7 +1,7 @@
 """Calibration checks of `gate` on real logs of `syncaudit simulate calib` (truth beside them).
 
-A calibration session (two LiDARs' PointCloud2 scans, /tf_static, no LiDAR packets) is
-judged on its calibration checks: a recorded extrinsic off by more than the policy's
+A calibration session (two LiDARs' PointCloud2 scans, /tf_static, no LiDAR packets; one
+written as a ROS 1 bag, one as MCAP) is judged on its calibration checks: a recorded extrinsic off by more than the policy's
 tolerance fails, a correct one passes. A log with both LiDAR packets and the scans (a
 drive log merged with a session by the mcap library, one /tf_static channel) gets both the
 sync checks and the calibration checks. Calibration is behind the policy: without a
@@ -80,7 +80,8 @@ def _merge(out: Path, *logs: Path) -> None:
 @pytest.fixture(scope="module")
 def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     root = tmp_path_factory.mktemp("calib_gate")
-    good, bad = root / "session_good.mcap", root / "session_bad.mcap"
+    # One session as a ROS 1 bag (sensor_msgs/PointCloud2, no metadata), one as MCAP.
+    good, bad = root / "session_good.bag", root / "session_bad.mcap"
     truths = {
         "good": _simulate(good),  # the rear LiDAR's recorded extrinsic off by 0.05 deg, 0.3 cm
         "bad": _simulate(bad, "--rotation-error-deg", "1.0", "--translation-error-cm", "5"),
@@ -113,7 +114,7 @@ def test_sessions_are_judged_on_their_calibration_checks(
         GateOptions(jobs=2, html_dir=tmp_path / "html", timeout_s=TIMEOUT_S),
     )
     logs = {Path(log.path).name: log for log in run.logs}
-    good, bad = logs["session_good.mcap"], logs["session_bad.mcap"]
+    good, bad = logs["session_good.bag"], logs["session_bad.mcap"]
     assert good.verdict == "pass", good.error or good.checks
     assert bad.verdict == "fail" and run.exit_code == 10
     for log in (good, bad):
