@@ -170,6 +170,17 @@ def baseline_s(paths: list[Path]) -> list[float]:
     return times
 
 
+def warm_audit_s(paths: list[Path], jobs: int) -> float:
+    """Wall time of `audit_log(jobs=jobs)` of each log in turn in this (warm) process."""
+    from syncaudit.audit import audit_log
+    from syncaudit.rig import load_rig
+
+    start = time.perf_counter()
+    for path in paths:
+        audit_log(path, load_rig(str(path) + ".rig.yaml"), jobs=jobs)
+    return time.perf_counter() - start
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--small", type=int, default=300)
@@ -182,6 +193,7 @@ def main(argv: list[str] | None = None) -> None:
     small = small_logs(args.cache_dir, args.small)
     large = large_logs(args.cache_dir, args.large, args.large_gb) if args.large else []
     small_gb = sum(p.stat().st_size for p in small) / 1e9
+    load_start = os.getloadavg()  # after generating: what the measurements start in
     with tempfile.TemporaryDirectory(prefix="bench_gate_") as tmp:
         scratch = Path(tmp)
         policy = scratch / "policy.yaml"
@@ -207,7 +219,10 @@ def main(argv: list[str] | None = None) -> None:
         spread = ", ".join(f"{1e3 * r[0]:+.1f}" for r in rounds)
         wall_par, _, _ = gate(small, policy, cores, scratch, db=False)
         wall_db, rss_db, _ = gate(small, policy, cores, scratch, db=True)
-        print(f"machine: {cores} cores (shared with other work: figures are indicative)")
+        print(
+            f"machine: {cores} cores (shared with other work: figures are indicative); load "
+            f"average at the start: {' '.join(f'{x:.2f}' for x in load_start)}"
+        )
         print(f"small logs: {len(small)} x {1e3 * small_gb / len(small):.2f} MB")
         print(f"  baseline audit (read+decode+analysis, warm, jobs=1): {mean_base_ms:.1f} ms/log")
         print(
@@ -244,18 +259,26 @@ def main(argv: list[str] | None = None) -> None:
                     ]
                 )
                 audit_walls.append(wall)
+            warm_s = warm_audit_s(large, cores)
             wall_large, rss_large, _ = gate(large, policy, cores, scratch, db=True)
             single = 60 * large_gb / sum(audit_walls)
+            warm = 60 * large_gb / warm_s
             ganged = 60 * large_gb / wall_large
             print(f"large logs: {len(large)} x {large_gb / len(large):.2f} GB")
             print(
-                f"  single-log audit, one after another: {sum(audit_walls):.2f} s = {single:.2f} GB/min"
+                f"  single-log audit (`syncaudit audit --jobs {cores}`), one after another: "
+                f"{sum(audit_walls):.2f} s = {single:.2f} GB/min"
+            )
+            print(
+                f"  the same audits in one warm process (audit_log, jobs={cores}; no start-up): "
+                f"{warm_s:.2f} s = {warm:.2f} GB/min"
             )
             print(
                 f"  gate ({cores} workers, database on): {wall_large:.2f} s = {ganged:.2f} GB/min, "
-                f"{ganged / single:.2f}x the single-log audit's (target >= {1 / TARGET_GB_RATIO:.2f}); "
-                f"peak RSS {rss_large:.0f} MB"
+                f"{ganged / single:.2f}x the single-log audit's, {ganged / warm:.2f}x the warm "
+                f"audit's (target >= {1 / TARGET_GB_RATIO:.2f}); peak RSS {rss_large:.0f} MB"
             )
+        print(f"load average after the run: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":

@@ -155,3 +155,24 @@ def test_fleet_report_exit_codes(tmp_path: Path, three_cameras_outcome: LogOutco
         app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv"), "--overwrite"]
     )
     assert done.exit_code == 0 and len((tmp_path / "x.csv").read_text().splitlines()) == 31
+
+
+def test_fleet_report_outputs_are_all_or_nothing(
+    tmp_path: Path, three_cameras_outcome: LogOutcome
+) -> None:
+    """Every target checked before the database is read; none written when one is refused."""
+    from syncaudit.errors import OutputError
+
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "index.html").write_text("previous")
+    with pytest.raises(OutputError, match=r"index.html: exists \(use --overwrite"):
+        write_report(db, html_dir=site, csv=tmp_path / "fleet.csv")
+    assert not (tmp_path / "fleet.csv").exists()
+    assert sorted(p.name for p in site.iterdir()) == ["index.html"]
+    with pytest.raises(OutputError, match="is an input of this run"):
+        write_report(db, csv=db, overwrite=True)
+    write_report(db, html_dir=site, csv=tmp_path / "fleet.csv", overwrite=True)
+    assert "<svg" in (site / "index.html").read_text() and (tmp_path / "fleet.csv").is_file()
+    assert not [p for p in tmp_path.rglob(".syncaudit-*")]

@@ -83,3 +83,72 @@ def test_fingerprint_follows_content(tmp_path: Path) -> None:
     assert fingerprint(a) != first
     bag = fingerprint(SAMPLES / "vlp16_short_ros2")
     assert len(bag) == 32 and bag != first
+
+
+def test_ros1_bag_vehicle_comes_from_the_path_or_a_manifest_else_a_clear_warning(
+    tmp_path: Path,
+) -> None:
+    """A ROS 1 bag has no metadata record: the pattern or a manifest names its vehicle."""
+    bag = tmp_path / "uploads" / "car3" / "drive.bag"
+    bag.parent.mkdir(parents=True)
+    bag.symlink_to(SAMPLES / "vlp16_short.bag")
+    pattern = parse_policy({"vehicle_pattern": r"uploads/(?P<vehicle>car\d+)/"}, "p")
+    found = discover([str(bag)], pattern)
+    assert [j.vehicle for j in found.jobs] == ["car3"] and found.warnings == []
+
+    elsewhere = tmp_path / "inbox" / "drive.bag"
+    elsewhere.parent.mkdir()
+    elsewhere.symlink_to(SAMPLES / "vlp16_short.bag")
+    found = discover([str(elsewhere)], pattern)
+    assert [j.vehicle for j in found.jobs] == [None]
+    (warning,) = found.warnings
+    assert warning.startswith(f"{elsewhere}: no vehicle id (a ROS 1 bag records none")
+    assert "vehicle_pattern 'uploads/(?P<vehicle>car\\d+)/' does not match its path" in warning
+    assert "manifest (CSV/JSONL column 'vehicle')" in warning
+
+    (tmp_path / "m.csv").write_text(f"path,vehicle\n{elsewhere},car9\n")
+    found = discover([str(tmp_path / "m.csv")], pattern)
+    assert [j.vehicle for j in found.jobs] == ["car9"] and found.warnings == []
+
+    # An MCAP without a vehicle metadata record is told apart; a policy that never refers
+    # to vehicles asks for none.
+    mcap = tmp_path / "inbox" / "drive.mcap"
+    mcap.symlink_to(SAMPLES / "vlp16_three_cameras.mcap")
+    (warning,) = discover([str(mcap)], pattern).warnings
+    assert "no MCAP metadata record with vehicle_id/vehicle" in warning
+    assert discover([str(elsewhere), str(mcap)], parse_policy({}, "p")).warnings == []
+
+
+def test_no_vehicle_warnings_reach_the_summaries_and_stderr(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    bag = tmp_path / "drive.bag"
+    bag.symlink_to(SAMPLES / "vlp16_short.bag")
+    shutil.copy(SAMPLES / "vlp16_short.bag.rig.yaml", tmp_path / "drive.bag.rig.yaml")
+    policy = tmp_path / "policy.yaml"
+    policy.write_text(
+        "vehicle_pattern: 'uploads/(?P<vehicle>[^/]+)/'\n"
+        "defaults: {camera: {error_mean_us: {max: 1.0e+6}, error_var_us2: {max: 1.0e+12}}}\n"
+    )
+    result = CliRunner().invoke(
+        app,
+        [
+            "gate",
+            str(bag),
+            "--policy",
+            str(policy),
+            "--no-db",
+            "--summary",
+            str(tmp_path / "gate.md"),
+            "--json-out",
+            str(tmp_path / "gate.json"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert f"warning: {bag}: no vehicle id (a ROS 1 bag records none" in result.output
+    summary = json.loads((tmp_path / "gate.json").read_text())
+    (warning,) = summary["warnings"]
+    assert "ROS 1 bag records none" in warning
+    assert "## Warnings" in (tmp_path / "gate.md").read_text()

@@ -148,15 +148,20 @@ def drop_rate(lidar: dict[str, Any]) -> float | None:
 
 
 def evaluate(outcome: LogOutcome, policy: Policy, vehicle: str | None) -> list[CheckResult]:
-    """Every enabled check of the policy on one audited log (empty for an error outcome)."""
-    audit = outcome.audit
-    if audit is None:
+    """Every enabled check of the policy on one judged log (empty for an error outcome).
+
+    A calibration session (point clouds, no LiDAR packets) has no sync audit: its log and
+    calibration checks apply, the camera and LiDAR checks have nothing to judge.
+    """
+    if not outcome.ok:
         return []
+    audit = outcome.audit
     results: list[CheckResult] = []
     base = policy.checks_for(vehicle)
-    results.extend(_log_checks(base, outcome, audit))
-    results.extend(_lidar_checks(base, audit))
-    for cam in audit.get("cameras", []):
+    results.extend(_log_checks(base, outcome, audit or {}))
+    if audit is not None:
+        results.extend(_lidar_checks(base, audit))
+    for cam in (audit or {}).get("cameras", []):
         checks = policy.checks_for(vehicle, cam["camera"]).camera
         values = _camera_values(cam)
         for name in type(checks).model_fields:
@@ -188,9 +193,8 @@ def _log_checks(base: CheckSet, outcome: LogOutcome, audit: dict[str, Any]) -> l
             )
         )
     if base.log.duration_s is not None and base.log.duration_s.enabled:
-        out.append(
-            judge_limit("log", "log", "duration_s", base.log.duration_s, audit.get("duration_s"))
-        )
+        duration = audit.get("duration_s", outcome.duration_s)
+        out.append(judge_limit("log", "log", "duration_s", base.log.duration_s, duration))
     return out
 
 
@@ -237,6 +241,11 @@ def _calibration_checks(base: CheckSet, outcome: LogOutcome) -> list[CheckResult
             judge_limit("calibration", "extrinsics", name, limit, None, outcome.calibration_error)
             for name, limit in wanted
         ]
+    if not outcome.calibration:
+        return [
+            judge_limit("calibration", "extrinsics", name, limit, None, "no extrinsic calibrated")
+            for name, limit in wanted
+        ]
     out = []
     for ext in outcome.calibration:
         values = {
@@ -251,11 +260,16 @@ def _calibration_checks(base: CheckSet, outcome: LogOutcome) -> list[CheckResult
 
 def verdict(outcome: LogOutcome, results: list[CheckResult]) -> str:
     """'error' (not audited), 'fail' (a fail check failed, or no camera to judge), 'warn'
-    (only warn checks failed) or 'pass'."""
+    (only warn checks failed) or 'pass'.
+
+    A calibration session has no camera to judge by design: its calibration checks decide.
+    """
     if not outcome.ok:
         return "error"
-    if not (outcome.audit or {}).get("cameras"):
+    if not outcome.calibration_only and not (outcome.audit or {}).get("cameras"):
         return "fail"
+    if outcome.calibration_only and not any(r.scope == "calibration" for r in results):
+        return "fail"  # nothing judged it: never a pass by default
     failed = [r for r in results if not r.passed]
     if any(r.severity == "fail" for r in failed):
         return "fail"

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 
 EXIT_USAGE = UsageError.exit_code
 EXIT_INTERNAL = 70
+MAX_WARNING_LINES = 10
 
 
 @cache
@@ -25,6 +26,13 @@ def _stderr() -> Console:
     from rich.console import Console
 
     return Console(stderr=True, soft_wrap=True)
+
+
+def _escape(text: str) -> str:
+    """Text shown through rich markup as written (a path may hold `[...]`)."""
+    from rich.markup import escape
+
+    return escape(text)
 
 
 def _fail(code: int, message: str) -> typer.Exit:
@@ -80,11 +88,12 @@ def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
         colours = {"pass": "green", "warn": "yellow", "fail": "red", "error": "red"}
 
         def update(log: Any, done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total, description=f"{log.verdict}: {log.path}")
+            description = f"{log.verdict}: {_escape(log.path)}"
+            bar.update(task, completed=done, total=total, description=description)
             if log.verdict != "pass":
                 bar.console.print(
-                    f"[{colours[log.verdict]}]{log.verdict:5}[/] {log.path}"
-                    + (f" ({log.error})" if log.error else ""),
+                    f"[{colours[log.verdict]}]{log.verdict:5}[/] {_escape(log.path)}"
+                    + (f" ({_escape(log.error)})" if log.error else ""),
                     highlight=False,
                 )
 
@@ -251,24 +260,31 @@ def _init(
     from syncaudit.fleet.init_policy import init_policy_yaml
     from syncaudit.fleet.inputs import discover
     from syncaudit.fleet.job import JobOptions
+    from syncaudit.fleet.outputs import OVERWRITE_HINT
     from syncaudit.fleet.policy import Policy
-    from syncaudit.writers.atomic import write_text_atomic
+    from syncaudit.writers.outputs import OutputSet
 
-    if output.exists() and not overwrite:
-        raise OutputError(f"{output}: exists (use --overwrite to replace it)")
-    found = discover(inputs, Policy())
-    if not found.jobs:
-        raise ConfigError("--init found no log in " + " ".join(inputs))
-    executor, audit_jobs = make_executor(GateOptions(jobs=jobs, timeout_s=timeout), len(found.jobs))
-    outcomes = list(executor.run(found.jobs, JobOptions(audit_jobs=audit_jobs)))
-    bad = [o for o in outcomes if not o.ok]
-    for outcome in bad:
-        _stderr().print(f"[yellow]skipped:[/] {outcome.job.path}: {outcome.error}", highlight=False)
-    if len(bad) == len(outcomes):
-        from syncaudit.errors import LogReadError
+    protected = [i for i in inputs if "://" not in i]
+    with OutputSet(overwrite=overwrite, inputs=protected, overwrite_hint=OVERWRITE_HINT) as out:
+        out.add(output)  # checked before any work
+        found = discover(inputs, Policy())
+        if not found.jobs:
+            raise ConfigError("--init found no log in " + " ".join(inputs))
+        executor, audit_jobs = make_executor(
+            GateOptions(jobs=jobs, timeout_s=timeout), len(found.jobs)
+        )
+        outcomes = list(executor.run(found.jobs, JobOptions(audit_jobs=audit_jobs)))
+        bad = [o for o in outcomes if not o.ok]
+        for outcome in bad:
+            _stderr().print(
+                f"[yellow]skipped:[/] {_escape(f'{outcome.job.path}: {outcome.error}')}",
+                highlight=False,
+            )
+        if len(bad) == len(outcomes):
+            from syncaudit.errors import LogReadError
 
-        raise LogReadError("--init: no log could be audited")
-    write_text_atomic(output, init_policy_yaml(outcomes))
+            raise LogReadError("--init: no log could be audited")
+        out.write_text(output, init_policy_yaml(outcomes))
     _stderr().print(
         f"policy from {len(outcomes) - len(bad)} log(s) written to {output}", highlight=False
     )
@@ -307,12 +323,21 @@ def _gate(
         force=force,
         overwrite=overwrite,
         cluster=cluster,
+        policy_path=policy_path,
     )
     update, finish = _progress_printer()
     try:
         run = run_gate(inputs, policy, options, progress=update)
     finally:
         finish()
+    for line in run.warnings[:MAX_WARNING_LINES]:
+        _stderr().print(f"[yellow]warning:[/] {_escape(line)}", highlight=False)
+    if len(run.warnings) > MAX_WARNING_LINES:
+        _stderr().print(
+            f"[yellow]warning:[/] ... and {len(run.warnings) - MAX_WARNING_LINES} more "
+            "log(s) without a vehicle id (all listed in --summary / --json-out)",
+            highlight=False,
+        )
     counts = {
         v: sum(log.verdict == v for log in run.logs) for v in ("pass", "warn", "fail", "error")
     }

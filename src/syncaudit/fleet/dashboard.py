@@ -12,7 +12,6 @@ from __future__ import annotations
 import html
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -21,7 +20,8 @@ from typing import Any
 
 from syncaudit.errors import OutputError
 from syncaudit.fleet.database import ResultsDB
-from syncaudit.writers.atomic import write_text_atomic
+from syncaudit.fleet.outputs import OVERWRITE_HINT
+from syncaudit.writers.outputs import OutputSet
 
 EXPORT_QUERY = """
 SELECT l.vehicle, c.camera, coalesce(l.start_time, l.judged_at) AS time, l.path, l.verdict,
@@ -271,18 +271,12 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
     )
 
 
-def _copy_to(con: Any, target: Path, fmt: str) -> None:
-    """DuckDB COPY of the export query into a temporary beside `target`, then a rename."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent or ".")
-    os.close(fd)
-    try:
-        options = "(FORMAT parquet)" if fmt == "parquet" else "(FORMAT csv, HEADER true)"
-        query = EXPORT_QUERY.replace("l.report, l.log_key, ", "l.report, ")
-        con.execute(f"COPY ({query}) TO '{tmp}' {options}")
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def _copy_to(con: Any, tmp: Path, fmt: str) -> None:
+    """DuckDB COPY of the export query into `tmp` (an OutputSet temporary)."""
+    options = "(FORMAT parquet)" if fmt == "parquet" else "(FORMAT csv, HEADER true)"
+    query = EXPORT_QUERY.replace("l.report, l.log_key, ", "l.report, ")
+    quoted = str(tmp).replace("'", "''")
+    con.execute(f"COPY ({query}) TO '{quoted}' {options}")
 
 
 def write_report(
@@ -293,26 +287,43 @@ def write_report(
     csv: Path | None = None,
     overwrite: bool = False,
 ) -> None:
-    """Write the dashboard (`html_dir/index.html`) and/or the Parquet/CSV exports."""
-    targets = [t for t in (parquet, csv) if t is not None]
-    if html_dir is not None:
-        if html_dir.exists() and not html_dir.is_dir():
-            raise OutputError(f"{html_dir}: exists and is not a directory (--html needs one)")
-        targets.append(html_dir / "index.html")
-    for target in targets:
-        if target.is_dir():
-            raise OutputError(f"{target}: is a directory")
-        if target.exists() and not overwrite:
-            raise OutputError(f"{target}: exists (use --overwrite to replace it)")
-    if not db_path.is_file():
-        raise OutputError(f"{db_path}: no such results database (run syncaudit gate --db first)")
-    with ResultsDB(db_path).connect() as con:
-        cursor = con.execute(EXPORT_QUERY)
-        names = [d[0] for d in cursor.description]
-        rows = [dict(zip(names, row, strict=True)) for row in cursor.fetchall()]
-        for export, fmt in ((parquet, "parquet"), (csv, "csv")):
+    """Write the dashboard (`html_dir/index.html`) and/or the Parquet/CSV exports.
+
+    One OutputSet: every target checked before the database is read, all committed
+    together (a failure leaves no temporary and the previous files). An `html_dir` that
+    does not exist is one folder output; an existing one gets its `index.html` replaced.
+    """
+    outputs = OutputSet(overwrite=overwrite, inputs=[db_path], overwrite_hint=OVERWRITE_HINT)
+    with outputs:
+        for export in (parquet, csv):
             if export is not None:
-                _copy_to(con, export, fmt)
-    if html_dir is not None:
-        html_dir.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(html_dir / "index.html", render_dashboard(rows, html_dir.resolve()))
+                outputs.add(export)
+        index: Path | None = None
+        if html_dir is not None:
+            if html_dir.exists() and not html_dir.is_dir():
+                raise OutputError(f"{html_dir}: exists and is not a directory (--html needs one)")
+            if html_dir.exists():
+                index = html_dir / "index.html"
+                outputs.add(index)
+            else:
+                folder = outputs.add(html_dir, kind="dir")
+                folder.mkdir()
+                index = folder / "index.html"
+        if not db_path.is_file():
+            raise OutputError(
+                f"{db_path}: no such results database (run syncaudit gate --db first)"
+            )
+        with ResultsDB(db_path).connect() as con:
+            cursor = con.execute(EXPORT_QUERY)
+            names = [d[0] for d in cursor.description]
+            rows = [dict(zip(names, row, strict=True)) for row in cursor.fetchall()]
+            for export, fmt in ((parquet, "parquet"), (csv, "csv")):
+                if export is not None:
+                    with outputs.writing(export) as tmp:
+                        _copy_to(con, tmp, fmt)
+        if html_dir is not None and index is not None:
+            text = render_dashboard(rows, html_dir.resolve())
+            if index.parent == html_dir:
+                outputs.write_text(index, text)
+            else:
+                index.write_text(text, encoding="utf-8")

@@ -84,13 +84,22 @@ class LocalExecutor:
         timeout_s: float = DEFAULT_TIMEOUT_S,
         max_tries: int = DEFAULT_MAX_TRIES,
         task: Task = run_log_job,
+        fresh_workers: bool = False,
     ) -> None:
+        """`fresh_workers`: start each worker as a new interpreter (spawn), not a fork.
+
+        Calibration runs OpenMP (small_gicp): a worker forked from a process whose
+        OpenMP runtime already ran (a program that calibrated before calling `run_gate`)
+        deadlocks in its first parallel region. A fresh worker pays the imports once.
+        """
         self.workers = max(1, workers)
         self.timeout_s = timeout_s
         self.max_tries = max(1, max_tries)
         self.task = task
+        self.fresh_workers = fresh_workers
         methods = multiprocessing.get_all_start_methods()
-        self._context: Any = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+        forked = "fork" in methods and not fresh_workers
+        self._context: Any = multiprocessing.get_context("fork" if forked else "spawn")
         self._pool: list[_Worker] = []
 
     def _spawn(self, options: JobOptions) -> _Worker:
@@ -108,7 +117,8 @@ class LocalExecutor:
         queue: deque[tuple[LogJob, int]] = deque((job, 1) for job in jobs)
         if not queue:
             return
-        preload()
+        if not self.fresh_workers:
+            preload()  # once here, inherited by every forked worker
         wanted = min(self.workers, len(queue))
         self._pool = [self._spawn(options) for _ in range(wanted)]
         try:

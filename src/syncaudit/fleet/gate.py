@@ -20,16 +20,14 @@ from syncaudit.errors import GateFailedError, LogReadError, OutputError, Syncaud
 from syncaudit.fleet.checks import evaluate, verdict
 from syncaudit.fleet.database import ResultsDB
 from syncaudit.fleet.executor import DEFAULT_MAX_TRIES, DEFAULT_TIMEOUT_S, Executor, LocalExecutor
-from syncaudit.fleet.html import render_error_page, render_index, report_name
+from syncaudit.fleet.html import render_error_page, report_file_name, report_name
 from syncaudit.fleet.inputs import LogJob, discover, file_fingerprint, fingerprint
 from syncaudit.fleet.job import JobOptions, LogOutcome
-from syncaudit.fleet.junit import render_junit
+from syncaudit.fleet.outputs import GateOutputs
 from syncaudit.fleet.policy import Policy
-from syncaudit.fleet.record import JudgedLog, log_key
-from syncaudit.fleet.summary import render_json, render_markdown
+from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.remote.fetch import is_url, public_url
 from syncaudit.remote.job import run_any_log_job
-from syncaudit.writers.atomic import write_text_atomic
 
 DB_BATCH_LOGS = 32
 DB_BATCH_S = 5.0
@@ -51,6 +49,8 @@ class GateOptions:
     overwrite: bool = False
     cluster: str | None = None
     """Dask scheduler address (`tcp://host:8786`): audits run there, not here."""
+    policy_path: Path | None = None
+    """The policy file, never to be written over by an output."""
 
 
 @dataclass(slots=True)
@@ -58,6 +58,8 @@ class GateRun:
     """The verdicts of a run, sorted by path, and the exit code they make."""
 
     logs: list[JudgedLog] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """Logs judged without a vehicle id although the policy refers to vehicles."""
 
     @property
     def exit_code(self) -> int:
@@ -75,31 +77,30 @@ Progress = Callable[[JudgedLog, int, int], None]
 
 
 def check_targets(options: GateOptions) -> None:
-    """Refuse outputs that exist (without --overwrite) before any work is done."""
-    for option, target in (
-        ("--junit", options.junit),
-        ("--summary", options.summary),
-        ("--json-out", options.json_out),
-    ):
-        if target is None:
-            continue
-        if target.is_dir():
-            raise OutputError(f"{target}: is a directory ({option} needs a file)")
-        if target.exists() and not options.overwrite and target.is_file():
-            raise OutputError(f"{target}: exists (use --overwrite to replace it)")
-        if not target.parent.is_dir():
-            raise OutputError(f"{target}: folder {target.parent} does not exist")
+    """Refuse a results database that cannot be written before any work is done.
+
+    The file outputs are checked by `GateOutputs` (all of them, before any work).
+    """
     if options.db is not None:
         if options.db.is_dir():
             raise OutputError(f"{options.db}: is a directory (--db needs a DuckDB file)")
         if not options.db.parent.is_dir():
             raise OutputError(f"{options.db}: folder {options.db.parent} does not exist")
-    html = options.html_dir
-    if html is not None:
-        if html.exists() and not html.is_dir():
-            raise OutputError(f"{html}: exists and is not a directory (--html needs one)")
-        if html.is_dir() and any(html.iterdir()) and not options.overwrite:
-            raise OutputError(f"{html}: exists and is not empty (use --overwrite to update it)")
+
+
+def plan_outputs(inputs: list[str], options: GateOptions) -> GateOutputs:
+    """Every file output of the run, checked now (exists without --overwrite: exit 8)."""
+    check_targets(options)
+    protected: list[str | Path | None] = [i for i in inputs if not is_url(i)]
+    protected.append(options.policy_path)
+    return GateOutputs(
+        junit=options.junit,
+        summary=options.summary,
+        json_out=options.json_out,
+        html_dir=options.html_dir,
+        overwrite=options.overwrite,
+        inputs=protected,
+    )
 
 
 def _judge(
@@ -127,6 +128,8 @@ def _judge(
         html=outcome.html,
         camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
         remote_read=outcome.remote_read,
+        duration_s=outcome.duration_s,
+        container=outcome.container,
     )
 
 
@@ -149,11 +152,14 @@ def _error_log(job: LogJob, error: SyncauditError, policy_fp: str) -> JudgedLog:
     )
 
 
-def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
+def make_executor(
+    options: GateOptions, pending: int, *, calibrates: bool = False
+) -> tuple[Executor, int]:
     """A local executor sized for `pending` logs, and the chunk jobs each audit gets.
 
     One worker per core auditing whole logs; only with fewer logs than cores does each
-    audit also read its chunks in parallel (cores shared out between the logs).
+    audit also read its chunks in parallel (cores shared out between the logs). Workers
+    that may calibrate start as fresh interpreters (see `LocalExecutor`).
     """
     if options.cluster is not None:
         from syncaudit.fleet.dask_executor import DaskExecutor
@@ -163,7 +169,11 @@ def make_executor(options: GateOptions, pending: int) -> tuple[Executor, int]:
     workers = max(1, min(cores, pending))
     audit_jobs = max(1, cores // workers) if pending < cores else 1
     executor = LocalExecutor(
-        workers, timeout_s=options.timeout_s, max_tries=options.max_tries, task=run_any_log_job
+        workers,
+        timeout_s=options.timeout_s,
+        max_tries=options.max_tries,
+        task=run_any_log_job,
+        fresh_workers=calibrates,
     )
     return executor, audit_jobs
 
@@ -176,8 +186,26 @@ def run_gate(
     executor: Executor | None = None,
     progress: Progress | None = None,
 ) -> GateRun:
-    """Judge every log named by `inputs` against `policy`; write the outputs and the DB."""
-    check_targets(options)
+    """Judge every log named by `inputs` against `policy`; write the outputs and the DB.
+
+    Every output is checked before any work and committed together at the end; a failure
+    or an interruption (KeyboardInterrupt, `Interrupted`) leaves no temporary and the
+    previous outputs as they were. The database keeps the verdicts reached so far.
+    """
+    with plan_outputs(inputs, options) as outputs:
+        run = _run(inputs, policy, options, outputs, executor, progress)
+        outputs.write_summaries(run.logs, policy.fingerprint(), run.warnings)
+    return run
+
+
+def _run(
+    inputs: list[str],
+    policy: Policy,
+    options: GateOptions,
+    outputs: GateOutputs,
+    executor: Executor | None,
+    progress: Progress | None,
+) -> GateRun:
     found = discover(inputs, policy)
     policy_fp = policy.fingerprint()
     judged: list[JudgedLog] = []
@@ -192,7 +220,9 @@ def run_gate(
             judged.append(_error_log(job, exc, policy_fp))
             continue
         except OSError as exc:
-            judged.append(_error_log(job, LogReadError(f"{job.path}: {exc.strerror}"), policy_fp))
+            judged.append(
+                _error_log(job, LogReadError(f"{job.path}: {exc.strerror or exc}"), policy_fp)
+            )
             continue
         pending.append((job, fp, file_fingerprint(job.rig_path)))
     db = ResultsDB(options.db) if options.db is not None else None
@@ -201,8 +231,14 @@ def run_gate(
             log_key(fp, _stored(job.path), __version__, rig, policy_fp): job
             for job, fp, rig in pending
         }
-        # Error rows are judged again: a timeout or a dead worker may not recur.
-        known = {k: v for k, v in db.known(keys).items() if v.verdict != "error"}
+        # Error rows are judged again: a timeout or a dead worker may not recur. So is a
+        # log whose report is asked for (--html) but gone (e.g. an interrupted run's).
+        known = {
+            k: v
+            for k, v in db.known(keys).items()
+            if v.verdict != "error"
+            and (options.html_dir is None or (v.report is not None and Path(v.report).is_file()))
+        }
         for key, stored in known.items():
             job = keys[key]
             stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
@@ -212,28 +248,30 @@ def run_gate(
             for p in pending
             if log_key(p[1], _stored(p[0].path), __version__, p[2], policy_fp) not in known
         ]
+    if options.html_dir is not None:  # every report's target checked before the audits
+        for log in judged:
+            if not log.skipped:
+                outputs.plan_report(report_name(log))
+        for job, fp, rig in pending:
+            key = log_key(fp, _stored(job.path), __version__, rig, policy_fp)
+            outputs.plan_report(report_file_name(display_path(_shown(job.path)), key))
     total = len(judged) + len(pending)
     for index, log in enumerate(judged, 1):
         if progress:
             progress(log, index, total)
-    calibrate = any(
-        limit is not None and limit.enabled
-        for limit in (
-            policy.defaults.calibration.rotation_deg,
-            policy.defaults.calibration.translation_cm,
-        )
-    )
     by_path = {job.path: (fp, rig) for job, fp, rig in pending}
     unsaved: list[JudgedLog] = [log for log in judged if not log.skipped]
     if pending:
         own = executor is None
         if executor is None:
-            executor, audit_jobs = make_executor(options, len(pending))
+            executor, audit_jobs = make_executor(
+                options, len(pending), calibrates=policy.calibrates()
+            )
         else:
             audit_jobs = 1
         job_options = JobOptions(
             audit_jobs=audit_jobs,
-            calibrate=calibrate,
+            calibrate=policy.calibrates(),
             html=options.html_dir is not None,
             policy=policy,
         )
@@ -251,7 +289,7 @@ def run_gate(
                 if db is not None and (
                     len(unsaved) >= DB_BATCH_LOGS or time.monotonic() - last_save > DB_BATCH_S
                 ):
-                    _save_reports(unsaved, options.html_dir)
+                    _save_reports(unsaved, outputs)
                     db.write(unsaved)
                     for saved in unsaved:
                         saved.audit = None  # in the database now: memory flat in the logs
@@ -259,48 +297,26 @@ def run_gate(
         finally:
             if own:
                 executor.close()
-    run = GateRun(sorted(judged, key=lambda log: log.path))
-    _save_reports(unsaved, options.html_dir)
+    run = GateRun(sorted(judged, key=lambda log: log.path), found.warnings)
+    _save_reports(unsaved, outputs)
     if db is not None:
         db.write(unsaved)
-    write_outputs(run, options, policy_fp)
     return run
 
 
-def _save_reports(logs: list[JudgedLog], html_dir: Path | None) -> None:
+def _shown(path: str) -> str:
+    """A log's path as its verdict shows it (URLs without query string)."""
+    return public_url(path) if is_url(path) else path
+
+
+def _save_reports(logs: list[JudgedLog], outputs: GateOutputs) -> None:
     """Write each new log's HTML report (before its row, which records the report path)."""
-    if html_dir is None:
+    if outputs.html_dir is None:
+        for log in logs:
+            log.html = None
         return
-    folder = html_dir / "logs"
-    folder.mkdir(parents=True, exist_ok=True)
     for log in logs:
         if log.skipped:
             continue
-        target = folder / report_name(log)
-        write_text_atomic(target, log.html or render_error_page(log))
-        log.report = str(target.resolve())
+        outputs.write_report(log, report_name(log), log.html or render_error_page(log))
         log.html = None  # keep memory flat in the number of logs
-
-
-def write_outputs(run: GateRun, options: GateOptions, policy_fp: str) -> None:
-    """Every file output of a run, each through a temporary beside it and a rename.
-
-    The one place outputs are written, so they can be routed through the CLI's
-    OutputSet when it lands.
-    """
-    texts: list[tuple[Path, str]] = []
-    if options.junit is not None:
-        texts.append((options.junit, render_junit(run.logs)))
-    if options.summary is not None:
-        texts.append((options.summary, render_markdown(run.logs)))
-    if options.json_out is not None:
-        texts.append((options.json_out, render_json(run.logs, policy_fp)))
-    if options.html_dir is not None:
-        options.html_dir.mkdir(parents=True, exist_ok=True)
-        links = {}
-        for log in run.logs:
-            if log.report and Path(log.report).is_file():
-                links[log.key] = os.path.relpath(log.report, options.html_dir)
-        texts.append((options.html_dir / "index.html", render_index(run.logs, links)))
-    for path, text in texts:
-        write_text_atomic(path, text)

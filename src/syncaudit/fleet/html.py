@@ -42,8 +42,13 @@ def checks_section(checks: list[CheckResult]) -> str:
 
 def report_name(log: JudgedLog) -> str:
     """File name of a log's report: readable stem plus the verdict key (unique per verdict)."""
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", os.path.basename(log.path.rstrip("/")))[:80]
-    return f"{stem}-{log.key[:10]}.html"
+    return report_file_name(log.path, log.key)
+
+
+def report_file_name(path: str, key: str) -> str:
+    """File name of the report of the log at `path` judged under `key`."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", os.path.basename(path.rstrip("/")))[:80]
+    return f"{stem}-{key[:10]}.html"
 
 
 def render_error_page(log: JudgedLog) -> str:

@@ -3,7 +3,9 @@
 Each log becomes a `LogJob` with its vehicle id and rig file. The vehicle comes from, in
 order: the manifest, the log's own metadata (an MCAP metadata record or a ROS 2 bag's
 `custom_data` with key `vehicle_id` or `vehicle`), the policy's `vehicle_pattern` on the
-path. The rig comes from the manifest, a `<log>.rig.yaml` beside the log, the policy's
+path. A ROS 1 bag (or a bare .db3) records no vehicle: only a manifest or the pattern can
+name it. A log left without a vehicle while the policy refers to vehicles gets a warning
+saying which of these to use (it is judged with the defaults). The rig comes from the manifest, a `<log>.rig.yaml` beside the log, the policy's
 `rigs` for the vehicle, then its `default_rig`; without any the audit guesses topics.
 """
 
@@ -50,6 +52,8 @@ class Discovery:
 
     jobs: list[LogJob] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """One line per log judged without a vehicle id although the policy refers to vehicles."""
 
 
 def is_bag_dir(path: Path) -> bool:
@@ -180,6 +184,35 @@ def log_metadata_vehicle(path: Path) -> str | None:
     return None
 
 
+def _where_vehicle_comes_from(path: str) -> str:
+    """What this kind of log can say about its vehicle (for the no-vehicle warning)."""
+    if is_url(path):
+        return "a remote log's own metadata is not read"
+    local = Path(path)
+    if local.is_dir():
+        return "its metadata.yaml has no custom_data vehicle_id/vehicle"
+    if local.suffix == ".bag":
+        return "a ROS 1 bag records none (it has no metadata record)"
+    if local.suffix == ".db3":
+        return "a bare .db3 file records none (no metadata.yaml beside it)"
+    return "it has no MCAP metadata record with vehicle_id/vehicle"
+
+
+def no_vehicle_warning(path: str, policy: Policy) -> str:
+    """The warning for a log left without a vehicle id: why, and the ways to give one."""
+    pattern = (
+        f"the policy's vehicle_pattern '{policy.vehicle_pattern}' does not match its path"
+        if policy.vehicle_pattern
+        else "the policy has no vehicle_pattern"
+    )
+    return (
+        f"{public_url(path) if is_url(path) else path}: no vehicle id "
+        f"({_where_vehicle_comes_from(path)}; {pattern}): give it in a manifest (CSV/JSONL "
+        "column 'vehicle') or a vehicle_pattern with a (?P<vehicle>...) group that matches "
+        "the path; judged with the default checks and rig"
+    )
+
+
 def discover(inputs: list[str], policy: Policy) -> Discovery:
     """Every log named by `inputs`, deduplicated, with vehicle and rig resolved."""
     found = Discovery()
@@ -211,6 +244,8 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
         if vehicle is None and pattern is not None:
             match = pattern.search(path.as_posix())
             vehicle = match.group("vehicle") if match else None
+        if vehicle is None and policy.uses_vehicles():
+            found.warnings.append(no_vehicle_warning(job.path, policy))
         rig = job.rig_path
         beside = Path(str(path) + ".rig.yaml")
         if rig is None and beside.is_file():
@@ -222,6 +257,7 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
             LogJob(path=job.path, vehicle=vehicle, rig_path=rig, tags=job.tags, source=job.source)
         )
     found.jobs.sort(key=lambda j: j.path)
+    found.warnings.sort()
     return found
 
 

@@ -1,5 +1,10 @@
 """What a worker does with one log: audit it (and calibrate it when it holds the scans).
 
+A log with LiDAR packets gets the sync audit; a log with two or more PointCloud2 topics
+is also calibrated when the policy switches a calibration check on for its vehicle; a log
+with point clouds but no LiDAR packets (a calibration session) is calibrated only, and
+judged on its calibration and log checks.
+
 `run_log_job` never raises for a problem of the log: it returns a `LogOutcome` with the
 error, so the driver records an error row. Everything in the outcome is plain data
 (picklable, JSON-ready) so it can come back from a process or a remote worker.
@@ -7,18 +12,23 @@ error, so the driver records an error row. Everything in the outcome is plain da
 
 from __future__ import annotations
 
+import html
 import os
 import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from syncaudit.errors import SyncauditError
+from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.policy import Policy
 
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+if TYPE_CHECKING:
+    from syncaudit.calib.result import CalibrationResult
+
+POINTCLOUD2_TYPES = frozenset({"sensor_msgs/msg/PointCloud2", "sensor_msgs/PointCloud2"})
+"""PointCloud2 as ROS 2 (MCAP, .db3) and ROS 1 bags name it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,7 +38,8 @@ class JobOptions:
     audit_jobs: int = 1
     """Chunk worker processes inside one log (1 when logs run in parallel)."""
     calibrate: bool = False
-    """Run the extrinsic calibration where the log has two or more point-cloud topics."""
+    """Run the extrinsic calibration where the log has two or more point-cloud topics (and
+    `policy`, when given, has a calibration check on for the log's vehicle)."""
     html: bool = False
     """Render the per-log HTML report (returned as text; the driver writes it)."""
     policy: Policy | None = None
@@ -46,6 +57,10 @@ class LogOutcome:
     calibration: list[dict[str, Any]] | None = None
     """One entry per calibrated extrinsic (topic, rotation_diff_deg, translation_diff_cm)."""
     calibration_error: str | None = None
+    calibration_only: bool = False
+    """Point clouds but no LiDAR packets: calibrated, not sync-audited (`audit` is None)."""
+    duration_s: float | None = None
+    container: str | None = None
     html: str | None = None
     error: str | None = None
     error_code: int | None = None
@@ -56,8 +71,8 @@ class LogOutcome:
 
     @property
     def ok(self) -> bool:
-        """The audit ran."""
-        return self.audit is not None and self.error is None
+        """The log was judged: its audit ran, or it is a calibration session that was read."""
+        return self.error is None and (self.audit is not None or self.calibration_only)
 
 
 def run_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
@@ -81,8 +96,16 @@ def run_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
     return outcome
 
 
+def wants_calibration(options: JobOptions, job: LogJob) -> bool:
+    """Whether this log's policy checks its extrinsics (so its scans are worth calibrating)."""
+    if not options.calibrate:
+        return False
+    return options.policy is None or options.policy.checks_for(job.vehicle).calibration.enabled
+
+
 def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
     from syncaudit.audit import audit_log
+    from syncaudit.collect import lidar_family
     from syncaudit.logs import open_log
     from syncaudit.rig import load_rig
 
@@ -90,42 +113,83 @@ def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
     with open_log(job.path) as log:
         outcome.topics = sorted(log.topics)
         outcome.start_ns = log.summary.start_ns
-        clouds = [t.name for t in log.topics.values() if t.msgtype == POINTCLOUD2]
-    result = audit_log(job.path, rig, jobs=options.audit_jobs)
-    outcome.audit = result.to_dict()
-    if options.calibrate and len(clouds) >= 2:
-        _calibrate_into(outcome, job)
+        outcome.duration_s = log.summary.duration_s
+        outcome.container = log.summary.container
+        clouds = sorted(t.name for t in log.topics.values() if t.msgtype in POINTCLOUD2_TYPES)
+        has_packets = any(lidar_family(t.msgtype) for t in log.topics.values())
+    calibrate = len(clouds) >= 2 and wants_calibration(options, job)
+    result = None
+    if has_packets or len(clouds) < 2:
+        result = audit_log(job.path, rig, jobs=options.audit_jobs)
+        outcome.audit = result.to_dict()
+    elif calibrate:
+        outcome.calibration_only = True
+    else:
+        raise NoDataError(
+            f"{job.path}: holds {len(clouds)} PointCloud2 topics but no LiDAR packets (a "
+            "calibration session?): only calibration checks can judge it, and the policy "
+            "switches none on for this log (calibration: rotation_deg / translation_cm)"
+        )
+    calibration = _calibrate_into(outcome, job) if calibrate else None
     if options.html:
-        from syncaudit.fleet.checks import evaluate
-        from syncaudit.fleet.html import checks_section
-        from syncaudit.report.html import render_audit_html
-
-        checks = evaluate(outcome, options.policy, job.vehicle) if options.policy else []
-        outcome.html = render_audit_html(result, [checks_section(checks)])
+        outcome.html = _report_html(outcome, job, options, result, calibration)
 
 
-def _calibrate_into(outcome: LogOutcome, job: LogJob) -> None:
+def _report_html(
+    outcome: LogOutcome,
+    job: LogJob,
+    options: JobOptions,
+    result: Any,
+    calibration: CalibrationResult | None,
+) -> str:
+    """The log's report page: its audit and/or calibration, then the policy checks."""
+    from syncaudit.fleet.checks import evaluate
+    from syncaudit.fleet.html import checks_section
+    from syncaudit.report.html import audit_sections, page, time_origin_ns
+
+    checks = evaluate(outcome, options.policy, job.vehicle) if options.policy else []
+    parts = [] if result is None else [audit_sections(result)]
+    if calibration is not None:
+        from syncaudit.report.calib_figures import calibration_section
+
+        parts.append(calibration_section(calibration))
+    elif outcome.calibration_error is not None:
+        parts.append(f"<h2>Calibration</h2><p>{html.escape(outcome.calibration_error)}</p>")
+    parts.append(checks_section(checks))
+    t0 = time_origin_ns(result) if result is not None else None
+    return page(f"syncaudit: {job.path}", "".join(parts), t0_ns=t0)
+
+
+def _calibrate_into(outcome: LogOutcome, job: LogJob) -> CalibrationResult | None:
     """Calibrate with the default configuration; a failure is kept, not raised."""
     try:
         from syncaudit.calib.config import CalibConfig
         from syncaudit.calib.pipeline import calibrate_log
 
         result = calibrate_log(Path(job.path), CalibConfig())
-        outcome.calibration = [
-            {
-                "topic": ext.topic,
-                "reference_topic": ext.reference_topic,
-                "rotation_diff_deg": ext.rotation_diff_deg,
-                "translation_diff_cm": ext.translation_diff_cm,
-                "calibrated": ext.calibrated,
-                "reason": ext.reason,
-            }
-            for ext in result.extrinsics
-        ]
     except SyncauditError as exc:
         outcome.calibration_error = str(exc).splitlines()[0]
+        return None
+    except ImportError as exc:
+        outcome.calibration_error = (
+            f"the calibration needs syncaudit[calib] on the worker ({exc.name} is missing)"
+        )
+        return None
     except Exception as exc:
         outcome.calibration_error = f"internal error: {type(exc).__name__}: {exc}"
+        return None
+    outcome.calibration = [
+        {
+            "topic": ext.topic,
+            "reference_topic": ext.reference_topic,
+            "rotation_diff_deg": ext.rotation_diff_deg,
+            "translation_diff_cm": ext.translation_diff_cm,
+            "calibrated": ext.calibrated,
+            "reason": ext.reason or (None if ext.calibrated else result.reason),
+        }
+        for ext in result.extrinsics
+    ]
+    return result
 
 
 def apply_test_hooks(path: str) -> None:

@@ -96,10 +96,22 @@ class LogChecks(_Strict):
 
 
 class CalibrationChecks(_Strict):
-    """Calibrated vs recorded extrinsics; run only when the log holds two or more point clouds."""
+    """Calibrated vs recorded extrinsics; run only when the log holds two or more point clouds.
+
+    Off by default: the calibration costs a few CPU seconds per session (the sync audit of
+    a small log costs tens of ms), so a policy switches it on by writing a limit.
+    """
 
     rotation_deg: Limit | None = None
     translation_cm: Limit | None = None
+
+    @property
+    def enabled(self) -> bool:
+        """Some calibration check is on (so the worker calibrates logs with the scans)."""
+        return any(
+            limit is not None and limit.enabled
+            for limit in (self.rotation_deg, self.translation_cm)
+        )
 
 
 class CheckSet(_Strict):
@@ -183,6 +195,16 @@ class Policy(_Strict):
                     CameraChecks, groups["camera"], override.cameras[camera], ""
                 )
         return CheckSet.model_validate({g: m.model_dump() for g, m in groups.items()})
+
+    def uses_vehicles(self) -> bool:
+        """Whether verdicts depend on the vehicle id (a pattern, per-vehicle rigs or checks)."""
+        return bool(self.vehicle_pattern or self.rigs or self.vehicles)
+
+    def calibrates(self) -> bool:
+        """Whether any vehicle (or the defaults) has a calibration check switched on."""
+        return self.defaults.calibration.enabled or any(
+            self.checks_for(vehicle).calibration.enabled for vehicle in self.vehicles
+        )
 
     def fingerprint(self) -> str:
         """A short hash of the policy's content (not its formatting), stored with each verdict."""

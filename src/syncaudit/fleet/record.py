@@ -54,6 +54,9 @@ class JudgedLog:
     """Cameras the audit judged (None for error rows and rows read from the database)."""
     remote_read: dict[str, Any] | None = None
     """For a URL: what the ranged reads fetched (bytes, requests, chunks)."""
+    duration_s: float | None = None
+    container: str | None = None
+    """From the log's index (also for a calibration session, which has no audit)."""
 
     @property
     def path(self) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Sequence
 from typing import Any
 
 from syncaudit import __version__
@@ -18,10 +19,14 @@ VERDICTS = ("fail", "error", "warn", "pass")
 SUMMARY_VERSION = 1
 
 
-def summary_dict(logs: list[JudgedLog], policy_fingerprint: str) -> dict[str, Any]:
-    """The JSON summary as a dict."""
+def summary_dict(
+    logs: list[JudgedLog], policy_fingerprint: str, warnings: Sequence[str] = ()
+) -> dict[str, Any]:
+    """The JSON summary as a dict (`warnings` only when there are some)."""
     counts = Counter(log.verdict for log in logs)
+    extra: dict[str, Any] = {"warnings": sorted(warnings)} if warnings else {}
     return {
+        **extra,
         "summary_version": SUMMARY_VERSION,
         "tool_version": __version__,
         "policy_fingerprint": policy_fingerprint,
@@ -44,21 +49,19 @@ def summary_dict(logs: list[JudgedLog], policy_fingerprint: str) -> dict[str, An
     }
 
 
-def render_json(logs: list[JudgedLog], policy_fingerprint: str) -> str:
+def render_json(
+    logs: list[JudgedLog], policy_fingerprint: str, warnings: Sequence[str] = ()
+) -> str:
     """The JSON summary text (sorted keys, 2-space indent, trailing newline)."""
-    return (
-        json.dumps(
-            summary_dict(logs, policy_fingerprint), indent=2, sort_keys=True, allow_nan=False
-        )
-        + "\n"
-    )
+    data = summary_dict(logs, policy_fingerprint, warnings)
+    return json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _md(text: object) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def render_markdown(logs: list[JudgedLog]) -> str:
+def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
     """A Markdown page for a CI job summary: counts, then failing logs and checks first."""
     counts = Counter(log.verdict for log in logs)
     icon = {"fail": "❌", "error": "💥", "warn": "⚠️", "pass": "✅"}
@@ -104,4 +107,6 @@ def render_markdown(logs: list[JudgedLog]) -> str:
             f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {icon[log.verdict]} {log.verdict} | "
             f"{n_failed} of {len(log.checks)} | {note} |"
         )
+    if warnings:
+        lines += ["", "## Warnings", ""] + [f"- {_md(w)}" for w in sorted(warnings)]
     return "\n".join(lines) + "\n"

@@ -89,6 +89,9 @@ class OutputSet:
         self._inputs = {Path(p).resolve() for p in inputs if p is not None}
         self._targets: dict[Path, tuple[Path, OutputKind]] = {}
         """target as given -> (its temporary, kind), in the order added."""
+        self._resolved: set[Path] = set()
+        """The targets resolved: a second name for one file is found without rescanning
+        (a gate run adds one report per log: thousands of targets)."""
         self._tmp_dirs: dict[Path, Path] = {}
         """folder of targets -> the hidden temporary folder made in it."""
         self._done = False
@@ -112,7 +115,7 @@ class OutputSet:
         resolved = target.resolve()
         if resolved in self._inputs:
             raise OutputError(f"{target}: is an input of this run; refusing to write over it")
-        if any(other.resolve() == resolved for other in self._targets):
+        if resolved in self._resolved:
             raise OutputError(f"{target}: given as two different outputs")
         if target.is_symlink() or target.exists():
             self._check_existing(target, kind)
@@ -121,6 +124,7 @@ class OutputSet:
             raise OutputError(f"{target}: cannot write (folder {parent} does not exist)")
         tmp = self._tmp_dir(parent) / target.name
         self._targets[target] = (tmp, kind)
+        self._resolved.add(resolved)
         return tmp
 
     def _check_existing(self, target: Path, kind: OutputKind) -> None:
