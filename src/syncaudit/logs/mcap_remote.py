@@ -56,8 +56,8 @@ from syncaudit.remote.ranges import (
 )
 
 KIND = "mcap-remote-chunks"
-HEAD_BYTES = 4 << 10
-"""First read: the magic and header record (and the whole of a small log)."""
+HEAD_BYTES = 1 << 10
+"""First read: the magic and the head of the header record (all `McapLog` checks)."""
 TAIL_BYTES = 16 << 10
 """Second read: the footer, and for most logs the whole summary section."""
 MISS_BYTES = 4 << 10
@@ -335,8 +335,9 @@ class RemoteChunksUnitReader:
     def __init__(self, source: str, *, check_crc: bool = False) -> None:
         self.source = source
         self._object = open_object(source)
-        tracker = find_tracker(source)  # inherited from the parent that forked this worker
-        self._counter = tracker.counter if tracker is not None else None
+        # The parent's tracker, inherited by fork: its counter, and the bytes it holds.
+        self._tracker = find_tracker(source)
+        self._counter = self._tracker.counter if self._tracker is not None else None
         self._decoder = RemoteChunkReader(self._object, self._counter, check_crc=check_crc)
         self._input = bytearray()
         self._head = bytearray(_RECORD_HEAD.size)
@@ -350,7 +351,7 @@ class RemoteChunksUnitReader:
         the order the local reader's chunks do. Payloads stay valid until the next run.
         """
         end = unit.offset + unit.length
-        stream = RangeStream(self._object, unit.offset, end, self._counter)
+        stream = _RunStream(self._object, unit.offset, end, self._tracker)
         try:
             pos, ordinal = unit.offset, 0
             while pos < end:
@@ -373,7 +374,7 @@ class RemoteChunksUnitReader:
         finally:
             stream.close()
 
-    def _record_head(self, stream: RangeStream, pos: int, end: int, where: str) -> tuple[int, int]:
+    def _record_head(self, stream: _RunStream, pos: int, end: int, where: str) -> tuple[int, int]:
         """(opcode, length) of the record at `pos`, which must end within the run."""
         if end - pos < _RECORD_HEAD.size:
             raise LogReadError(f"{where}: a record is cut by the end of the indexed chunks")
@@ -386,7 +387,7 @@ class RemoteChunksUnitReader:
             )
         return int(opcode), int(length)
 
-    def _chunk(self, stream: RangeStream, length: int, where: str, ordinal: int) -> memoryview:
+    def _chunk(self, stream: _RunStream, length: int, where: str, ordinal: int) -> memoryview:
         """Stream the rest of a chunk record into memory and decode it."""
         total = _RECORD_HEAD.size + length
         if total > MAX_CHUNK_RECORD_BYTES:
@@ -402,7 +403,44 @@ class RemoteChunksUnitReader:
         """Nothing to release: the connection belongs to the worker process."""
 
 
-def _skip(stream: RangeStream, length: int) -> None:
+class _RunStream:
+    """The bytes of a run, in order: those the parent already holds at its ends (head,
+    tail) from memory, the rest streamed by one ranged GET."""
+
+    def __init__(self, obj: RemoteObject, start: int, end: int, tracker: Tracker | None) -> None:
+        self.pos = start
+        segments = tracker.segments.items() if tracker is not None else ()
+        self._held = [(at, data) for at, data in segments if at < end and start < at + len(data)]
+        net_start, net_end = start, end
+        for at, data in self._held:
+            if at <= net_start < at + len(data):
+                net_start = at + len(data)
+            if at < net_end <= at + len(data):
+                net_end = at
+        counter = tracker.counter if tracker is not None else None
+        self._net = RangeStream(obj, net_start, net_end, counter) if net_start < net_end else None
+
+    def readinto(self, buffer: memoryview) -> None:
+        """Fill `buffer` exactly with the next bytes of the run."""
+        while len(buffer):
+            net = self._net
+            if net is not None and net.start <= self.pos < net.end:
+                n = min(len(buffer), net.end - self.pos)
+                net.readinto(buffer[:n])
+            else:
+                at, data = next((a, d) for a, d in self._held if a <= self.pos < a + len(d))
+                n = min(len(buffer), at + len(data) - self.pos)
+                buffer[:n] = data[self.pos - at : self.pos - at + n]
+            buffer = buffer[n:]
+            self.pos += n
+
+    def close(self) -> None:
+        """Drop the reply."""
+        if self._net is not None:
+            self._net.close()
+
+
+def _skip(stream: _RunStream, length: int) -> None:
     """Read past `length` bytes of the stream."""
     scratch = memoryview(bytearray(min(length, 1 << 16)))
     while length > 0:
