@@ -30,6 +30,7 @@ from mcap.reader import SeekingReader
 from mcap.summary import Summary
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
+from syncaudit.logs.base import LogReader
 from syncaudit.logs.mcap_chunks import (
     MAX_LOG_TIME_NS,
     OP_CHUNK,
@@ -85,16 +86,21 @@ class UrlPath(PosixPath):
         return f"{parts[0]}//{'/'.join(parts[1:])}" if parts else ""
 
 
-class _RemoteFile:
-    """A read-only, seekable view of a remote object for the mcap library: the bytes the
-    parent fetched (head, tail, summary), anything else by a ranged read, kept.
+class RemoteFile:
+    """A read-only, seekable view of a remote object (for the mcap library, the ROS 1 bag
+    reader): the bytes the parent fetched (head, tail, summary, index), anything else by a
+    ranged read.
 
     Not an `io.RawIOBase`: the mcap library wraps those in a BufferedReader, which reads
     ahead past what is needed and closes the file when it is dropped.
     """
 
-    def __init__(self, obj: RemoteObject, size: int, tracker: Tracker) -> None:
+    def __init__(
+        self, obj: RemoteObject, size: int, tracker: Tracker, *, keep: bool = True
+    ) -> None:
         self._obj, self._size, self._tracker = obj, size, tracker
+        self._keep = keep
+        """Keep what a miss fetched (the parent's index reads; not a worker's chunks)."""
         self._pos = 0
         self.closed = False
 
@@ -143,6 +149,8 @@ class _RemoteFile:
             if at <= start and end <= at + len(data):
                 return memoryview(data)[start - at : end - at]
         stop = min(self._size, max(end, start + MISS_BYTES))
+        if not self._keep:
+            return memoryview(read_range(self._obj, start, end, self._tracker.counter))
         data = read_range(self._obj, start, stop, self._tracker.counter)
         self._tracker.segments[start] = data
         return memoryview(data)[: end - start]
@@ -216,7 +224,7 @@ class RemoteMcapLog(McapLog):
         try:
             self._object = open_object(url)
             self._size = self._fetch_index()
-            self._file = cast(BinaryIO, _RemoteFile(self._object, self._size, self._tracker))
+            self._file = cast(BinaryIO, RemoteFile(self._object, self._size, self._tracker))
             self._reader = SeekingReader(self._file, validate_crcs=True)
             self._check_header()
             if self._load_index() is None:
@@ -449,12 +457,17 @@ def _skip(stream: _RunStream, length: int) -> None:
         length -= step
 
 
-def open_remote_log(url: str) -> McapLog:
-    """A log behind a URL: an indexed MCAP read by ranges (anything else is refused with
-    a LogOpenError: the fleet gate downloads bags whole)."""
-    if not urlsplit(url).path.lower().endswith(".mcap"):
-        raise LogOpenError(
-            f"{public_url(url)}: only MCAP files are read straight from a URL "
-            "(syncaudit gate downloads ROS 1 and ROS 2 bags)"
-        )
-    return RemoteMcapLog(url)
+def open_remote_log(url: str) -> LogReader:
+    """A log behind a URL: an indexed MCAP or ROS 1 bag, read by ranges (anything else is
+    refused with a LogOpenError: the fleet gate downloads ROS 2 bag folders whole)."""
+    path = urlsplit(url).path.lower()
+    if path.endswith(".mcap"):
+        return RemoteMcapLog(url)
+    if path.endswith(".bag"):
+        from syncaudit.logs.rosbag1_remote import RemoteRosbag1Log
+
+        return RemoteRosbag1Log(url)
+    raise LogOpenError(
+        f"{public_url(url)}: only MCAP files and ROS 1 bags are read straight from a URL "
+        "(syncaudit gate downloads ROS 2 bag folders)"
+    )

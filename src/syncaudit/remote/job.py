@@ -41,12 +41,12 @@ def rig_topics(rig_path: str | None) -> frozenset[str] | None:
 
 
 def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
-    """`run_log_job` for local paths and for MCAP URLs (read by ranges, straight into each
-    chunk worker's memory); other URLs (bags, an MCAP without index, a log to calibrate)
-    are fetched into a temporary folder first."""
+    """`run_log_job` for local paths and for MCAP and ROS 1 bag URLs (read by ranges,
+    straight into each chunk worker's memory); other URLs (ROS 2 bag folders, a log
+    without index, a log to calibrate) are fetched into a temporary folder first."""
     if not is_url(job.path):
         return run_log_job(job, options)
-    if urlsplit(job.path).path.lower().endswith(".mcap") and not options.calibrate:
+    if urlsplit(job.path).path.lower().endswith((".mcap", ".bag")) and not options.calibrate:
         with tracking(job.path) as tracker:
             outcome = run_log_job(job, options)
             if tracker.ranged:  # else: no chunk index, read from a whole copy below

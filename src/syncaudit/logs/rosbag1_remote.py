@@ -1,0 +1,174 @@
+"""A ROS 1 bag read straight from a URL: its index section, then ranged reads of its chunks.
+
+The parent (`RemoteRosbag1Log`) fetches the bag header and the index section at the end
+of the file (connections and chunk infos: two requests). A bag's index gives where each
+chunk starts, not its length; the local reader reads every chunk's record header at open
+for it, which remotely would cost one request per chunk. Here a chunk's span runs from
+its position to the next chunk's (to the index section for the last): the chunk record
+and the index-data records that follow it. Each span is one 'rosbag1-remote-chunk' unit,
+read by a worker with one ranged GET and decoded by the local chunk reader
+(`Rosbag1ChunkReader`, which reads the chunk's own header and ignores the index records
+after it); the record header is checked there, when the chunk is read.
+
+A bag whose index is missing or damaged (a recording that was not closed) is refused with
+`RemoteUnindexedError`: the local reader would scan every record, so the caller
+downloads it whole instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import BinaryIO, cast
+
+from syncaudit.errors import LogOpenError, SyncauditError
+from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath
+from syncaudit.logs.model import ReadUnit
+from syncaudit.logs.rosbag1 import (
+    MAGIC,
+    OP_CHUNK,
+    OP_CHUNK_INFO,
+    BagFile,
+    BagFormatError,
+    BagIndex,
+    Rosbag1ChunkReader,
+    read_bag_header,
+)
+from syncaudit.logs.rosbag1_log import Rosbag1Log
+from syncaudit.logs.typesys import one_line
+from syncaudit.remote.ranges import (
+    Tracker,
+    acquire_tracker,
+    find_tracker,
+    open_object,
+    public_url,
+    read_head,
+    read_range,
+    release_tracker,
+)
+
+KIND = "rosbag1-remote-chunk"
+HEAD_BYTES = (4 << 10) + 256
+"""First read: the magic and the bag header record (rosbag pads it to 4 KiB)."""
+
+
+class _SpannedBagFile(BagFile):
+    """A bag over ranged reads that gives each chunk the span up to the next chunk.
+
+    It notes the chunk positions of the chunk-info records as the index is parsed; asked
+    then for the record at a chunk position (the index reader wants each chunk's length),
+    it answers with that span, read from nothing.
+    """
+
+    def __init__(self, handle: BinaryIO, size: int, index_pos: int) -> None:
+        super().__init__(handle, size)
+        self._index_pos = index_pos
+        self._chunk_positions: set[int] = set()
+        self._span_ends: dict[int, int] | None = None
+
+    def record_at(self, offset: int) -> tuple[dict[str, bytes], int, int]:
+        """The record's (fields, data offset, data length); a chunk's span for a chunk."""
+        if offset < self._index_pos and offset in self._chunk_positions:
+            end = self._span_end(offset)
+            return {"op": bytes([OP_CHUNK])}, offset, end - offset
+        fields, data_at, dlen = super().record_at(offset)
+        if fields.get("op") == bytes([OP_CHUNK_INFO]) and len(fields.get("chunk_pos", b"")) == 8:
+            self._chunk_positions.add(int.from_bytes(fields["chunk_pos"], "little"))
+            self._span_ends = None
+        return fields, data_at, dlen
+
+    def _span_end(self, offset: int) -> int:
+        if self._span_ends is None:
+            starts = sorted(self._chunk_positions)
+            self._span_ends = dict(zip(starts, [*starts[1:], self._index_pos], strict=True))
+        return self._span_ends[offset]
+
+
+class RemoteRosbag1Log(Rosbag1Log):
+    """A ROS 1 bag (format 2.0) behind a URL, read by chunk spans."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.path = UrlPath(public_url(url))
+        self.warnings = []
+        self._registry = None
+        self._fallback = ""
+        self._tracker = acquire_tracker(url)
+        try:
+            self._object = open_object(url)
+            bag = self._fetch_index()
+            self._index = self._load(bag)
+        except SyncauditError:
+            release_tracker(self._tracker)
+            raise
+        except Exception as exc:
+            release_tracker(self._tracker)
+            raise LogOpenError(f"{self.path}: not a readable ROS 1 bag: {one_line(exc)}") from exc
+        self.summary = self._make_summary()
+        self._report_damage()
+        self._chunk_reader = RemoteRosbag1ChunkReader(url)
+
+    def _fetch_index(self) -> BagFile:
+        """Fetch the head and (where the header points at one) the index section."""
+        tracker = self._tracker
+        if not tracker.segments:
+            head, size = read_head(self._object, HEAD_BYTES, tracker.counter)
+            if size == 0:
+                raise LogOpenError(f"{self.path}: file is empty")
+            tracker.segments[0], tracker.size_bytes = head, size
+        size = tracker.size_bytes
+        handle = cast(BinaryIO, RemoteFile(self._object, size, tracker))
+        try:
+            index_pos, _conns, _chunks, first = read_bag_header(BagFile(handle, size))
+        except (BagFormatError, ValueError):
+            return BagFile(handle, size)  # not a bag, or a damaged header: `_load` says which
+        if first <= index_pos < size and index_pos not in tracker.segments:
+            tracker.segments[index_pos] = read_range(self._object, index_pos, size, tracker.counter)
+        return _SpannedBagFile(handle, size, index_pos)
+
+    def _load(self, bag: BagFile) -> BagIndex:
+        if bag.read(0, len(MAGIC)) != MAGIC:
+            raise LogOpenError(f"{self.path}: not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0')")
+        return super()._load(bag)
+
+    def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
+        """No scan over ranged reads (it would read every record): refused, to be fetched."""
+        self._tracker.ranged = False
+        raise RemoteUnindexedError(
+            f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}"
+        )
+
+    def _units(self, conn_ids: set[int]) -> list[ReadUnit]:
+        """One unit per chunk span holding `conn_ids`, read from the URL."""
+        units = [
+            dataclasses.replace(unit, source=self.url, kind=KIND)
+            for unit in super()._units(conn_ids)
+        ]
+        tracker = self._tracker
+        tracker.chunks_total = len(self._index.chunks)
+        tracker.chunks_fetched = len(units)
+        tracker.needed_chunk_bytes = sum(unit.length for unit in units)
+        return units
+
+    def fetch_stats(self) -> Tracker:
+        """What this log's reading has fetched so far (shared with its workers)."""
+        return self._tracker
+
+    def _close(self) -> None:
+        super()._close()
+        release_tracker(self._tracker)
+
+
+class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
+    """Per-worker reader of 'rosbag1-remote-chunk' units: each span one ranged GET."""
+
+    def __init__(self, source: str | None = None) -> None:
+        super().__init__()
+        if source is None:
+            return
+        obj = open_object(source)
+        tracker = find_tracker(source)  # the parent's, inherited by fork
+        if tracker is None or not tracker.size_bytes:
+            _head, size = read_head(obj, 1, None)
+            tracker = Tracker(source, size_bytes=size)
+        handle = cast(BinaryIO, RemoteFile(obj, tracker.size_bytes, tracker, keep=False))
+        self._files[source] = BagFile(handle, tracker.size_bytes)
