@@ -43,7 +43,6 @@ from syncaudit.logs.mcap_log import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog, _Sca
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.ranges import (
-    FetchCounter,
     RangeStream,
     RemoteObject,
     Tracker,
@@ -68,6 +67,9 @@ RANGE_BYTES = 24 << 20
 GROUP_BYTES, so tasks are as many as for the local file."""
 GAP_BYTES = 64 << 10
 """Chunks of a run may be this far apart: the message indexes between them are read too."""
+PARENT_CACHE_BYTES = 64 << 20
+"""Chunks the parent's own `messages()` fetched (topic probes, /tf_static) that it keeps,
+so that the workers' runs do not fetch them again."""
 _RECORD_HEAD = struct.Struct("<BQ")
 _FOOTER_SUMMARY_START = 28
 """Bytes from the end of the file to the footer's summary_start field (u64)."""
@@ -168,7 +170,7 @@ class RemoteChunkReader(ChunkReader):
     def __init__(
         self,
         obj: RemoteObject,
-        counter: FetchCounter | None,
+        tracker: Tracker | None,
         *,
         check_crc: bool = False,
         reuse: bool = True,
@@ -180,16 +182,26 @@ class RemoteChunkReader(ChunkReader):
         self._out = bytearray()
         self._zstd = None
         self._obj = obj
-        self._counter = counter
+        self._tracker = tracker
         self._slots: list[bytearray] = []
 
     def read(self, offset: int, length: int) -> memoryview:
-        """The decompressed records of the chunk record at `offset` (fetched whole)."""
+        """The decompressed records of the chunk record at `offset` (fetched whole, and
+        kept in the tracker up to `PARENT_CACHE_BYTES`: the workers' runs then skip it)."""
         where = chunk_where(self.path, offset)
         if offset < 0 or length < _RECORD_HEAD.size or length > MAX_CHUNK_RECORD_BYTES:
             raise LogReadError(f"{where}: chunk record of {length} bytes cannot be read")
-        data = read_range(self._obj, offset, offset + length, self._counter)
-        return self.decode(memoryview(data), where)
+        tracker = self._tracker
+        data = bytearray(length)
+        stream = _RunStream(self._obj, offset, offset + length, tracker)
+        try:
+            stream.readinto(memoryview(data))
+        finally:
+            stream.close()
+        if tracker is not None and tracker.cached_bytes + length <= PARENT_CACHE_BYTES:
+            tracker.segments.setdefault(offset, bytes(data))
+            tracker.cached_bytes += length
+        return self.decode(memoryview(data)[:length], where)
 
     def decode(self, record: memoryview, where: str, *, slot: int | None = None) -> memoryview:
         """The decompressed records of a whole chunk record, checked as `ChunkReader.read`."""
@@ -284,7 +296,7 @@ class RemoteMcapLog(McapLog):
 
     def _chunk_reader(self) -> ChunkReader:
         """Chunks for `messages()`: fetched one by one, each into its own buffer."""
-        return RemoteChunkReader(self._object, self._tracker.counter, check_crc=True, reuse=False)
+        return RemoteChunkReader(self._object, self._tracker, check_crc=True, reuse=False)
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Runs of chunks holding `topics`, one ranged GET each (see `coalesce_units`)."""
@@ -346,7 +358,7 @@ class RemoteChunksUnitReader:
         # The parent's tracker, inherited by fork: its counter, and the bytes it holds.
         self._tracker = find_tracker(source)
         self._counter = self._tracker.counter if self._tracker is not None else None
-        self._decoder = RemoteChunkReader(self._object, self._counter, check_crc=check_crc)
+        self._decoder = RemoteChunkReader(self._object, None, check_crc=check_crc)
         self._input = bytearray()
         self._head = bytearray(_RECORD_HEAD.size)
 
@@ -412,28 +424,37 @@ class RemoteChunksUnitReader:
 
 
 class _RunStream:
-    """The bytes of a run, in order: those the parent already holds at its ends (head,
-    tail) from memory, the rest streamed by one ranged GET."""
+    """The bytes of a run, in order: those the parent already holds (head, tail, chunks
+    its own `messages()` read) from memory, each stretch between them by one ranged GET."""
 
     def __init__(self, obj: RemoteObject, start: int, end: int, tracker: Tracker | None) -> None:
         self.pos = start
         segments = tracker.segments.items() if tracker is not None else ()
-        self._held = [(at, data) for at, data in segments if at < end and start < at + len(data)]
-        net_start, net_end = start, end
-        for at, data in self._held:
-            if at <= net_start < at + len(data):
-                net_start = at + len(data)
-            if at < net_end <= at + len(data):
-                net_end = at
-        counter = tracker.counter if tracker is not None else None
-        self._net = RangeStream(obj, net_start, net_end, counter) if net_start < net_end else None
+        self._held = sorted(
+            (at, data) for at, data in segments if at < end and start < at + len(data)
+        )
+        self._obj = obj
+        self._counter = tracker.counter if tracker is not None else None
+        self._net: RangeStream | None = None
+        self._gaps: list[tuple[int, int]] = []
+        at = start
+        for seg_start, data in self._held:
+            if seg_start > at:
+                self._gaps.append((at, min(seg_start, end)))
+            at = max(at, seg_start + len(data))
+        if at < end:
+            self._gaps.append((at, end))
 
     def readinto(self, buffer: memoryview) -> None:
         """Fill `buffer` exactly with the next bytes of the run."""
         while len(buffer):
-            net = self._net
-            if net is not None and net.start <= self.pos < net.end:
-                n = min(len(buffer), net.end - self.pos)
+            gap = next(((a, b) for a, b in self._gaps if a <= self.pos < b), None)
+            if gap is not None:
+                net = self._net
+                if net is None or net.start != gap[0]:
+                    self.close()
+                    net = self._net = RangeStream(self._obj, gap[0], gap[1], self._counter)
+                n = min(len(buffer), gap[1] - self.pos)
                 net.readinto(buffer[:n])
             else:
                 at, data = next((a, d) for a, d in self._held if a <= self.pos < a + len(d))
@@ -446,6 +467,7 @@ class _RunStream:
         """Drop the reply."""
         if self._net is not None:
             self._net.close()
+            self._net = None
 
 
 def _skip(stream: _RunStream, length: int) -> None:

@@ -91,6 +91,8 @@ class Tracker:
     counter: FetchCounter = field(default_factory=FetchCounter)
     segments: dict[int, bytes] = field(default_factory=dict)
     """Start offset -> bytes fetched by the parent (head, tail, summary)."""
+    cached_bytes: int = 0
+    """Bytes of chunks among `segments` (bounded by the reader)."""
     size_bytes: int = 0
     needed_chunk_bytes: int = 0
     chunks_fetched: int = 0
