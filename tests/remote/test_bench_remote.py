@@ -31,4 +31,4 @@ def test_bench_remote_short_mode() -> None:
     # Everything fetched is a needed chunk, the header or the summary section.
     assert figures["fetched_bytes"] <= figures["size_bytes"]
     assert figures["fetched_over_needed"] <= 1.05
-    assert figures["server"] == "aiohttp" and figures["time_ratio"] > 0
+    assert figures["server"] == "threaded" and figures["time_ratio"] > 0
