@@ -52,7 +52,9 @@ CLIENT_TOTAL_BYTES = 768 << 20
 
 
 class _Handler(SimpleHTTPRequestHandler):
-    """Static files with single-range support, sent with sendfile; quiet."""
+    """Static files with single-range support, sent with sendfile; keep-alive; quiet."""
+
+    protocol_version = "HTTP/1.1"  # persistent connections, as object stores keep them
 
     def log_message(self, format: str, *args: Any) -> None:
         """Quiet."""

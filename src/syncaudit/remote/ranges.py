@@ -320,6 +320,9 @@ class RangeStream:
         self._counter = counter
         self._body: Body | None = None
         self._failures = 0
+        self._requests = 0
+        self._counted = start
+        """Bytes before this position (and `_requests`) are in the shared counter."""
 
     def begin(self) -> int:
         """Send the request (if not yet sent); the object's size."""
@@ -329,8 +332,7 @@ class RangeStream:
             except Exception as exc:
                 self._failed(exc)
                 continue
-            if self._counter is not None:
-                self._counter.add(0, 1)
+            self._requests += 1
         assert self.size is not None
         return self.size
 
@@ -357,8 +359,6 @@ class RangeStream:
                 continue
             got += n
             self.pos += n
-            if self._counter is not None:
-                self._counter.add(n)
 
     def _failed(self, exc: Exception) -> None:
         """Drop the reply; raise at once for what no retry can change, or after `TRIES`
@@ -385,10 +385,14 @@ class RangeStream:
         return bytes(out)
 
     def close(self) -> None:
-        """Drop the reply (the connection too if bytes of it are left unread)."""
+        """Drop the reply (the connection too if bytes of it are left unread); count what
+        was fetched (once per reply, not per read: the shared counter takes a lock)."""
         body, self._body = self._body, None
         if body is not None:
             body.close()
+        if self._counter is not None and (self.pos > self._counted or self._requests):
+            self._counter.add(self.pos - self._counted, self._requests)
+        self._counted, self._requests = self.pos, 0
 
 
 def read_range(obj: RemoteObject, start: int, end: int, counter: FetchCounter | None) -> bytes:
