@@ -198,8 +198,12 @@ class RemoteChunkReader(ChunkReader):
             stream.readinto(memoryview(data))
         finally:
             stream.close()
-        if tracker is not None and tracker.cached_bytes + length <= PARENT_CACHE_BYTES:
-            tracker.segments.setdefault(offset, bytes(data))
+        if (
+            tracker is not None
+            and offset not in tracker.segments
+            and tracker.cached_bytes + length <= PARENT_CACHE_BYTES
+        ):
+            tracker.segments[offset] = bytes(data)
             tracker.cached_bytes += length
         return self.decode(memoryview(data)[:length], where)
 
