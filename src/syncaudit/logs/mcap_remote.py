@@ -124,14 +124,22 @@ class RemoteFile:
         self._pos = max(0, base + offset)
         return self._pos
 
-    def read(self, size: int = -1) -> bytes:
+    def read(self, size: int = -1) -> bytes | bytearray:
         """Up to `size` bytes from the read position (to the end if negative)."""
         end = self._size if size < 0 else min(self._size, self._pos + size)
         if end <= self._pos:
             return b""
-        data = bytes(self._slice(self._pos, end))
-        self._pos = end
-        return data
+        start, self._pos = self._pos, end
+        if not self._keep and self._held(start, end) is None:
+            # A worker's chunk: streamed straight into the buffer returned (no second copy).
+            out = bytearray(end - start)
+            stream = _RunStream(self._obj, start, end, self._tracker)
+            try:
+                stream.readinto(memoryview(out))
+            finally:
+                stream.close()
+            return out
+        return bytes(self._slice(start, end))
 
     def readinto(self, buffer: bytearray | memoryview) -> int:
         """Fill a prefix of `buffer`; the bytes read."""
@@ -146,10 +154,17 @@ class RemoteFile:
         """Nothing held open (the fetched bytes belong to the tracker)."""
         self.closed = True
 
-    def _slice(self, start: int, end: int) -> memoryview:
+    def _held(self, start: int, end: int) -> memoryview | None:
+        """Bytes start..end-1 if one fetched segment holds them all."""
         for at, data in self._tracker.segments.items():
             if at <= start and end <= at + len(data):
                 return memoryview(data)[start - at : end - at]
+        return None
+
+    def _slice(self, start: int, end: int) -> memoryview:
+        held = self._held(start, end)
+        if held is not None:
+            return held
         stop = min(self._size, max(end, start + MISS_BYTES))
         if not self._keep:
             return memoryview(read_range(self._obj, start, end, self._tracker.counter))
