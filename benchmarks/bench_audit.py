@@ -653,7 +653,7 @@ def audit_argv(log: Path, json_out: Path) -> list[str]:
     """
     exe = Path(sys.executable).with_name("syncaudit")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "syncaudit.cli"]
-    return [*cmd, "audit", str(log), "--rig", str(rig_path(log)), "--json-out", str(json_out)]
+    return [*cmd, "audit", str(log), "--rig", str(rig_path(log)), "--json-out", str(json_out), "--overwrite"]
 
 
 def audit_vs_truth(json_out: Path, log: Path) -> str:
