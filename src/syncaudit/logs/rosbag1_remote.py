@@ -18,15 +18,17 @@ downloads it whole instead.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 from typing import BinaryIO, cast
 
-from syncaudit.errors import LogOpenError, SyncauditError
-from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath
-from syncaudit.logs.model import ReadUnit
+from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
+from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath, _RunStream
+from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.rosbag1 import (
     MAGIC,
     OP_CHUNK,
     OP_CHUNK_INFO,
+    UNIT_KIND,
     BagFile,
     BagFormatError,
     BagIndex,
@@ -47,6 +49,8 @@ from syncaudit.remote.ranges import (
 )
 
 KIND = "rosbag1-remote-chunk"
+RANGE_BYTES = 24 << 20
+"""Largest run of chunk spans one GET reads (as MCAP runs)."""
 HEAD_BYTES = (4 << 10) + 256
 """First read: the magic and the bag header record (rosbag pads it to 4 KiB)."""
 
@@ -138,16 +142,32 @@ class RemoteRosbag1Log(Rosbag1Log):
         )
 
     def _units(self, conn_ids: set[int]) -> list[ReadUnit]:
-        """One unit per chunk span holding `conn_ids`, read from the URL."""
-        units = [
-            dataclasses.replace(unit, source=self.url, kind=KIND)
-            for unit in super()._units(conn_ids)
-        ]
+        """Runs of adjacent chunk spans holding `conn_ids` (up to `RANGE_BYTES`), each read
+        from the URL with one GET."""
+        spans = super()._units(conn_ids)
         tracker = self._tracker
         tracker.chunks_total = len(self._index.chunks)
-        tracker.chunks_fetched = len(units)
-        tracker.needed_chunk_bytes = sum(unit.length for unit in units)
-        return units
+        tracker.chunks_fetched = len(spans)
+        tracker.needed_chunk_bytes = sum(unit.length for unit in spans)
+        runs: list[ReadUnit] = []
+        for span in spans:  # in file order
+            last = runs[-1] if runs else None
+            end = span.offset + span.length
+            if (
+                last is not None
+                and last.offset + last.length == span.offset
+                and end - last.offset <= RANGE_BYTES
+            ):
+                runs[-1] = dataclasses.replace(
+                    last,
+                    length=end - last.offset,
+                    start_ns=min(last.start_ns, span.start_ns),
+                    end_ns=max(last.end_ns, span.end_ns),
+                    cost=end - last.offset,
+                )
+                continue
+            runs.append(dataclasses.replace(span, source=self.url, kind=KIND, cost=span.length))
+        return runs
 
     def fetch_stats(self) -> Tracker:
         """What this log's reading has fetched so far (shared with its workers)."""
@@ -158,17 +178,71 @@ class RemoteRosbag1Log(Rosbag1Log):
         release_tracker(self._tracker)
 
 
+class _RunFile:
+    """A run of chunk spans held in memory, read at its file offsets (for `BagFile`)."""
+
+    def __init__(self, data: memoryview, offset: int) -> None:
+        self._data, self._offset, self._pos = data, offset, offset
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        self._pos = offset
+        return offset
+
+    def read(self, size: int) -> bytes:
+        at = self._pos - self._offset
+        self._pos += size
+        return bytes(self._data[at : at + size])
+
+    def close(self) -> None:
+        """Nothing to close (the buffer belongs to the reader)."""
+
+
 class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
-    """Per-worker reader of 'rosbag1-remote-chunk' units: each span one ranged GET."""
+    """Per-worker reader of 'rosbag1-remote-chunk' units: a run of chunk spans fetched with
+    one ranged GET into a reused buffer, then each chunk decoded by the local reader."""
 
     def __init__(self, source: str | None = None) -> None:
         super().__init__()
+        self._source = source
+        self._buffer = bytearray()
+        self._tracker: Tracker | None = None
         if source is None:
             return
-        obj = open_object(source)
-        tracker = find_tracker(source)  # the parent's, inherited by fork
-        if tracker is None or not tracker.size_bytes:
-            _head, size = read_head(obj, 1, None)
-            tracker = Tracker(source, size_bytes=size)
-        handle = cast(BinaryIO, RemoteFile(obj, tracker.size_bytes, tracker, keep=False))
-        self._files[source] = BagFile(handle, tracker.size_bytes)
+        self._object = open_object(source)
+        self._tracker = find_tracker(source)  # the parent's, inherited by fork
+
+    def messages(
+        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
+    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(log time, index in run, connection id, payload) of the run's wanted messages;
+        the index is (chunk's place in the run << 32) | message index."""
+        if unit.kind != KIND or unit.source != self._source:
+            yield from super().messages(unit, channels)
+            return
+        if len(self._buffer) < unit.length:
+            self._buffer = bytearray(unit.length)
+        view = memoryview(self._buffer)[: unit.length]
+        stream = _RunStream(self._object, unit.offset, unit.offset + unit.length, self._tracker)
+        try:
+            stream.readinto(view)
+        finally:
+            stream.close()
+        end = unit.offset + unit.length
+        bag = BagFile(cast(BinaryIO, _RunFile(view, unit.offset)), end)
+        name = self._object.name  # errors name the URL (no query string)
+        self._files[name] = bag
+        pos, ordinal = unit.offset, 0
+        while pos < end:
+            try:
+                fields, data_at, dlen = bag.record_at(pos)
+            except BagFormatError as exc:
+                raise LogReadError(
+                    f"{self._object.name}: ROS 1 record at byte {pos}: {exc}"
+                ) from None
+            if fields.get("op") == bytes([OP_CHUNK]):
+                chunk = ReadUnit(name, UNIT_KIND, pos, data_at + dlen - pos, 0, 0, 0)
+                base = ordinal << 32
+                for log_time, index, conn_id, data in super().messages(chunk, channels):
+                    yield log_time, base | index, conn_id, data
+                ordinal += 1
+            pos = data_at + dlen
