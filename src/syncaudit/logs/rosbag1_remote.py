@@ -5,10 +5,11 @@ of the file (connections and chunk infos: two requests). A bag's index gives whe
 chunk starts, not its length; the local reader reads every chunk's record header at open
 for it, which remotely would cost one request per chunk. Here a chunk's span runs from
 its position to the next chunk's (to the index section for the last): the chunk record
-and the index-data records that follow it. Each span is one 'rosbag1-remote-chunk' unit,
-read by a worker with one ranged GET and decoded by the local chunk reader
-(`Rosbag1ChunkReader`, which reads the chunk's own header and ignores the index records
-after it); the record header is checked there, when the chunk is read.
+and the index-data records that follow it. Spans tile the data section, so adjacent
+spans holding audited topics are merged into runs of up to `RANGE_BYTES`: one
+'rosbag1-remote-chunk' unit each, fetched by a worker with one ranged GET into a reused
+buffer and walked record by record, each chunk decoded by the local chunk reader
+(`Rosbag1ChunkReader`); the record headers are checked there, when the chunks are read.
 
 A bag whose index is missing or damaged (a recording that was not closed) is refused with
 `RemoteUnindexedError`: the local reader would scan every record, so the caller
