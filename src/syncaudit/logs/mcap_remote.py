@@ -133,7 +133,7 @@ class RemoteFile:
         if not self._keep and self._held(start, end) is None:
             # A worker's chunk: streamed straight into the buffer returned (no second copy).
             out = bytearray(end - start)
-            stream = _RunStream(self._obj, start, end, self._tracker)
+            stream = RunStream(self._obj, start, end, self._tracker)
             try:
                 stream.readinto(memoryview(out))
             finally:
@@ -208,7 +208,7 @@ class RemoteChunkReader(ChunkReader):
             raise LogReadError(f"{where}: chunk record of {length} bytes cannot be read")
         tracker = self._tracker
         data = bytearray(length)
-        stream = _RunStream(self._obj, offset, offset + length, tracker)
+        stream = RunStream(self._obj, offset, offset + length, tracker)
         try:
             stream.readinto(memoryview(data))
         finally:
@@ -390,7 +390,7 @@ class RemoteChunksUnitReader:
         the order the local reader's chunks do. Payloads stay valid until the next run.
         """
         end = unit.offset + unit.length
-        stream = _RunStream(self._object, unit.offset, end, self._tracker)
+        stream = RunStream(self._object, unit.offset, end, self._tracker)
         try:
             pos, ordinal = unit.offset, 0
             while pos < end:
@@ -413,7 +413,7 @@ class RemoteChunksUnitReader:
         finally:
             stream.close()
 
-    def _record_head(self, stream: _RunStream, pos: int, end: int, where: str) -> tuple[int, int]:
+    def _record_head(self, stream: RunStream, pos: int, end: int, where: str) -> tuple[int, int]:
         """(opcode, length) of the record at `pos`, which must end within the run."""
         if end - pos < _RECORD_HEAD.size:
             raise LogReadError(f"{where}: a record is cut by the end of the indexed chunks")
@@ -426,7 +426,7 @@ class RemoteChunksUnitReader:
             )
         return int(opcode), int(length)
 
-    def _chunk(self, stream: _RunStream, length: int, where: str, ordinal: int) -> memoryview:
+    def _chunk(self, stream: RunStream, length: int, where: str, ordinal: int) -> memoryview:
         """Stream the rest of a chunk record into memory and decode it."""
         total = _RECORD_HEAD.size + length
         if total > MAX_CHUNK_RECORD_BYTES:
@@ -442,7 +442,7 @@ class RemoteChunksUnitReader:
         """Nothing to release: the connection belongs to the worker process."""
 
 
-class _RunStream:
+class RunStream:
     """The bytes of a run, in order: those the parent already holds (head, tail, chunks
     its own `messages()` read) from memory, each stretch between them by one ranged GET."""
 
@@ -489,7 +489,7 @@ class _RunStream:
             self._net = None
 
 
-def _skip(stream: _RunStream, length: int) -> None:
+def _skip(stream: RunStream, length: int) -> None:
     """Read past `length` bytes of the stream."""
     scratch = memoryview(bytearray(min(length, 1 << 16)))
     while length > 0:

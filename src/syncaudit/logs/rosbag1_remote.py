@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from typing import BinaryIO, cast
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath, _RunStream
+from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath, RunStream
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.rosbag1 import (
     MAGIC,
@@ -223,7 +223,7 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
         if len(self._buffer) < unit.length:
             self._buffer = bytearray(unit.length)
         view = memoryview(self._buffer)[: unit.length]
-        stream = _RunStream(self._object, unit.offset, unit.offset + unit.length, self._tracker)
+        stream = RunStream(self._object, unit.offset, unit.offset + unit.length, self._tracker)
         try:
             stream.readinto(view)
         finally:
