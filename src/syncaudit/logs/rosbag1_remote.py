@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from typing import BinaryIO, cast
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, UrlPath, RunStream
+from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.rosbag1 import (
     MAGIC,
