@@ -12,6 +12,7 @@ import numpy as np
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
+from syncaudit.camera.routing import CameraRouter
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.errors import NoDataError
@@ -181,8 +182,8 @@ def audit_log(
 
 def _plan(
     log: LogReader, rig: Rig, cameras: list[CameraConfig], check_crc: bool = False
-) -> tuple[ExtractPlan, dict[str, CameraTableBuilder]]:
-    """What to read, and a table builder per camera topic."""
+) -> tuple[ExtractPlan, CameraRouter]:
+    """What to read, and where each camera topic's rows go (topics may be shared)."""
     lidar = rig.lidar
     family = lidar_family(log.topics[lidar.topic].msgtype)
     if family is None:
@@ -195,25 +196,32 @@ def _plan(
         if meta_topic is None:
             raise NoDataError(f"{lidar.topic}: Ouster packets need the sensor metadata topic")
         meta = read_ouster_metadata(log, meta_topic)
-    builders: dict[str, CameraTableBuilder] = {}
-    images: dict[str, str] = {}
-    exposures: dict[str, tuple[str, str]] = {}
-    triggers: dict[str, str] = {}
+    router = CameraRouter()
     for cam in cameras:
         builder = CameraTableBuilder(cam)
         # Frames come from the image headers, or from CameraInfo where no image was recorded.
         frame_topic = cam.image_topic if cam.image_topic in log.topics else cam.info_topic
-        if frame_topic in log.topics:
-            images[frame_topic] = cam.name
-            builders[frame_topic] = builder
-        if cam.exposure_topic in log.topics:
-            exposures[cam.exposure_topic] = (cam.name, cam.stamp)
-            builders[cam.exposure_topic] = builder
-        if cam.trigger_topic in log.topics:
-            triggers[cam.trigger_topic] = cam.name
-            builders[cam.trigger_topic] = builder
+        for kind, topic in (
+            ("image", frame_topic),
+            ("exposure", cam.exposure_topic),
+            ("trigger", cam.trigger_topic),
+        ):
+            if topic in log.topics:
+                router.add(kind, topic, builder)
+        router.builders.setdefault(cam.name, builder)
+    images = {t: _owner(o) for t, o in router.topics("image").items()}
+    exposures: dict[str, tuple[str, str]] = {
+        t: (_owner(o), o[0].camera.stamp) for t, o in router.topics("exposure").items()
+    }
+    triggers = {t: _owner(o) for t, o in router.topics("trigger").items()}
     plan = ExtractPlan(lidar.topic, family, meta, check_crc, images, exposures, triggers)
-    return plan, builders
+    return plan, router
+
+
+def _owner(owners: list[CameraTableBuilder]) -> str:
+    """The camera the plan names for a topic's rows: "" for a shared topic, whose rows the
+    router gives to the camera each message names."""
+    return owners[0].camera.name if len(owners) == 1 else ""
 
 
 def _import_analysis() -> None:
@@ -243,9 +251,18 @@ def _locate_cameras(log: LogReader, rig: Rig, warnings: list[str]) -> list[Locat
 
 
 def _read(
-    log: LogReader, rig: Rig, located: list[Located], *, jobs: int, check_crc: bool
+    log: LogReader,
+    rig: Rig,
+    located: list[Located],
+    *,
+    jobs: int,
+    check_crc: bool,
+    warnings: list[str],
 ) -> tuple[LidarScan, list[CameraTables]]:
-    """One pass over the log: the LiDAR's reduced timing and every camera's tables."""
+    """One pass over the log: the LiDAR's reduced timing and every camera's tables.
+
+    What could not be given to a camera from a topic cameras share is added to `warnings`.
+    """
     lidar_cfg = rig.lidar
     scanner = LidarScanner.create(
         lidar_cfg.topic,
@@ -254,23 +271,19 @@ def _read(
         target_azimuth_deg=tuple(a for _, a, _ in located),
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
-    plan, builders = _plan(log, rig, [c for c, _, _ in located], check_crc)
+    plan, router = _plan(log, rig, [c for c, _, _ in located], check_crc)
     for count, (kind, topic, payload) in enumerate(iter_items(log, plan, jobs)):
         if count == 0:
             _import_analysis()
         if kind == "lidar":
             scanner.feed(payload)
-        elif kind == "image":
-            builders[topic].images.append(payload)
-        elif kind == "exposure":
-            builders[topic].exposures.append(payload)
         else:
-            builders[topic].triggers.append(payload)
+            router.feed(kind, topic, payload)
     scan = scanner.finish()
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
-    by_camera = {b.camera.name: b for b in builders.values()}
-    tables = [by_camera.get(c.name, CameraTableBuilder(c)).build() for c, _, _ in located]
+    warnings.extend(router.finish())
+    tables = [router.builders[c.name].build() for c, _, _ in located]
     return scan, tables
 
 
@@ -321,7 +334,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     rig, warnings = check_rig_against_log(log, rig)
     missing: list[str] = []
     located = _locate_cameras(log, rig, warnings)
-    scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc)
+    scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings)
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
     if not rig.cameras:

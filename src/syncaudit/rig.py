@@ -17,6 +17,9 @@ from syncaudit.errors import ConfigError
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 
+CAMERA_TOPIC_KEYS = ("image_topic", "info_topic", "exposure_topic", "trigger_topic")
+"""The camera fields naming a topic; cameras may share one (told apart by frame_id)."""
+
 MAX_LATENCY_US = 10_000_000.0
 """Largest latency, exposure or error limit a rig may state (10 s): anything above is a typo."""
 
@@ -56,10 +59,21 @@ class CameraConfig(_Strict):
     yaw_deg: float | None = Field(None, ge=-360.0, le=360.0)
     """Centre of the HFOV as a yaw in the LiDAR frame (CCW from +X); converted to azimuth."""
     frame_id: str | None = None
-    """Camera frame in /tf_static, to take the yaw from the log."""
+    """The header.frame_id of the camera's messages (its optical frame, REP 103): tells its
+    messages from other cameras' on a topic they share, and names its frame in /tf_static
+    (where the yaw is taken from when the rig gives no angle)."""
     hfov_deg: float = Field(90.0, gt=0.0, le=360.0)
     stamp: StampSemantics = "exposure_start"
-    """What the image header stamp marks; drivers differ."""
+    """What the header stamp of the camera's images (and of exposure metadata without an
+    explicit start: flir ImageMetaData, WFOVImage) marks. Drivers differ:
+    'exposure_start' (the default: the sensor's start-of-exposure timestamp, what the
+    method's checkpoint 248 is), 'exposure_middle' (NVIDIA DriveWorks' moeTimestampUs;
+    ntnu-arl's blackfly_nodelet: its end-of-exposure event less half the exposure),
+    'exposure_end' (FlyCapture's 1394 cycle time, latched when the shutter closes),
+    'trigger' (the trigger reaching the camera, checkpoint 246; the exposure starts t4
+    later: the trigger record's 248, else analysis.assumed_t4_us). A driver stamping on
+    arrival at the host (spinnaker_camera_driver without adjust_timestamp) has none of
+    these: give it exposure metadata with a start, or expect errors of the readout time."""
     assumed_exposure_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
     """Exposure to assume where the log has no exposure metadata (marked as assumed)."""
     optional: bool = False
@@ -110,6 +124,30 @@ class Rig(_Strict):
         names = [c.name for c in self.cameras]
         if len(names) != len(set(names)):
             raise ValueError(f"camera names must be unique, got {names}")
+        return self
+
+    @model_validator(mode="after")
+    def _shared_topics_tell_cameras_apart(self) -> Rig:
+        """Cameras reading one topic need different frame_ids to tell their messages apart."""
+        for key in CAMERA_TOPIC_KEYS:
+            by_topic: dict[str, list[CameraConfig]] = {}
+            for cam in self.cameras:
+                topic = getattr(cam, key)
+                if topic:
+                    by_topic.setdefault(topic, []).append(cam)
+            for topic, cams in by_topic.items():
+                seen: dict[str, str] = {}
+                for cam in cams:
+                    if cam.frame_id is None:
+                        continue
+                    frame = cam.frame_id.lstrip("/")  # ROS 1 "/cam" is tf2's "cam"
+                    if frame in seen:
+                        raise ValueError(
+                            f"cameras {seen[frame]!r} and {cam.name!r} share {key} "
+                            f"{topic} and frame_id {cam.frame_id!r}: their messages cannot "
+                            "be told apart; give each the header.frame_id its messages carry"
+                        )
+                    seen[frame] = cam.name
         return self
 
 

@@ -39,13 +39,15 @@ def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
             f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
         )
     camera_topics = [t for t, info in log.topics.items() if topic_role(info.msgtype)]
-    camera_fields, frame_ids = probe_camera_topics(log, camera_topics)
-    cameras = detect_cameras(log.topics, camera_fields, frame_ids)
+    probe = probe_camera_topics(log, camera_topics)
+    cameras = detect_cameras(log.topics, probe.camera_fields, probe.frame_ids, probe.shared)
     guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes]
     if cameras:
         guessed.append(
             "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
         )
+    for topic, names in sorted(probe.shared.items()):
+        guessed.append(f"{topic} shared by {len(names)} cameras ({', '.join(names)})")
     return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
 
 

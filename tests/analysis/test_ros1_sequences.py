@@ -143,3 +143,24 @@ def test_time_pairing_keeps_exact_stamps() -> None:
     assert warning is not None and "repeat" in warning
     assert paired["trig_lidar_packet_ns"].tolist() == [s - 20_000_000 for s in STARTS]
     assert str(paired["trig_lidar_packet_ns"].dtype) == "Int64"
+
+
+def test_sequence_wrapping_at_2_32_falls_back_to_time_pairing() -> None:
+    """ROS 1 header seq (and the uint32 frame_sequence fields) wrap after 2^32 messages:
+    13.6 years of a 10 Hz publisher, so no log is expected to hold one. Should a counter
+    start near the top, the numbers stop increasing and the frames pair by time, still each
+    with its own trigger."""
+    wrapping = [2**32 - 2, 2**32 - 1, 0, 1, 2]
+    frames, triggers = _frames(wrapping, STARTS), _triggers(wrapping, STARTS)
+    assert "do not increase" in str(sequence_problem(frames, triggers))
+    paired, warning = pair_triggers(frames, triggers)
+    assert warning is not None and "by time" in warning
+    assert paired["trig_lidar_packet_ns"].tolist() == [s - 20_000_000 for s in STARTS]
+
+
+def test_time_pairing_takes_a_trigger_recorded_just_after_the_derived_start() -> None:
+    """A start derived from an exposure_end stamp minus a whole-microsecond exposure can lie
+    up to 0.5 us before the trigger's own 248: it is still that frame's trigger."""
+    early = [s - 400 for s in STARTS]
+    paired, _ = pair_triggers(_frames([0] * 5, early), _triggers(list(range(5)), STARTS))
+    assert paired["trig_lidar_packet_ns"].tolist() == [s - 20_000_000 for s in STARTS]

@@ -1,7 +1,9 @@
-"""Simulator options used by the benchmark: a VLS-128, six cameras, JPEG-sized images."""
+"""Simulator options: the benchmark's (a VLS-128, six cameras, JPEG-sized images), and
+shared camera topics and header-stamp conventions through `simulate sync`."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -134,3 +136,33 @@ def test_defaults_and_validation() -> None:
     with pytest.raises(ValueError):
         SyncSimConfig(image_kind="compressed", image_bytes=10)
     assert SyncSimConfig(lidar_model="VLS-128").vendor == "velodyne"
+
+
+def test_cli_shared_topics_and_stamp_audit_to_the_truth(tmp_path: Path) -> None:
+    """`simulate sync` writes one image/meta/trigger topic for all cameras, told apart only by
+    header.frame_id, with exposure-end stamps; its rig audits each camera to the truth."""
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    runner = CliRunner()
+    out = tmp_path / "shared.mcap"
+    made = runner.invoke(
+        app,
+        [
+            "simulate", "sync", str(out), "--duration", "3", "--seed", "4",
+            "--shared-topics", "image,meta,trigger", "--exposure-messages", "flir_meta",
+            "--no-camera-field", "--stamp", "exposure_end",
+        ],
+    )  # fmt: skip
+    assert made.exit_code == 0, made.output
+    truth = json.loads(Path(f"{out}.truth.json").read_text())
+    assert {c["topics"]["image"] for c in truth["cameras"].values()} == {"/cameras/image_raw"}
+    audited = runner.invoke(app, ["audit", str(out), "--rig", f"{out}.rig.yaml", "--json"])
+    assert audited.exit_code == 0, audited.output
+    for cam in json.loads(audited.stdout)["cameras"]:
+        t = truth["cameras"][cam["camera"]]
+        assert cam["frames_paired"] == len(t["frames"])
+        assert abs(cam["error_mean_us"] - t["error_mean_ns"] / 1e3) < 5.0
+    bad = runner.invoke(app, ["simulate", "sync", str(tmp_path / "x.mcap"), "--stamp", "late"])
+    assert bad.exit_code == 64 and "--stamp" in bad.output

@@ -21,6 +21,10 @@ from syncaudit.columns.lidar import RevolutionColumns
 
 PAIR_TOLERANCE_NS = 50_000_000
 """A trigger belongs to a frame when it precedes the exposure by less than this."""
+PAIR_LEAD_NS = 1_000_000
+"""...or follows it by at most this: a frame's exposure start derived from its header stamp
+and a rounded exposure (ImageMetaData holds whole microseconds: `exposure_end` stamps give a
+start up to 0.5 us early) may fall just before the trigger's own record of it (248)."""
 SEQUENCE_AGREEMENT = 0.9
 """Sequence pairing is trusted when this share of its pairs also agree in time."""
 PHASE_FROM_TRIGGER = "trigger packet"
@@ -44,10 +48,17 @@ def _frame_time_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
     return np.where(present(start), start, header)
 
 
-def _trigger_time_ns(triggers: pd.DataFrame) -> NDArray[np.int64]:
-    """When a trigger started its exposure: checkpoint 248, else 246."""
+def _trigger_time_ns(triggers: pd.DataFrame, *, at_trigger: bool = False) -> NDArray[np.int64]:
+    """When a trigger started its exposure: checkpoint 248, else 246.
+
+    `at_trigger`: checkpoint 246 wherever recorded, to pair with frames whose time is the
+    trigger itself (header stamps marking the trigger, before t4 is known).
+    """
     start = stamps_ns(triggers, "exposure_start_ns")
-    return start if present(start).any() else stamps_ns(triggers, "camera_sensor_ns")
+    sensor = stamps_ns(triggers, "camera_sensor_ns")
+    if at_trigger and present(sensor).any():
+        return sensor
+    return start if present(start).any() else sensor
 
 
 def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None:
@@ -104,12 +115,17 @@ def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.DataFrame, str | None]:
+def pair_triggers(
+    frames: pd.DataFrame, triggers: pd.DataFrame, *, trigger_stamped: bool = False
+) -> tuple[pd.DataFrame, str | None]:
     """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
 
     By sequence number where `sequence_problem` finds none, else by time: the latest
     trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
-    where it has no exposure metadata).
+    where it has no exposure metadata), or at most `PAIR_LEAD_NS` after it.
+    `trigger_stamped`: the frames' times are their triggers (checkpoint 246, the rig's
+    `stamp: trigger`), so they pair with the triggers' 246 rather than their 248, which
+    lies t4 after.
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
     triggers = _unset_as_missing(triggers)
@@ -129,15 +145,17 @@ def pair_triggers(frames: pd.DataFrame, triggers: pd.DataFrame) -> tuple[pd.Data
     if frames["frame_sequence"].notna().any() and triggers["frame_sequence"].notna().any():
         warning = f"frames paired with triggers by time, not sequence number: {problem}"
     when = _frame_time_ns(frames)
-    left = frames.assign(_t=when, _row=np.arange(len(frames)))
+    lead = np.where(present(when), when + PAIR_LEAD_NS, when)
+    left = frames.assign(_t=lead, _row=np.arange(len(frames)))
     timed = left[present(when)].sort_values("_t", kind="stable")
-    trig_when = _trigger_time_ns(triggers)
+    trig_when = _trigger_time_ns(triggers, at_trigger=trigger_stamped)
     right = (
         trig.drop(columns="trig_frame_sequence")
         .assign(_t=trig_when)[present(trig_when)]
         .sort_values("_t", kind="stable")
     )
-    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=PAIR_TOLERANCE_NS)
+    window = PAIR_TOLERANCE_NS + PAIR_LEAD_NS
+    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=window)
     untimed = left[~present(when)]
     if not untimed.empty:
         merged = pd.concat([merged, untimed], ignore_index=True)

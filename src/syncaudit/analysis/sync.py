@@ -34,7 +34,7 @@ from syncaudit.analysis.stamps import (
     values_ns,
 )
 from syncaudit.analysis.stats import error_mean, error_variance, rolling_mean, rolling_variance
-from syncaudit.camera.extract import CameraTables
+from syncaudit.camera.extract import CAMERA_EXPOSURE, CameraTables
 from syncaudit.lidar.clock import ClockReport
 from syncaudit.lidar.scan import LidarScan
 from syncaudit.rig import AnalysisConfig, CameraConfig, LidarConfig, Thresholds
@@ -184,6 +184,42 @@ def _rotation(scan: LidarScan, camera_azimuth_deg: float, lidar: LidarConfig) ->
     omega_mean = float(omega.mean()) if omega.size else math.nan
     t_rotate = theta / omega_mean * 1e9 if omega_mean else math.nan
     return _Rotation(theta, omega_mean, t_rotate)
+
+
+def _start_after_trigger(
+    frames: pd.DataFrame, camera: CameraConfig, analysis: AnalysisConfig
+) -> tuple[pd.DataFrame, str | None]:
+    """Exposure starts of frames stamped at their trigger (246), moved on by t4 to 248.
+
+    With `stamp: trigger` the header stamp is when the trigger reached the camera; the
+    exposure starts t4 later. t4 is each frame's own where its trigger records 248 and
+    246, else `analysis.assumed_t4_us`; without either the start stays at the trigger (t_l
+    early by t4) and the warning says so. Exposure records stating their start
+    (CameraExposure) are left alone.
+    """
+    if camera.stamp != "trigger" or frames.empty:
+        return frames, None
+    derived = frames["source"].ne(CAMERA_EXPOSURE).fillna(True).to_numpy(bool)
+    start = stamps_ns(frames, "exposure_start_ns")
+    derived &= present(start)
+    if not derived.any():
+        return frames, None
+    t4 = delta_ns(
+        stamps_ns(frames, "trig_exposure_start_ns"), stamps_ns(frames, "trig_camera_sensor_ns")
+    )
+    if analysis.assumed_t4_us is not None:
+        t4 = np.where(np.isfinite(t4), t4, analysis.assumed_t4_us * 1e3)
+    known = derived & np.isfinite(t4)
+    moved = np.where(known, start + np.rint(np.nan_to_num(t4)).astype(np.int64), start)
+    out = frames.copy()
+    out["exposure_start_ns"] = nullable(moved)
+    unknown = int(np.sum(derived & ~known))
+    if not unknown:
+        return out, None
+    return out, (
+        f"{unknown} frames stamped at the trigger (246) without t4 (no trigger record of 248, "
+        "no analysis.assumed_t4_us): exposure start taken at the trigger, t_l early by t4"
+    )
 
 
 def _t_l_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
@@ -438,7 +474,10 @@ def analyze_camera(
     `target_index` is the camera's column in the revolutions' target crossings.
     """
     rotation = _rotation(scan, camera_azimuth_deg, lidar)
-    frames, pairing_warning = pair_triggers(tables.frames, tables.triggers)
+    frames, pairing_warning = pair_triggers(
+        tables.frames, tables.triggers, trigger_stamped=camera.stamp == "trigger"
+    )
+    frames, t4_warning = _start_after_trigger(frames, camera, analysis)
     t_l = _t_l_ns(frames)
     period = rotation.period_ns
     revolutions = pair_revolutions(
@@ -472,8 +511,19 @@ def analyze_camera(
     warnings.extend(_zero_warnings(revolutions, lidar))
     if pairing_warning:
         warnings.insert(0, pairing_warning)
+    if t4_warning:
+        warnings.append(t4_warning)
     return _camera_sync(
-        camera, rotation, revolutions, errors, stats, delay, table, warnings, thresholds
+        camera,
+        rotation,
+        revolutions,
+        errors,
+        stats,
+        delay,
+        table,
+        warnings,
+        thresholds,
+        shared_topic_notes=tables.shared_topic_notes,
     )
 
 
@@ -487,13 +537,21 @@ def _camera_sync(
     table: pd.DataFrame,
     warnings: list[str],
     thresholds: Thresholds,
+    *,
+    shared_topic_notes: tuple[str, ...] = (),
 ) -> CameraSync:
-    """Eq. 5/6 over the paired frames, the thresholds and the judgement, as a CameraSync."""
+    """Eq. 5/6 over the paired frames, the thresholds and the judgement, as a CameraSync.
+
+    A camera not judged because a topic it shares with others gave it nothing says so
+    first (`shared_topic_notes`), then the counts.
+    """
     s = errors.signed_ns[errors.paired]
     e = np.abs(s)
     mean_e, var_e = error_mean(e), error_variance(e)
     paired = int(errors.paired.sum())
     reason = _judgement(paired, len(table), thresholds)
+    if reason is not None and shared_topic_notes:
+        reason = f"{'; '.join(shared_topic_notes)} ({reason})"
     return CameraSync(
         camera=camera.name,
         theta_deg=rotation.theta_deg,

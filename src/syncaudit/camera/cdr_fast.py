@@ -9,7 +9,8 @@ Damaged bytes (a message cut short, a length past its end, an unknown encapsulat
 never raise: `read_fast` returns a namespace whose `damaged` attribute says what is
 wrong, so the row functions can skip the message with a counted warning (a damaged
 camera message should not stop the audit of everything else). Strings decode leniently
-(bit flips become U+FFFD): the audit does not use their text.
+(bit flips become U+FFFD): the audit uses their text only to tell cameras sharing a topic
+apart (`camera`, `header.frame_id`), where a damaged name matches no camera of the rig.
 """
 
 from __future__ import annotations

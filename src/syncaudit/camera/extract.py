@@ -32,6 +32,8 @@ _STAMP = struct.Struct("<iI")
 _STAMP_BE = struct.Struct(">iI")
 _ROS1_STAMP = struct.Struct("<II")
 _ROS1_SEQ = struct.Struct("<I")
+_U32 = struct.Struct("<I")
+_U32_BE = struct.Struct(">I")
 
 _HEADER_BYTES = 12
 """Bytes up to the end of the header stamp: ROS 1 seq + stamp, or CDR encapsulation + stamp."""
@@ -50,8 +52,15 @@ class DamagedRow:
     reason: str
 
 
-ImageRow = tuple[int, int, int | None]
-"""(header stamp ns, log time ns, ROS 1 seq or None)."""
+ImageRow = tuple[int, int, int | None, str]
+"""(header stamp ns, log time ns, ROS 1 seq or None, header frame_id)."""
+
+CAMERA_FIELD_TYPES = frozenset(
+    {"syncaudit_msgs/msg/TriggerEvent", "syncaudit_msgs/msg/CameraExposure"}
+)
+"""Types whose `camera` field names the rig camera a message belongs to."""
+_SOURCE = -2
+"""Index of the `source` (message type) column in frame and trigger rows."""
 
 
 def header_stamp_ns(msg: RawMessage) -> int:
@@ -71,6 +80,28 @@ def header_stamp_ns(msg: RawMessage) -> int:
     if sec < 0 or nsec >= 1_000_000_000:
         raise LogReadError(_where(msg, f"header stamp {sec} s {nsec} ns out of range"))
     return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def header_frame_id(msg: RawMessage) -> str:
+    """`header.frame_id` of a message whose first field is a std_msgs/Header, from its bytes.
+
+    "" where the message is too short to hold one (image_row reports the damage).
+    """
+    data = msg.data
+    if msg.encoding == "ros1":
+        unpack = _U32.unpack_from  # ROS 1 is little-endian; strings have no terminator
+        terminator = 0
+    else:
+        little = bytes(data[1:2]) in (b"\x01", b"\x03")
+        unpack = (_U32 if little else _U32_BE).unpack_from
+        terminator = 1  # CDR strings count their NUL
+    if len(data) < _HEADER_BYTES + 4:
+        return ""
+    (length,) = unpack(data, _HEADER_BYTES)
+    end = _HEADER_BYTES + 4 + length - terminator
+    if length < terminator or end > len(data):
+        return ""
+    return bytes(data[_HEADER_BYTES + 4 : end]).decode("utf-8", errors="replace")
 
 
 def _where(msg: RawMessage, what: str) -> str:
@@ -112,15 +143,35 @@ def exposure_start_ns(stamp: int, duration: int | None, semantics: str) -> int:
 def image_row(msg: RawMessage) -> ImageRow | DamagedRow:
     """The header of an image (or CameraInfo / WFOVImage) message; DamagedRow if unreadable."""
     try:
-        return header_stamp_ns(msg), msg.log_time_ns, _ros1_seq(msg)
+        return header_stamp_ns(msg), msg.log_time_ns, _ros1_seq(msg), header_frame_id(msg)
     except LogReadError as exc:
         return _damaged(msg, str(exc).rsplit(": ", 1)[-1])
+
+
+def _named_camera(msg: RawMessage, m: Any, camera: str) -> str:
+    """The camera a record names in its `camera` field (syncaudit types), else `camera`."""
+    if msg.msgtype in CAMERA_FIELD_TYPES:
+        named = str(getattr(m, "camera", ""))
+        if named:
+            return named
+    return camera
+
+
+def _frame_id(m: Any) -> str:
+    """`header.frame_id` of a deserialised message ("" where it has no header)."""
+    header = getattr(m, "header", None)
+    return str(getattr(header, "frame_id", "")) if header is not None else ""
 
 
 def exposure_row(
     msg: RawMessage, m: Any, camera: str, semantics: str
 ) -> tuple[Any, ...] | DamagedRow:
-    """A FRAME_COLUMNS row from one deserialised exposure message; DamagedRow if unreadable."""
+    """A FRAME_COLUMNS row from one deserialised exposure message; DamagedRow if unreadable.
+
+    Its `camera` is the one the message names (CameraExposure.camera), else `camera`; its
+    exposure start follows `semantics` where the message states none (the builder derives
+    it again with its own camera's `stamp`: a shared topic's cameras may differ).
+    """
     damage = getattr(m, "damaged", None)
     if damage is not None:
         return _damaged(msg, str(damage))
@@ -145,11 +196,23 @@ def _exposure_row(msg: RawMessage, m: Any, camera: str, semantics: str) -> tuple
         shutter = float(m.shutter)
         duration = _duration_ns(shutter, "shutter") if shutter >= 0 else None
         start = exposure_start_ns(stamp, duration, semantics)
-    return (camera, seq, stamp, msg.log_time_ns, start, duration, msg.msgtype)
+    return (
+        _named_camera(msg, m, camera),
+        seq,
+        stamp,
+        msg.log_time_ns,
+        start,
+        duration,
+        msg.msgtype,
+        _frame_id(m),
+    )
 
 
 def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...] | DamagedRow:
-    """A TRIGGER_COLUMNS row from one deserialised trigger message; DamagedRow if unreadable."""
+    """A TRIGGER_COLUMNS row from one deserialised trigger message; DamagedRow if unreadable.
+
+    Its `camera` is the one the message names (TriggerEvent.camera), else `camera`.
+    """
     damage = getattr(m, "damaged", None)
     if damage is not None:
         return _damaged(msg, str(damage))
@@ -162,7 +225,7 @@ def trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...] | Damag
 def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
     if msg.msgtype == "syncaudit_msgs/msg/TriggerEvent":
         return (
-            camera,
+            _named_camera(msg, m, camera),
             int(m.frame_sequence),
             msg.log_time_ns,
             _time_ns(m.lidar_packet_time),
@@ -172,8 +235,12 @@ def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
             _time_ns(m.exposure_start_time),
             _duration_ns(m.applied_delay, "applied_delay"),
             msg.msgtype,
+            _frame_id(m),
         )
-    sent = _time_ns(m) if msg.msgtype == "builtin_interfaces/msg/Time" else _time_ns(m.time_ref)
+    if msg.msgtype == "builtin_interfaces/msg/Time":
+        sent, frame_id = _time_ns(m), ""  # a bare time: nothing names the camera
+    else:  # sensor_msgs/TimeReference: frame_id "not used" by the message's docs; source
+        sent, frame_id = _time_ns(m.time_ref), _frame_id(m) or str(getattr(m, "source", ""))
     return (
         camera,
         _ros1_seq(msg),
@@ -185,6 +252,7 @@ def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
         None,
         None,
         msg.msgtype,
+        frame_id,
     )
 
 
@@ -194,7 +262,7 @@ class CameraTables:
 
     name: str
     images: pd.DataFrame
-    """header_stamp_ns, log_time_ns, frame_sequence (ROS 1 seq) of every image."""
+    """header_stamp_ns, log_time_ns, frame_sequence (ROS 1 seq), frame_id of every image."""
     frames: pd.DataFrame
     """FRAME_COLUMNS: one row per exposure record (or per image where there are none)."""
     triggers: pd.DataFrame
@@ -203,6 +271,13 @@ class CameraTables:
     trigger_source: str | None
     warnings: tuple[str, ...] = ()
     """Damaged messages skipped, one line per topic."""
+    shared_topic_notes: tuple[str, ...] = ()
+    """Why messages of a topic this camera shares with others could not be given to it
+    (nothing in them tells the cameras apart): the reason it is not judged, if it is not."""
+
+
+CAMERA_EXPOSURE = "syncaudit_msgs/msg/CameraExposure"
+"""The one exposure type stating its exposure start; the others' follow the rig's `stamp`."""
 
 
 @dataclass(slots=True)
@@ -213,6 +288,7 @@ class CameraTableBuilder:
     images: list[ImageRow | DamagedRow] = field(default_factory=list)
     exposures: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
     triggers: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
+    shared_topic_notes: list[str] = field(default_factory=list)
 
     def build(self) -> CameraTables:
         """The camera's frame, image and trigger tables, damaged messages left out.
@@ -231,10 +307,11 @@ class CameraTableBuilder:
                 "header_stamp_ns": pd.array([r[0] for r in image_rows], dtype="int64"),
                 "log_time_ns": pd.array([r[1] for r in image_rows], dtype="int64"),
                 "frame_sequence": pd.array([r[2] for r in image_rows], dtype="Int64"),
+                "frame_id": pd.array([r[3] for r in image_rows], dtype="string"),
             }
         )
         if exposure_rows:
-            frames = _table(exposure_rows, FRAME_COLUMNS)
+            frames = _restamped(_table(exposure_rows, FRAME_COLUMNS), cam.stamp)
         else:
             assumed = (
                 None if cam.assumed_exposure_us is None else round(cam.assumed_exposure_us * 1e3)
@@ -251,20 +328,47 @@ class CameraTableBuilder:
                     ],
                     "exposure_duration_ns": assumed,
                     "source": "image" if assumed is None else "image+assumed_exposure",
+                    "frame_id": images["frame_id"],
                 },
                 columns=list(FRAME_COLUMNS),
             )
-        frames = frames.astype(FRAME_COLUMNS).sort_values("log_time_ns", kind="stable")
-        triggers = _table(trigger_rows, TRIGGER_COLUMNS)
+        # Rows from a shared topic carry what the message names; the table is this camera's.
+        frames = frames.assign(camera=cam.name).astype(FRAME_COLUMNS)
+        frames = frames.sort_values("log_time_ns", kind="stable")
+        triggers = _table(trigger_rows, TRIGGER_COLUMNS).assign(camera=cam.name)
         return CameraTables(
             cam.name,
             images,
             frames.reset_index(drop=True),
-            triggers,
-            exposure_rows[0][-1] if exposure_rows else None,
-            trigger_rows[0][-1] if trigger_rows else None,
+            triggers.astype(TRIGGER_COLUMNS),
+            exposure_rows[0][_SOURCE] if exposure_rows else None,
+            trigger_rows[0][_SOURCE] if trigger_rows else None,
             warnings,
+            tuple(self.shared_topic_notes),
         )
+
+
+def _restamped(frames: pd.DataFrame, semantics: str) -> pd.DataFrame:
+    """Exposure starts derived from header stamps again, with this camera's `stamp`.
+
+    The workers derive them with the semantics of the topic's (first) camera; a topic
+    shared by cameras whose drivers stamp differently needs each camera's own.
+    """
+    derived = frames["source"].ne(CAMERA_EXPOSURE).fillna(True).to_numpy(bool)
+    if not derived.any():
+        return frames
+    stamp = frames["header_stamp_ns"].astype("Int64")
+    duration = frames["exposure_duration_ns"].astype("Int64")
+    if semantics == "exposure_middle":
+        start = stamp - duration // 2
+    elif semantics == "exposure_end":
+        start = stamp - duration
+    else:
+        start = stamp
+    start = start.fillna(stamp) if semantics in ("exposure_middle", "exposure_end") else start
+    out = frames.copy()
+    out["exposure_start_ns"] = out["exposure_start_ns"].astype("Int64").where(~derived, start)
+    return out
 
 
 _Row = TypeVar("_Row", bound=tuple[Any, ...])

@@ -8,14 +8,25 @@ camera `cam_front` instead of becoming a camera `trigger_event`.
 
 from __future__ import annotations
 
-import struct
 from collections import defaultdict
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
-from syncaudit.logs import LogReader, RawMessage, TopicInfo
+from syncaudit.camera.extract import CAMERA_FIELD_TYPES, header_frame_id
+from syncaudit.logs import LogReader, TopicInfo
 from syncaudit.rig import CameraConfig
 
+__all__ = [
+    "CAMERA_FIELD_TYPES",
+    "CameraProbe",
+    "camera_name",
+    "detect_cameras",
+    "frame_camera_name",
+    "header_frame_id",
+    "probe_camera_topics",
+    "topic_role",
+]
 IMAGE_TYPES = frozenset({"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"})
 INFO_TYPES = frozenset({"sensor_msgs/msg/CameraInfo"})
 EXPOSURE_TYPES = frozenset(
@@ -54,10 +65,6 @@ _LEAVES = frozenset(
         "camera_exposure",
     }
 )
-CAMERA_FIELD_TYPES = frozenset(
-    {"syncaudit_msgs/msg/TriggerEvent", "syncaudit_msgs/msg/CameraExposure"}
-)
-"""Types whose `camera` field names the camera they belong to."""
 _ROLES = (
     (IMAGE_TYPES, "image_topic"),
     (INFO_TYPES, "info_topic"),
@@ -102,18 +109,40 @@ def _owner(info: TopicInfo, role: str, cameras: set[str], camera_fields: dict[st
     return name
 
 
+MAX_SHARED_CAMERAS = 16
+"""More frame ids than this on one image topic within the probe window are not cameras
+(drivers exist that put a per-image id in frame_id): the topic stays one camera."""
+_FRAME_SUFFIXES = ("_optical_frame", "_optical", "_frame", "_link")
+
+
+def frame_camera_name(frame_id: str) -> str:
+    """A camera name from a frame id: `cam_front_optical_frame` -> `cam_front`."""
+    name = frame_id.strip("/").rsplit("/", 1)[-1]
+    for suffix in _FRAME_SUFFIXES:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name or frame_id
+
+
 def detect_cameras(
     topics: dict[str, TopicInfo],
     camera_fields: dict[str, str] | None = None,
     frame_ids: dict[str, str] | None = None,
+    shared: dict[str, list[str]] | None = None,
 ) -> list[CameraConfig]:
     """Camera configs guessed from topic types, then names (one per camera name).
 
     `camera_fields` maps trigger/exposure topics to the `camera` field of their first
-    message, `frame_ids` image topics to their header frame (see `probe_camera_topics`).
+    message, `frame_ids` image topics to their header frame, `shared` topics to the
+    several cameras their messages name (frame ids of an image topic, `camera` fields of
+    a trigger/exposure topic; see `probe_camera_topics`). An image topic of several frame
+    ids is several cameras, one per frame id, sharing it and its namespace's other topics.
     """
     camera_fields = camera_fields or {}
     frame_ids = frame_ids or {}
+    shared = {t: ids for t, ids in (shared or {}).items() if 1 < len(ids) <= MAX_SHARED_CAMERAS}
+    # A shared trigger/exposure topic belongs to its namespace, not to its first message's camera.
+    fields_of = {t: f for t, f in camera_fields.items() if t not in shared}
     roles = {
         info.name: role
         for info in topics.values()
@@ -123,60 +152,63 @@ def detect_cameras(
     found: dict[str, dict[str, str]] = defaultdict(dict)
     for name in sorted(roles):
         info, role = topics[name], roles[name]
-        slots = found[_owner(info, role, image_cameras, camera_fields)]
+        slots = found[_owner(info, role, image_cameras, fields_of)]
         if role == "image_topic" and role in slots and info.msgtype.endswith("CompressedImage"):
             continue  # keep the raw image where both are recorded
         slots.setdefault(role, info.name)
-    cameras = []
+    cameras: list[CameraConfig] = []
     for name, slots in sorted(found.items()):
         if "exposure_topic" in slots and "image_topic" not in slots:
             exposure_type = topics[slots["exposure_topic"]].msgtype
             if exposure_type == "wfov_camera_msgs/msg/WFOVImage":
                 slots["image_topic"] = slots["exposure_topic"]
-        frame = frame_ids.get(slots.get("image_topic", "")) or frame_ids.get(
+        frame_topic = slots.get("image_topic") or slots.get("info_topic", "")
+        if frame_topic in shared:
+            taken = {c.name for c in cameras}
+            for frame in shared[frame_topic]:
+                split = frame_camera_name(frame)
+                split = split if split not in taken else frame
+                taken.add(split)
+                cameras.append(
+                    CameraConfig.model_validate({"name": split, **slots, "frame_id": frame})
+                )
+            continue
+        first_frame = frame_ids.get(slots.get("image_topic", "")) or frame_ids.get(
             slots.get("info_topic", "")
         )
         fields: dict[str, Any] = {"name": name, **slots}
-        if frame:
-            fields["frame_id"] = frame
+        if first_frame:
+            fields["frame_id"] = first_frame
         cameras.append(CameraConfig.model_validate(fields))
     return cameras
 
 
-_U32 = struct.Struct("<I")
-_U32_BE = struct.Struct(">I")
-
-
-def header_frame_id(msg: RawMessage) -> str:
-    """`header.frame_id` of a message whose first field is a std_msgs/Header (raw bytes).
-
-    "" where the bytes are too short to hold one (a guess, never an error).
-    """
-    data = bytes(msg.data[:4096])
-    if msg.encoding == "ros1":
-        offset, unpack = 12, _U32.unpack_from  # seq, stamp
-    else:
-        little = data[1:2] in (b"\x01", b"\x03")
-        offset, unpack = 12, (_U32 if little else _U32_BE).unpack_from  # encapsulation, stamp
-    try:
-        (length,) = unpack(data, offset)
-    except struct.error:
-        return ""
-    text = data[offset + 4 : offset + 4 + length]
-    return text.rstrip(b"\x00").decode("utf-8", errors="replace")
-
-
 PROBE_WINDOW_NS = 60_000_000_000
 """Only the log's first minute is searched for each camera topic's first message."""
+SHARED_WINDOW_NS = 1_000_000_000
+"""After a topic's first message, this long is read for other cameras on it: one frame
+of each camera of a shared topic (cameras run at 1 Hz or more)."""
 
 
-def probe_camera_topics(
-    log: LogReader, topics: Iterable[str]
-) -> tuple[dict[str, str], dict[str, str]]:
-    """From the first message of each camera topic: `camera` fields and image frame ids.
+@dataclass(frozen=True, slots=True)
+class CameraProbe:
+    """What the first messages of the camera topics say about their cameras."""
 
-    Reads only until every topic has shown one message, and at most the log's first
-    minute (topics without messages, or starting later, are left out).
+    camera_fields: dict[str, str]
+    """Trigger/exposure topic -> `camera` field of its first message."""
+    frame_ids: dict[str, str]
+    """Image/info topic -> header.frame_id of its first message."""
+    shared: dict[str, list[str]]
+    """Topic -> the distinct non-empty names (frame ids, or camera fields) its messages gave
+    in `SHARED_WINDOW_NS`, where there were several."""
+
+
+def probe_camera_topics(log: LogReader, topics: Iterable[str]) -> CameraProbe:
+    """From the first second of each camera topic: `camera` fields and image frame ids.
+
+    Reads each topic from its first message for `SHARED_WINDOW_NS` (to see every camera
+    of a shared topic), and at most the log's first minute (topics without messages, or
+    starting later, are left out).
     """
     probed = CAMERA_FIELD_TYPES | IMAGE_TYPES | INFO_TYPES
     pending = {
@@ -184,20 +216,38 @@ def probe_camera_topics(
         for t in topics
         if t in log.topics and log.topics[t].msgtype in probed and log.topics[t].count != 0
     }
-    camera_fields: dict[str, str] = {}
-    frame_ids: dict[str, str] = {}
-    if not pending:
-        return camera_fields, frame_ids
-    start = log.summary.start_ns
-    stop = None if start is None else start + PROBE_WINDOW_NS
-    for msg in log.messages(sorted(pending), stop_ns=stop):
-        if msg.topic not in pending:
-            continue
-        pending.discard(msg.topic)
-        if msg.msgtype in CAMERA_FIELD_TYPES:
-            camera_fields[msg.topic] = str(getattr(log.deserialize(msg), "camera", ""))
-        else:
-            frame_ids[msg.topic] = header_frame_id(msg)
-        if not pending:
-            break
-    return camera_fields, frame_ids
+    seen: dict[str, list[str]] = {}
+    first_ns: dict[str, int] = {}
+    if pending:
+        start = log.summary.start_ns
+        stop = None if start is None else start + PROBE_WINDOW_NS
+        for msg in log.messages(sorted(pending), stop_ns=stop):
+            if msg.topic not in pending:
+                continue
+            first = first_ns.setdefault(msg.topic, msg.log_time_ns)
+            if msg.log_time_ns - first > SHARED_WINDOW_NS:
+                pending.discard(msg.topic)
+                if not pending:
+                    break
+                continue
+            if msg.msgtype in CAMERA_FIELD_TYPES:
+                name = str(getattr(log.deserialize(msg), "camera", ""))
+            else:
+                name = header_frame_id(msg)
+            names = seen.setdefault(msg.topic, [])
+            if name not in names and (name or not names):
+                names.append(name)
+    firsts = {t: names[0] for t, names in seen.items()}
+    return CameraProbe(
+        camera_fields={
+            t: n for t, n in firsts.items() if log.topics[t].msgtype in CAMERA_FIELD_TYPES
+        },
+        frame_ids={
+            t: n for t, n in firsts.items() if log.topics[t].msgtype not in CAMERA_FIELD_TYPES
+        },
+        shared={
+            t: [n for n in names if n]
+            for t, names in seen.items()
+            if len([n for n in names if n]) > 1
+        },
+    )

@@ -53,6 +53,11 @@ _OPTION_OF_FIELD: dict[str, str] = {
     "trigger_packet_offset": "--trigger-packet-offset",
     "trigger_packet": "--trigger-packet",
     "ros1_header_seq": "--ros1-seq",
+    "shared_topics": "--shared-topics",
+    "exposure_messages": "--exposure-messages",
+    "header_frame_ids": "--frame-ids",
+    "camera_field": "--camera-field",
+    "stamp_semantics": "--stamp",
     "log_format": "--format",
     "n_stops": "--stops",
     "scans_per_stop": "--scans-per-stop",
@@ -147,6 +152,44 @@ def simulate_sync(
             help="ROS 1 formats: number header seq per frame, or write 0 as some drivers do.",
         ),
     ] = True,
+    stamp: Annotated[
+        str,
+        typer.Option(
+            "--stamp",
+            help="What every camera's image header stamp marks: exposure_start, "
+            "exposure_middle, exposure_end or trigger (246).",
+        ),
+    ] = "exposure_start",
+    exposure_messages: Annotated[
+        str,
+        typer.Option(
+            "--exposure-messages",
+            help="Comma-separated exposure metadata to write: camera_exposure (states its "
+            "start), flir_meta (ImageMetaData: the start follows --stamp); '' for none.",
+        ),
+    ] = "camera_exposure,flir_meta",
+    shared_topics: Annotated[
+        str,
+        typer.Option(
+            "--shared-topics",
+            help="Comma-separated kinds every camera publishes on one topic (image, "
+            "exposure, meta, trigger), told apart by header.frame_id.",
+        ),
+    ] = "",
+    frame_ids: Annotated[
+        bool,
+        typer.Option(
+            "--frame-ids/--no-frame-ids",
+            help="Write each camera's frame in header.frame_id, or leave it empty.",
+        ),
+    ] = True,
+    camera_field: Annotated[
+        bool,
+        typer.Option(
+            "--camera-field/--no-camera-field",
+            help="Write the camera name in CameraExposure/TriggerEvent.camera, or leave it empty.",
+        ),
+    ] = True,
     overwrite: OverwriteFlag = False,
 ) -> None:
     """Write a LiDAR + three cameras log, its truth (OUT.truth.json) and rig (OUT.rig.yaml)."""
@@ -177,6 +220,11 @@ def simulate_sync(
                 trigger_packet=trigger_packet,
                 trigger_packet_offset=trigger_packet_offset,
                 ros1_header_seq=ros1_seq,
+                stamp=stamp,
+                exposure_messages=_names(exposure_messages),
+                shared_topics=_names(shared_topics),
+                header_frame_ids=frame_ids,
+                camera_field=camera_field,
             )
         except ConfigError as exc:
             raise _usage(exc) from None
@@ -200,6 +248,11 @@ def simulate_sync(
         emit(lambda: print("\n".join(lines)))
 
     run(job)
+
+
+def _names(option: str) -> tuple[str, ...]:
+    """A comma-separated option as a tuple of names ('' -> none)."""
+    return tuple(name.strip() for name in option.split(",") if name.strip())
 
 
 def _format(out: Path, fmt: str | None) -> LogFormat:

@@ -10,8 +10,10 @@ FRAME_COLUMNS: dict[str, str] = {
     "exposure_start_ns": "Int64",
     "exposure_duration_ns": "Int64",
     "source": "string",
+    "frame_id": "string",
 }
-"""Frame table: exposure fields are <NA> where the log has no exposure metadata."""
+"""Frame table: exposure fields are <NA> where the log has no exposure metadata; frame_id is
+the header.frame_id of the message the row came from ("" where it has none)."""
 
 TRIGGER_COLUMNS: dict[str, str] = {
     "camera": "string",
@@ -24,5 +26,7 @@ TRIGGER_COLUMNS: dict[str, str] = {
     "exposure_start_ns": "Int64",
     "applied_delay_ns": "Int64",
     "source": "string",
+    "frame_id": "string",
 }
-"""Trigger table: the five checkpoints 240..248 of the method, <NA> where not recorded."""
+"""Trigger table: the five checkpoints 240..248 of the method, <NA> where not recorded;
+frame_id as in the frame table (TimeReference: its `source` where the header has none)."""

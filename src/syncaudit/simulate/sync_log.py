@@ -69,6 +69,17 @@ azimuth block by block sees first. 'first_after': the first packet whose first b
 at or past zero, what a driver that cuts revolutions packet by packet sees first (the next
 packet in most revolutions). `trigger_packet_offset` moves either by whole packets."""
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
+CameraTopicKind = Literal["image", "exposure", "meta", "trigger"]
+"""The kinds of per-frame camera message the simulator writes (one topic each per camera,
+or one topic shared by every camera: see `SyncSimConfig.shared_topics`)."""
+SHARED_TOPICS: dict[str, str] = {
+    "image": "/cameras/image_raw",
+    "exposure": "/cameras/exposure",
+    "meta": "/cameras/meta",
+    "trigger": "/cameras/trigger",
+}
+"""Topic of each kind that all cameras share when the kind is in `shared_topics` (a
+compressed image topic gets `/compressed` appended)."""
 
 NS_PER_S = 1_000_000_000
 NS_PER_US = 1_000
@@ -227,6 +238,17 @@ class SyncSimConfig(_Strict):
     ros1_header_seq: bool = True
     """ROS 1 logs: number each camera's header `seq` by frame; False writes 0 everywhere,
     as drivers that leave it alone and bags converted from ROS 2 do."""
+    shared_topics: tuple[CameraTopicKind, ...] = ()
+    """Kinds of camera message that every camera publishes on one topic (`SHARED_TOPICS`),
+    as one driver node for several cameras does, told apart only by header.frame_id (and
+    the `camera` field of the syncaudit types while `camera_field` is set). ROS 1 header
+    seq numbers on a shared topic count that topic's messages, as one publisher does."""
+    header_frame_ids: bool = True
+    """Write each camera's optical frame in header.frame_id; False leaves it empty, as
+    drivers that never set it do (/tf_static still names the frames)."""
+    camera_field: bool = True
+    """Write the rig camera name in CameraExposure/TriggerEvent.camera; False leaves it
+    empty, so that header.frame_id is the only field telling cameras apart."""
     trigger_packet: TriggerPacket = "containing"
     """The packet convention of the triggers (see `TriggerPacket`)."""
     trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
@@ -242,6 +264,8 @@ class SyncSimConfig(_Strict):
             raise ValueError(f"camera names must be unique: {names}")
         if len(set(self.exposure_messages)) != len(self.exposure_messages):
             raise ValueError("exposure_messages has duplicates")
+        if len(set(self.shared_topics)) != len(self.shared_topics):
+            raise ValueError("shared_topics has duplicates")
         if self.image_bytes is not None and self.image_kind != "compressed":
             raise ValueError("image_bytes needs image_kind 'compressed'")
         return self
@@ -786,19 +810,21 @@ class _Simulation:
         }
 
     def _camera_topics(self, cam: CameraSim) -> dict[str, str]:
-        """The topics one camera's messages go to, by kind."""
+        """The topics one camera's messages go to, by kind (shared ones: `SHARED_TOPICS`)."""
         cfg = self.cfg
         prefix = f"/cameras/{cam.name}"
-        image_topic = (
-            f"{prefix}/image_raw" if cfg.image_kind == "raw" else f"{prefix}/image_raw/compressed"
-        )
-        topics: dict[str, str] = {"image": image_topic}
+        topics: dict[str, str] = {"image": f"{prefix}/image_raw"}
         if "camera_exposure" in cfg.exposure_messages:
             topics["exposure"] = f"{prefix}/exposure"
         if "flir_meta" in cfg.exposure_messages:
             topics["meta"] = f"{prefix}/meta"
         if cfg.trigger_messages:
             topics["trigger"] = f"{prefix}/trigger"
+        for kind in topics:
+            if kind in cfg.shared_topics:
+                topics[kind] = SHARED_TOPICS[kind]
+        if cfg.image_kind != "raw":
+            topics["image"] += "/compressed"
         return topics
 
     def _run_controller(
@@ -958,26 +984,35 @@ class _Simulation:
             "/tf_static",
             writer.serialize(writer.new_msg("tf2_msgs/msg/TFMessage", transforms=tf_msgs)),
         )
-        for cam_cfg, cam in zip(cfg.cameras, cams, strict=True):
-            self._frames_of(writer, cam_cfg, cam, out)
+        shared_seq = _shared_topic_seqs(cams)
+        for index, (cam_cfg, cam) in enumerate(zip(cfg.cameras, cams, strict=True)):
+            self._frames_of(writer, cam_cfg, cam, out, shared_seq[index])
         return out
 
     def _frames_of(
-        self, writer: LogWriter, cam_cfg: CameraSim, cam: dict[str, Any], out: _Outgoing
+        self,
+        writer: LogWriter,
+        cam_cfg: CameraSim,
+        cam: dict[str, Any],
+        out: _Outgoing,
+        shared_seq: NDArray[np.int64],
     ) -> None:
         cfg = self.cfg
         arrays = cam["_arrays"]
         topics = cam["topics"]
-        frame_id = cam["frame_id"]
+        frame_id = cam["frame_id"] if cfg.header_frame_ids else ""
+        camera_name = cam["name"] if cfg.camera_field else ""
         pattern_rng = np.random.default_rng(arrays["pattern_seed"])
         height, width = 24, 32
         gradient = np.linspace(0.6, 1.4, width)[None, :] * np.linspace(1.2, 0.8, height)[:, None]
         ros1 = writer.encoding == "ros1"
 
-        def hdr(stamp_ns: int, seq: int) -> Any:
-            """Header of this camera; ROS 1 publishers number messages in `seq`."""
+        def hdr(stamp_ns: int, i: int, kind: str) -> Any:
+            """Header of this camera's frame i on its `kind` topic; ROS 1 publishers number
+            their messages in `seq` (per topic: a shared topic counts every camera's)."""
             fields: dict[str, Any] = {"stamp": writer.time(stamp_ns), "frame_id": frame_id}
             if ros1:
+                seq = int(shared_seq[i]) if kind in cfg.shared_topics else i
                 fields["seq"] = seq if cfg.ros1_header_seq else 0
             return writer.new_msg("std_msgs/msg/Header", **fields)
 
@@ -985,7 +1020,7 @@ class _Simulation:
             stamp_ns = int(arrays["image_stamp"][i])
             log_ns = int(arrays["image_log"][i])
             seq = frame["frame_sequence"]
-            header = hdr(stamp_ns, seq)
+            header = hdr(stamp_ns, i, "image")
             level = 110.0 * float(arrays["exposure_ratio"][i])
             noise = pattern_rng.normal(0.0, 2.0, (height, width))
             pixels = np.clip(level * gradient + noise, 0, 255).astype(np.uint8)
@@ -1019,8 +1054,8 @@ class _Simulation:
             if "exposure" in topics:
                 msg = writer.new_msg(
                     "syncaudit_msgs/msg/CameraExposure",
-                    header=hdr(frame["exposure_start_ns"], seq),
-                    camera=cam["name"],
+                    header=hdr(frame["exposure_start_ns"], i, "exposure"),
+                    camera=camera_name,
                     frame_sequence=seq,
                     exposure_start=writer.time(frame["exposure_start_ns"]),
                     exposure_duration=t5 / NS_PER_S,
@@ -1030,7 +1065,7 @@ class _Simulation:
             if "meta" in topics:
                 msg = writer.new_msg(
                     "flir_camera_msgs/msg/ImageMetaData",
-                    header=header,
+                    header=hdr(stamp_ns, i, "meta"),
                     camera_time=frame["exposure_start_ns"] - cfg.start_time_ns + 3_600 * NS_PER_S,
                     brightness=int(pixels.mean()),
                     exposure_time=round(t5 / NS_PER_US),
@@ -1045,8 +1080,8 @@ class _Simulation:
                 cam_sensor = cam_driver + frame["applied_delay_ns"] + frame["t3_ns"]
                 msg = writer.new_msg(
                     "syncaudit_msgs/msg/TriggerEvent",
-                    header=hdr(cam_sensor, seq),
-                    camera=cam["name"],
+                    header=hdr(cam_sensor, i, "trigger"),
+                    camera=camera_name,
                     frame_sequence=seq,
                     lidar_packet_time=writer.time(packet),
                     lidar_driver_time=writer.time(driver),
@@ -1071,15 +1106,18 @@ class _Simulation:
                 if cfg.image_kind == "raw"
                 else "sensor_msgs/msg/CompressedImage"
             )
+            types = {
+                "image": image_type,
+                "exposure": "syncaudit_msgs/msg/CameraExposure",
+                "meta": "flir_camera_msgs/msg/ImageMetaData",
+                "trigger": "syncaudit_msgs/msg/TriggerEvent",
+            }
+            declared: set[str] = set()
             for cam in cams:
-                topics = cam["topics"]
-                writer.add_topic(topics["image"], image_type)
-                if "exposure" in topics:
-                    writer.add_topic(topics["exposure"], "syncaudit_msgs/msg/CameraExposure")
-                if "meta" in topics:
-                    writer.add_topic(topics["meta"], "flir_camera_msgs/msg/ImageMetaData")
-                if "trigger" in topics:
-                    writer.add_topic(topics["trigger"], "syncaudit_msgs/msg/TriggerEvent")
+                for kind, topic in cam["topics"].items():
+                    if topic not in declared:  # a shared topic is declared once
+                        writer.add_topic(topic, types[kind])
+                        declared.add(topic)
             camera_msgs = self._camera_messages(writer, cams)
             camera_msgs.items.sort()
             merged = heapq.merge(
@@ -1089,6 +1127,22 @@ class _Simulation:
             )
             for log_time, _order, topic, data in merged:
                 writer.write(topic, log_time, data() if callable(data) else data)
+
+
+def _shared_topic_seqs(cams: list[dict[str, Any]]) -> list[NDArray[np.int64]]:
+    """Per camera, the ROS 1 header seq of each frame's message on a shared topic.
+
+    One publisher numbers the messages of its topic in the order it publishes them: the
+    frames of every camera by image log time (ties by camera order); every shared kind
+    is written in that same order (exposure, metadata and trigger follow their image).
+    """
+    log_ns = np.concatenate([np.asarray(c["_arrays"]["image_log"], np.int64) for c in cams])
+    camera = np.concatenate([np.full(len(c["frames"]), k) for k, c in enumerate(cams)])
+    order = np.lexsort((camera, log_ns))
+    rank = np.empty(order.size, dtype=np.int64)
+    rank[order] = np.arange(order.size)
+    bounds = np.cumsum([0, *(len(c["frames"]) for c in cams)])
+    return [rank[bounds[k] : bounds[k + 1]] for k in range(len(cams))]
 
 
 def _jpeg_image(writer: LogWriter, header: Any, size: int, seed: int) -> bytes:
@@ -1171,14 +1225,16 @@ def sync_sim_config(
     clock_offset_s: float = 0.0,
     compressed: bool = False,
     controller: bool = False,
+    stamp: str = "exposure_start",
     **settings: Any,
 ) -> SyncSimConfig:
     """A SyncSimConfig from the settings `syncaudit simulate sync` offers.
 
     `lidar` accepts the names users write (`XT32`, `vlp-16`); `tunnel=False` keeps the
     exposure bright all along; `delay_error_us` offsets every camera's applied delay from the
-    ideal; `clock_offset_s` is the LiDAR clock minus the host clock. Every other keyword is a
-    SyncSimConfig field (`seed`, `duration_s`, `log_format`, `packet_drop_fraction`, ...).
+    ideal; `clock_offset_s` is the LiDAR clock minus the host clock; `stamp` is what every
+    camera's image header stamp marks. Every other keyword is a SyncSimConfig field (`seed`,
+    `duration_s`, `log_format`, `packet_drop_fraction`, `shared_topics`, ...).
 
     Raises:
         ConfigError: naming the first setting out of range.
@@ -1195,8 +1251,12 @@ def sync_sim_config(
             "lidar_model": lidar_model(lidar),
             "clock_offset_ns": round(clock_offset_s * 1e9),
             "light": light,
-            "cameras": [
-                camera.model_copy(update={"delay_error_us": delay_error_us})
+            "cameras": [  # as mappings, so that the settings are validated
+                {
+                    **camera.model_dump(),
+                    "delay_error_us": delay_error_us,
+                    "stamp_semantics": stamp,
+                }
                 for camera in base.cameras
             ],
             "image_kind": "compressed" if compressed else "raw",
