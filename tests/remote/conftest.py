@@ -25,6 +25,10 @@ class ServerState:
     """Close the connection after sending this many body bytes of a ranged reply."""
     drop_min_length: int = 1 << 16
     """Only replies at least this long are dropped (the small footer read goes through)."""
+    drops_left: int | None = None
+    """Drop only this many replies (None: every one that qualifies)."""
+    ignore_range: bool = False
+    """Answer every GET with the whole file (200), as a server without Range support."""
     delay_s: float = 0.0
     served_bytes: int = 0
     requests: list[str] = field(default_factory=list)
@@ -56,6 +60,8 @@ class RangeHandler(SimpleHTTPRequestHandler):
             return
         size = path.stat().st_size
         match = RANGE.match(self.headers.get("Range", "") or "")
+        if state.ignore_range:
+            match = None
         if not match:
             start, end = 0, size
             self.send_response(200)
@@ -76,13 +82,19 @@ class RangeHandler(SimpleHTTPRequestHandler):
         self.send_header("Content-Type", "application/octet-stream")
         self.end_headers()
         length = end - start
-        drop = state.drop_after_bytes
+        drop = state.drop_after_bytes if length >= state.drop_min_length and match else None
+        if drop is not None and state.drops_left is not None:
+            with state.lock:
+                if state.drops_left > 0:
+                    state.drops_left -= 1
+                else:
+                    drop = None
         with path.open("rb") as handle:
             handle.seek(start)
             sent = 0
             while sent < length:
                 block = handle.read(min(1 << 20, length - sent))
-                if drop is not None and length >= state.drop_min_length and match:
+                if drop is not None:
                     block = block[: max(0, drop - sent)]
                     self.wfile.write(block)
                     sent += len(block)

@@ -62,7 +62,8 @@ def test_gate_on_an_http_prefix_matches_the_local_run(
         and mcap["size_bytes"] == (SAMPLES / "vlp16_three_cameras.mcap").stat().st_size
     )
     assert mcap["fetched_bytes"] <= mcap["size_bytes"]
-    assert got[1]["remote_read"]["ranged"] is False  # ROS 1 bag: downloaded whole
+    assert got[1]["remote_read"]["ranged"] is True  # ROS 1 bag: its chunks by ranges too
+    assert got[2]["remote_read"]["ranged"] is False  # ROS 2 bag folder: downloaded whole
 
 
 def test_slow_server_hits_the_per_log_timeout(

@@ -511,7 +511,7 @@ class McapLog(LogReader):
             and (stop_ns is None or ci.message_start_time < stop_ns)
         ]
         heapq.heapify(heap)
-        reader = ChunkReader(str(self.path), check_crc=True, reuse=False)
+        reader = self._chunk_reader()
         try:
             while heap:
                 _time, offset, _index, item = heapq.heappop(heap)
@@ -534,6 +534,10 @@ class McapLog(LogReader):
                         heapq.heappush(heap, (log_time, offset, index, message))
         finally:
             reader.close()
+
+    def _chunk_reader(self) -> ChunkReader:
+        """The reader of this file's chunks for `messages()` (a buffer per chunk)."""
+        return ChunkReader(str(self.path), check_crc=True, reuse=False)
 
     def _channel_info(self, channel: Channel) -> ChannelInfo:
         schema = self._schemas.get(channel.schema_id)

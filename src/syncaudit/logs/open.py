@@ -75,7 +75,12 @@ def open_log(path: str | Path) -> LogReader:
 
     Files are opened read-only. Every failure is a LogOpenError (exit 2) or, for a file
     damaged past reading, a LogReadError (exit 3), with a one-line message naming the path.
+    An indexed MCAP or ROS 1 bag may also be a URL (http(s)://, or s3:// etc. via fsspec).
     """
+    if isinstance(path, str) and "://" in path:
+        from syncaudit.logs.mcap_remote import open_remote_log
+
+        return open_remote_log(path)
     path = Path(path)
     if not path.exists():
         raise LogOpenError(f"{path}: no such file or directory")

@@ -24,7 +24,9 @@ from syncaudit.logs.model import ChannelInfo, ReadUnit
 UNIT_READERS: dict[str, str] = {
     "mcap-chunk": "syncaudit.logs.mcap_chunks:McapChunkUnitReader",
     "mcap-cut-chunk": "syncaudit.logs.mcap_log:McapCutChunkUnitReader",
+    "mcap-remote-chunks": "syncaudit.logs.mcap_remote:RemoteChunksUnitReader",
     "rosbag1-chunk": "syncaudit.logs.rosbag1:Rosbag1ChunkReader",
+    "rosbag1-remote-chunk": "syncaudit.logs.rosbag1_remote:RemoteRosbag1ChunkReader",
     "sqlite-rows": "syncaudit.logs.sqlite_rows:SqliteRowsReader",
 }
 """Unit kind -> "module:Class" of its per-worker reader."""

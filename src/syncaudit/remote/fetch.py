@@ -1,16 +1,13 @@
-"""Fetch what an audit needs of a remote log into a local sparse file, with ranged reads.
+"""Fetch a remote log into a local folder, for the logs that cannot be read by ranges.
 
-MCAP: the footer and summary first (one ranged read of the tail), then only the chunks
-whose message indexes name a channel of an audited topic (all chunks when the topics
-are not known), read in coalesced ranges of at most `PIECE_BYTES`, fetched concurrently
-(fsspec's `cat_ranges`). Each range is written at its own offset into a sparse file of
-the remote size, so the unchanged local MCAP reader, its `ReadUnit`s and its chunk-level
-parallelism apply as they are; bytes never fetched are holes the reader never visits.
-(A file-like object over ranged reads would plug into the reader too, but the reader is
-being reworked in parallel; the sparse file keeps the two changes apart.)
-
-ROS 1 bags and ROS 2 bag prefixes (metadata.yaml and its files) are downloaded whole:
-their indexes are spread through the file or held in SQLite pages.
+An indexed MCAP is read straight from its URL (`logs.mcap_remote`: each chunk worker
+streams its chunks into memory). What this module fetches is the rest: ROS 1 bags and
+ROS 2 bag prefixes (metadata.yaml and its files) whole, and an MCAP without a usable
+index whole; and, for the calibration (which reads point-cloud topics through a local
+path), an MCAP as a sparse file: the footer and summary first, then the chunks whose
+message indexes name a channel of the wanted topics (all chunks when the topics are not
+known), read in coalesced ranges of at most `PIECE_BYTES` (fsspec's `cat_ranges`) and
+written at their offsets into a sparse file of the remote size.
 """
 
 from __future__ import annotations
@@ -21,9 +18,10 @@ import struct
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit, urlunsplit
+from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError, UsageError
+from syncaudit.remote.ranges import public_url as public_url  # re-exported
 
 URL = re.compile(r"^(s3|s3a|gs|gcs|az|abfs|abfss|http|https)://", re.IGNORECASE)
 EXTRAS = {"s3": "s3", "s3a": "s3", "gs": "gcs", "gcs": "gcs", "az": "azure", "abfs": "azure"}
@@ -62,15 +60,6 @@ class FetchStats:
 def is_url(item: str) -> bool:
     """True for the object-storage and HTTP URLs fsspec reads."""
     return bool(URL.match(item))
-
-
-def public_url(url: str) -> str:
-    """The URL without query string, fragment or user info (no credentials, no tokens)."""
-    parts = urlsplit(url)
-    host = parts.hostname or ""
-    if parts.port:
-        host = f"{host}:{parts.port}"
-    return urlunsplit((parts.scheme, host, parts.path, "", ""))
 
 
 def filesystem(url: str) -> tuple[Any, str]:

@@ -1,9 +1,11 @@
-"""The gate's task for a log that may be a URL: fetch what the audit needs, then audit it.
+"""The gate's task for a log that may be a URL: an MCAP read by ranges, else fetched first.
 
-The sparse copy goes to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows:
-writing it is the slowest step on a busy disk), else the system temp folder. Runs in the worker (a local process or a cluster worker), so the bytes travel from the
-object store to where the audit runs, never through the driver. The temporary copy is
-removed when the audit ends.
+An MCAP URL is opened as a `logs.mcap_remote.RemoteMcapLog` (its index fetched by the
+parent, its chunk runs by each chunk worker into memory): nothing is written to disk.
+Other logs are copied to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows),
+else the system temp folder, and the copy is removed when the audit ends. Runs in the
+gate's worker (a local process or a cluster worker), so the bytes travel from the object
+store to where the audit runs, never through the driver.
 """
 
 from __future__ import annotations
@@ -12,11 +14,13 @@ import os
 import tempfile
 from dataclasses import replace
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from syncaudit.errors import SyncauditError
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.job import JobOptions, LogOutcome, run_log_job
 from syncaudit.remote.fetch import fetch_log, is_url
+from syncaudit.remote.ranges import tracking
 
 
 def rig_topics(rig_path: str | None) -> frozenset[str] | None:
@@ -37,11 +41,19 @@ def rig_topics(rig_path: str | None) -> frozenset[str] | None:
 
 
 def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
-    """`run_log_job` for local paths; for URLs, a ranged fetch into a temporary folder first."""
+    """`run_log_job` for local paths and for MCAP and ROS 1 bag URLs (read by ranges,
+    straight into each chunk worker's memory); other URLs (ROS 2 bag folders, a log
+    without index, a log to calibrate) are fetched into a temporary folder first."""
     if not is_url(job.path):
         return run_log_job(job, options)
+    if urlsplit(job.path).path.lower().endswith((".mcap", ".bag")) and not options.calibrate:
+        with tracking(job.path) as tracker:
+            outcome = run_log_job(job, options)
+            if tracker.ranged:  # else: no chunk index, read from a whole copy below
+                outcome.remote_read = tracker.stats()
+                return outcome
     try:
-        topics = rig_topics(job.rig_path)
+        topics = None if options.calibrate else rig_topics(job.rig_path)
     except SyncauditError as exc:
         return LogOutcome(job=job, error=str(exc).splitlines()[0], error_code=exc.exit_code)
     outcome = _fetch_and_audit(job, options, topics)

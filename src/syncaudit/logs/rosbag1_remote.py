@@ -1,0 +1,249 @@
+"""A ROS 1 bag read straight from a URL: its index section, then ranged reads of its chunks.
+
+The parent (`RemoteRosbag1Log`) fetches the bag header and the index section at the end
+of the file (connections and chunk infos: two requests). A bag's index gives where each
+chunk starts, not its length; the local reader reads every chunk's record header at open
+for it, which remotely would cost one request per chunk. Here a chunk's span runs from
+its position to the next chunk's (to the index section for the last): the chunk record
+and the index-data records that follow it. Spans tile the data section, so adjacent
+spans holding audited topics are merged into runs of up to `RANGE_BYTES`: one
+'rosbag1-remote-chunk' unit each, fetched by a worker with one ranged GET into a reused
+buffer and walked record by record, each chunk decoded by the local chunk reader
+(`Rosbag1ChunkReader`); the record headers are checked there, when the chunks are read.
+
+A bag whose index is missing or damaged (a recording that was not closed) is refused with
+`RemoteUnindexedError`: the local reader would scan every record, so the caller
+downloads it whole instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+from typing import BinaryIO, cast
+
+from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
+from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
+from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.rosbag1 import (
+    MAGIC,
+    OP_CHUNK,
+    OP_CHUNK_INFO,
+    UNIT_KIND,
+    BagFile,
+    BagFormatError,
+    BagIndex,
+    Rosbag1ChunkReader,
+    read_bag_header,
+)
+from syncaudit.logs.rosbag1_log import Rosbag1Log
+from syncaudit.logs.typesys import one_line
+from syncaudit.remote.ranges import (
+    Tracker,
+    acquire_tracker,
+    find_tracker,
+    open_object,
+    public_url,
+    read_head,
+    read_range,
+    release_tracker,
+)
+
+KIND = "rosbag1-remote-chunk"
+RANGE_BYTES = 24 << 20
+"""Largest run of chunk spans one GET reads (as MCAP runs)."""
+HEAD_BYTES = (4 << 10) + 256
+"""First read: the magic and the bag header record (rosbag pads it to 4 KiB)."""
+
+
+class _SpannedBagFile(BagFile):
+    """A bag over ranged reads that gives each chunk the span up to the next chunk.
+
+    It notes the chunk positions of the chunk-info records as the index is parsed; asked
+    then for the record at a chunk position (the index reader wants each chunk's length),
+    it answers with that span, read from nothing.
+    """
+
+    def __init__(self, handle: BinaryIO, size: int, index_pos: int) -> None:
+        super().__init__(handle, size)
+        self._index_pos = index_pos
+        self._chunk_positions: set[int] = set()
+        self._span_ends: dict[int, int] | None = None
+
+    def record_at(self, offset: int) -> tuple[dict[str, bytes], int, int]:
+        """The record's (fields, data offset, data length); a chunk's span for a chunk."""
+        if offset < self._index_pos and offset in self._chunk_positions:
+            end = self._span_end(offset)
+            return {"op": bytes([OP_CHUNK])}, offset, end - offset
+        fields, data_at, dlen = super().record_at(offset)
+        if fields.get("op") == bytes([OP_CHUNK_INFO]) and len(fields.get("chunk_pos", b"")) == 8:
+            self._chunk_positions.add(int.from_bytes(fields["chunk_pos"], "little"))
+            self._span_ends = None
+        return fields, data_at, dlen
+
+    def _span_end(self, offset: int) -> int:
+        if self._span_ends is None:
+            starts = sorted(self._chunk_positions)
+            self._span_ends = dict(zip(starts, [*starts[1:], self._index_pos], strict=True))
+        return self._span_ends[offset]
+
+
+class RemoteRosbag1Log(Rosbag1Log):
+    """A ROS 1 bag (format 2.0) behind a URL, read by chunk spans."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.path = UrlPath(public_url(url))
+        self.warnings = []
+        self._registry = None
+        self._fallback = ""
+        self._tracker = acquire_tracker(url)
+        try:
+            self._object = open_object(url)
+            bag = self._fetch_index()
+            self._index = self._load(bag)
+        except SyncauditError:
+            release_tracker(self._tracker)
+            raise
+        except Exception as exc:
+            release_tracker(self._tracker)
+            raise LogOpenError(f"{self.path}: not a readable ROS 1 bag: {one_line(exc)}") from exc
+        self.summary = self._make_summary()
+        self._report_damage()
+        self._chunk_reader = RemoteRosbag1ChunkReader(url)
+
+    def _fetch_index(self) -> BagFile:
+        """Fetch the head and (where the header points at one) the index section."""
+        tracker = self._tracker
+        if not tracker.segments:
+            head, size = read_head(self._object, HEAD_BYTES, tracker.counter)
+            if size == 0:
+                raise LogOpenError(f"{self.path}: file is empty")
+            tracker.segments[0], tracker.size_bytes = head, size
+        size = tracker.size_bytes
+        handle = cast(BinaryIO, RemoteFile(self._object, size, tracker))
+        try:
+            index_pos, _conns, _chunks, first = read_bag_header(BagFile(handle, size))
+        except (BagFormatError, ValueError):
+            return BagFile(handle, size)  # not a bag, or a damaged header: `_load` says which
+        if first <= index_pos < size and index_pos not in tracker.segments:
+            tracker.segments[index_pos] = read_range(self._object, index_pos, size, tracker.counter)
+        return _SpannedBagFile(handle, size, index_pos)
+
+    def _load(self, bag: BagFile) -> BagIndex:
+        if bag.read(0, len(MAGIC)) != MAGIC:
+            raise LogOpenError(f"{self.path}: not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0')")
+        return super()._load(bag)
+
+    def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
+        """No scan over ranged reads (it would read every record): refused, to be fetched."""
+        self._tracker.ranged = False
+        raise RemoteUnindexedError(
+            f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}"
+        )
+
+    def _units(self, conn_ids: set[int]) -> list[ReadUnit]:
+        """Runs of adjacent chunk spans holding `conn_ids` (up to `RANGE_BYTES`), each read
+        from the URL with one GET."""
+        spans = super()._units(conn_ids)
+        tracker = self._tracker
+        tracker.chunks_total = len(self._index.chunks)
+        tracker.chunks_fetched = len(spans)
+        tracker.needed_chunk_bytes = sum(unit.length for unit in spans)
+        runs: list[ReadUnit] = []
+        for span in spans:  # in file order
+            last = runs[-1] if runs else None
+            end = span.offset + span.length
+            if (
+                last is not None
+                and last.offset + last.length == span.offset
+                and end - last.offset <= RANGE_BYTES
+            ):
+                runs[-1] = dataclasses.replace(
+                    last,
+                    length=end - last.offset,
+                    start_ns=min(last.start_ns, span.start_ns),
+                    end_ns=max(last.end_ns, span.end_ns),
+                    cost=end - last.offset,
+                )
+                continue
+            runs.append(dataclasses.replace(span, source=self.url, kind=KIND, cost=span.length))
+        return runs
+
+    def fetch_stats(self) -> Tracker:
+        """What this log's reading has fetched so far (shared with its workers)."""
+        return self._tracker
+
+    def _close(self) -> None:
+        super()._close()
+        release_tracker(self._tracker)
+
+
+class _RunFile:
+    """A run of chunk spans held in memory, read at its file offsets (for `BagFile`)."""
+
+    def __init__(self, data: memoryview, offset: int) -> None:
+        self._data, self._offset, self._pos = data, offset, offset
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        self._pos = offset
+        return offset
+
+    def read(self, size: int) -> bytes:
+        at = self._pos - self._offset
+        self._pos += size
+        return bytes(self._data[at : at + size])
+
+    def close(self) -> None:
+        """Nothing to close (the buffer belongs to the reader)."""
+
+
+class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
+    """Per-worker reader of 'rosbag1-remote-chunk' units: a run of chunk spans fetched with
+    one ranged GET into a reused buffer, then each chunk decoded by the local reader."""
+
+    def __init__(self, source: str | None = None) -> None:
+        super().__init__()
+        self._source = source
+        self._buffer = bytearray()
+        self._tracker: Tracker | None = None
+        if source is None:
+            return
+        self._object = open_object(source)
+        self._tracker = find_tracker(source)  # the parent's, inherited by fork
+
+    def messages(
+        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
+    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(log time, index in run, connection id, payload) of the run's wanted messages;
+        the index is (chunk's place in the run << 32) | message index."""
+        if unit.kind != KIND or unit.source != self._source:
+            yield from super().messages(unit, channels)
+            return
+        if len(self._buffer) < unit.length:
+            self._buffer = bytearray(unit.length)
+        view = memoryview(self._buffer)[: unit.length]
+        stream = RunStream(self._object, unit.offset, unit.offset + unit.length, self._tracker)
+        try:
+            stream.readinto(view)
+        finally:
+            stream.close()
+        end = unit.offset + unit.length
+        bag = BagFile(cast(BinaryIO, _RunFile(view, unit.offset)), end)
+        name = self._object.name  # errors name the URL (no query string)
+        self._files[name] = bag
+        pos, ordinal = unit.offset, 0
+        while pos < end:
+            try:
+                fields, data_at, dlen = bag.record_at(pos)
+            except BagFormatError as exc:
+                raise LogReadError(
+                    f"{self._object.name}: ROS 1 record at byte {pos}: {exc}"
+                ) from None
+            if fields.get("op") == bytes([OP_CHUNK]):
+                chunk = ReadUnit(name, UNIT_KIND, pos, data_at + dlen - pos, 0, 0, 0)
+                base = ordinal << 32
+                for log_time, index, conn_id, data in super().messages(chunk, channels):
+                    yield log_time, base | index, conn_id, data
+                ordinal += 1
+            pos = data_at + dlen
