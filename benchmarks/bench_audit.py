@@ -646,14 +646,16 @@ def peer_runs(bin_dir: Path, log: Path, scratch: Path, timeout_s: float) -> list
 
 
 def audit_argv(log: Path, json_out: Path) -> list[str]:
-    """`syncaudit audit LOG --rig LOG.rig.yaml --json-out F`.
+    """`syncaudit audit LOG --rig LOG.rig.yaml --json-out F --overwrite`.
 
     The JSON goes to a scratch file, not /dev/null: the atomic writer renames a temporary
     onto its target, which (run as root) would replace /dev/null by a regular file.
+    `--overwrite`: every round after the first writes onto the previous round's file, which
+    the CLI refuses (exit 8) without it.
     """
     exe = Path(sys.executable).with_name("syncaudit")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "syncaudit.cli"]
-    return [*cmd, "audit", str(log), "--rig", str(rig_path(log)), "--json-out", str(json_out)]
+    return [*cmd, "audit", str(log), "--rig", str(rig_path(log)), "--json-out", str(json_out), "--overwrite"]
 
 
 def audit_vs_truth(json_out: Path, log: Path) -> str:
