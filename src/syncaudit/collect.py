@@ -238,7 +238,7 @@ def _parallel_results(
     if freeze:
         gc.freeze()
     try:
-        with worker_pool(jobs, context) as pool:
+        with worker_pool(jobs, context, label=f"{path}: a reader worker process") as pool:
             window: list[Future[list[Keyed]]] = []
             submitted = 0
             for _ in range(len(groups)):
