@@ -16,7 +16,7 @@ import gc
 import heapq
 import multiprocessing
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any
@@ -99,21 +99,35 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Item]:
-    """Every item of the plan's topics, in log-time order; parallel where the log allows."""
+def iter_items(
+    log: LogReader,
+    plan: ExtractPlan,
+    jobs: int = 1,
+    *,
+    meanwhile: Callable[[], object] | None = None,
+) -> Iterator[Item]:
+    """Every item of the plan's topics, in log-time order; parallel where the log allows.
+
+    `meanwhile` is work of the caller's (e.g. imports it needs afterwards) run once: in
+    the parallel path as soon as the workers have their first tasks, so it overlaps them;
+    otherwise before the read.
+    """
     topics = frozenset(plan.topics)
     units = log.read_units(topics)
+    groups = group_units(units, GROUP_BYTES) if units is not None else []
+    if meanwhile is not None and not (jobs > 1 and len(groups) > 1):
+        meanwhile()
     if units is None:
         for msg in log.messages(plan.topics):
             item = extract(plan, msg, log)
             if item is not None:
                 yield item
         return
-    groups = group_units(units, GROUP_BYTES)
     channels = log.unit_channels(topics)
     ranks = _source_ranks(units)
     if jobs > 1 and len(groups) > 1:
-        yield from _merged(groups, _parallel_results(log, groups, channels, plan, jobs))
+        results = _parallel_results(log, groups, channels, plan, jobs, meanwhile)
+        yield from _merged(groups, results)
         return
     readers = _Readers(plan.check_crc)
     try:
@@ -219,8 +233,10 @@ def _parallel_results(
     channels: dict[int, ChannelInfo],
     plan: ExtractPlan,
     jobs: int,
+    meanwhile: Callable[[], object] | None = None,
 ) -> Iterator[list[Keyed]]:
-    """Each group's extracted items, in group order, computed by `jobs` worker processes."""
+    """Each group's extracted items, in group order, computed by `jobs` worker processes;
+    `meanwhile` runs here once the first tasks are submitted."""
     path = log.summary.path
     task = _Task(path, channels, _source_ranks([u for g in groups for u in g]), plan)
     methods = multiprocessing.get_all_start_methods()
@@ -245,6 +261,9 @@ def _parallel_results(
                 while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
                     window.append(pool.submit(_extract_group, task, groups[submitted]))
                     submitted += 1
+                if meanwhile is not None:
+                    meanwhile()
+                    meanwhile = None
                 yield window.pop(0).result()
     finally:
         if freeze:
