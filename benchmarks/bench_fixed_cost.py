@@ -64,6 +64,8 @@ class Contender:
 
     name: str
     argv: list[str]
+    env: dict[str, str] | None = None
+    """Environment of the run (None: this one's)."""
     wall_s: list[float] = field(default_factory=list)
     cpu_s: list[float] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
@@ -90,7 +92,7 @@ def run_once(contender: Contender, *, record: bool = True) -> None:
     """Run the command once with its output to pipes; record wall and CPU time."""
     start = time.perf_counter()
     proc = subprocess.Popen(
-        contender.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO
+        contender.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO, env=contender.env
     )
     out, err = proc.communicate()
     wall = time.perf_counter() - start
@@ -144,6 +146,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--imports", action="store_true", help="also print the audit's import times"
     )
+    parser.add_argument(
+        "--baseline-src",
+        type=Path,
+        help="also run --help and the audit with syncaudit imported from this src folder "
+        "(e.g. `git archive <commit> src | tar -x -C DIR`), interleaved: before/after",
+    )
     return parser.parse_args(argv)
 
 
@@ -159,6 +167,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         Contender("syncaudit --help", [*cli, "--help"]),
         audit,
     ]
+    if args.baseline_src is not None:
+        src = str(args.baseline_src.resolve())
+        env = dict(os.environ, PYTHONPATH=src)
+        contenders += [Contender(f"{c.name} [baseline]", c.argv, env) for c in contenders[1:]]
+        print(f"baseline: syncaudit from {src}")
     runs = max(1, args.runs)
     load_before, load_after, others = measure(contenders, runs)
     print(
@@ -167,15 +180,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"of the machine used {others:.1f} CPU s meanwhile"
     )
     print(f"log: {log.relative_to(REPO) if log.is_relative_to(REPO) else log}")
-    head = f"{'command':<28}{'median s':>10}{'min s':>8}{'max s':>8}{'CPU s':>8}"
+    head = f"{'command':<40}{'median s':>10}{'min s':>8}{'max s':>8}{'CPU s':>8}"
     print(head)
     print("-" * len(head))
     for c in contenders:
         if c.failures:
-            print(f"{c.name:<28}  FAILED: {c.failures[0]}")
+            print(f"{c.name:<40}  FAILED: {c.failures[0]}")
             continue
         print(
-            f"{c.name:<28}{statistics.median(c.wall_s):>10.3f}{min(c.wall_s):>8.3f}"
+            f"{c.name:<40}{statistics.median(c.wall_s):>10.3f}{min(c.wall_s):>8.3f}"
             f"{max(c.wall_s):>8.3f}{statistics.median(c.cpu_s):>8.3f}"
         )
     print(
