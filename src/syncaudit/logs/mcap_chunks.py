@@ -15,6 +15,7 @@ after at most that many bytes.
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
 import struct
@@ -178,6 +179,10 @@ class ChunkReader:
     cost more than the copy out of the page cache). A record longer than any chunk can
     legitimately be (`MAX_READ_BYTES`) is mapped instead, never allocated, so a hostile
     length costs no memory before the size checks refuse it.
+    A chunk stored uncompressed (rosbags' and some recorders' MCAP) is mapped and its
+    records are returned as a view of the mapping: nothing is copied, and the pages of
+    payloads nobody reads (image pixels) are never touched. The mapping goes when the
+    last view of it does.
     With `reuse=False` every chunk gets its own output buffer (for callers holding several).
     """
 
@@ -197,7 +202,9 @@ class ChunkReader:
         where = chunk_where(self.path, offset)
         if offset < 0 or length < _RECORD_HEAD.size or offset + length > self._size:
             raise LogReadError(f"{where} runs past the end of the file")
-        if length > MAX_READ_BYTES:
+        if self.reuse and self._stored_uncompressed(offset, length):
+            size, crc, records = self._read_in_place(offset, length, where)
+        elif length > MAX_READ_BYTES:
             size, crc, records = self._read_mapped(offset, length, where)
         else:
             if len(self._in) < length:
@@ -209,6 +216,36 @@ class ChunkReader:
         if len(records) != size or (self.check_crc and crc and zlib.crc32(records) != crc):
             raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
         return records
+
+    def _stored_uncompressed(self, offset: int, length: int) -> bool:
+        """Whether the chunk record at `offset` names no compression (from its first bytes;
+        a damaged head says no, and the buffered read then reports the damage)."""
+        name_at = _RECORD_HEAD.size + _CHUNK_HEAD.size
+        head = os.pread(self._file.fileno(), min(length, name_at + 4), offset)
+        if len(head) < name_at + 4 or head[0] != OP_CHUNK:
+            return False
+        return struct.unpack_from("<I", head, name_at)[0] == 0
+
+    def _read_in_place(self, offset: int, length: int, where: str) -> tuple[int, int, memoryview]:
+        """`_records` of an uncompressed chunk as a view of a mapping of it (no copy)."""
+        start = offset - offset % mmap.ALLOCATIONGRANULARITY
+        mapped = mmap.mmap(
+            self._file.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
+        )
+        whole = memoryview(mapped)
+        view = whole[offset - start :]
+        try:
+            return self._records(view, where, in_place=True)
+        except BaseException:
+            view.release()
+            whole.release()
+            with contextlib.suppress(BufferError):
+                mapped.close()
+            raise
+        finally:
+            # The records view (if any) keeps the mapping; it is unmapped when that goes.
+            view.release()
+            whole.release()
 
     def _read_mapped(self, offset: int, length: int, where: str) -> tuple[int, int, memoryview]:
         """`_records` of a chunk record read through a mapping of it (no allocation)."""
@@ -226,8 +263,11 @@ class ChunkReader:
         finally:
             mapped.close()
 
-    def _records(self, view: memoryview, where: str) -> tuple[int, int, memoryview]:
-        """(uncompressed size, CRC, records) of the chunk record in `view`."""
+    def _records(
+        self, view: memoryview, where: str, *, in_place: bool = False
+    ) -> tuple[int, int, memoryview]:
+        """(uncompressed size, CRC, records) of the chunk record in `view`; `in_place`: an
+        uncompressed chunk's records are a view of `view`'s memory, not a copy."""
         import zstandard
 
         try:
@@ -246,7 +286,9 @@ class ChunkReader:
             pos += 8
             if pos + data_len > len(view):
                 raise LogReadError(f"{where} is corrupt: its data runs past the chunk record")
-            with view[pos : pos + data_len] as data:
+            data = view[pos : pos + data_len]
+            keep = False
+            try:
                 if compression not in ("zstd", "lz4", ""):
                     raise LogReadError(f"{where}: unsupported compression {compression!r}")
                 check_chunk_size(where, compression, size, data)
@@ -254,7 +296,13 @@ class ChunkReader:
                     return size, crc, self._unzstd(data, size)
                 if compression == "lz4":
                     return size, crc, self._unlz4(data, size)
+                if in_place:
+                    keep = True
+                    return size, crc, data
                 return size, crc, self._copy(data)
+            finally:
+                if not keep:
+                    data.release()
         except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
             raise LogReadError(f"{where} is corrupt: {' '.join(str(exc).split())}") from exc
 
