@@ -224,7 +224,8 @@ class ChunkReader:
         head = os.pread(self._file.fileno(), min(length, name_at + 4), offset)
         if len(head) < name_at + 4 or head[0] != OP_CHUNK:
             return False
-        return struct.unpack_from("<I", head, name_at)[0] == 0
+        (name_len,) = struct.unpack_from("<I", head, name_at)
+        return bool(name_len == 0)
 
     def _read_in_place(self, offset: int, length: int, where: str) -> tuple[int, int, memoryview]:
         """`_records` of an uncompressed chunk as a view of a mapping of it (no copy)."""
