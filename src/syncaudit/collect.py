@@ -18,7 +18,7 @@ import multiprocessing
 import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from syncaudit.camera.cdr_fast import has_fast_reader, read_fast
@@ -33,6 +33,9 @@ from syncaudit.workers import worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
+IMAGE_PREFIX_BYTES = 256
+"""Bytes of an image payload the audit reads: its header (stamp, ROS 1 seq) lies in the
+first 12-16; the rest (pixels) is never looked at, and readers that can skip it do."""
 TASKS_PER_WORKER = 8
 """Tasks in flight per worker: enough queued work that workers never wait on a parent
 busy with something else (its one-off imports); results are small, so memory stays low."""
@@ -123,7 +126,7 @@ def iter_items(
             if item is not None:
                 yield item
         return
-    channels = log.unit_channels(topics)
+    channels = _with_prefixes(log.unit_channels(topics), plan)
     ranks = _source_ranks(units)
     if jobs > 1 and len(groups) > 1:
         results = _parallel_results(log, groups, channels, plan, jobs, meanwhile)
@@ -135,6 +138,16 @@ def iter_items(
         yield from _merged(groups, results)
     finally:
         readers.close()
+
+
+def _with_prefixes(channels: dict[int, ChannelInfo], plan: ExtractPlan) -> dict[int, ChannelInfo]:
+    """The channels, image topics marked as read for their header only."""
+    if IMAGE_PREFIX_BYTES <= 0:
+        return channels
+    return {
+        cid: replace(info, prefix_bytes=IMAGE_PREFIX_BYTES) if info.topic in plan.images else info
+        for cid, info in channels.items()
+    }
 
 
 def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
