@@ -5,7 +5,7 @@ driving sessions: translation between stops, motion-distorted scans, roof/bumper
 mounts, 16-128 beams, organised clouds, two-level tf chains, odometry) plus the refusals.
 Each matrix session is simulated and calibrated once per module, two at a time in
 spawned workers, with 8 stops and 2-4 moving scans per move (`FAST_STOPS`,
-`FAST_MOVING_SCANS`); `benchmarks/bench_calib.py` runs 12 stops, 10-18 moving scans and
+`FAST_MOVING_SCANS`; a case in `SEEDS` runs that seed's 12-stop session, a regression); `benchmarks/bench_calib.py` runs 12 stops, 10-18 moving scans and
 10 seeds per case. Tolerances per beam class are the
 issue's: 16 beams 0.3 deg / 2 cm (sparse rings), 32 and 64 beams 0.1 deg / 1 cm,
 128 beams 0.05 deg / 0.5 cm.
@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import multiprocessing
 import os
+import re
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -78,12 +80,20 @@ the stop detection must reject (faster, more distorted sweeps) but not what is c
 the simulation and reading time halve."""
 
 
+SEEDS = {"drive-64-bumper": 2}
+"""Cases whose fast-subset session is not seed 0 (and runs 12 stops): a session that once
+missed its target stands for its case, one session instead of two. drive-64-bumper seed 2
+(12 stops: the loop closes): the coarse motion 5->6 is 1.15 m wrong and the front LiDAR's
+5-6 alignment, seeded there, converged 1.39 m off and was accepted, so the front map held
+stops 6-10 1.38 m off (1.7 cm calibration error with these moving scans, 1.21 cm with the
+benchmark's)."""
+
+
 def _case_config(name: str) -> CalibSceneConfig:
-    """Seed 0 of one matrix case as the fast subset runs it."""
+    """One session of a matrix case as the fast subset runs it (seed 0 unless `SEEDS`)."""
     case = MATRIX[name]
-    config = calib_scene_config(
-        seed=0, n_stops=12 if case["motion"] == "turntable" else FAST_STOPS, **case
-    )
+    stops = 12 if case["motion"] == "turntable" or name in SEEDS else FAST_STOPS
+    config = calib_scene_config(seed=SEEDS.get(name, 0), n_stops=stops, **case)
     if case["motion"] == "drive":
         config = config.model_copy(update={"moving_scans_range": FAST_MOVING_SCANS})
     return config
@@ -91,7 +101,7 @@ def _case_config(name: str) -> CalibSceneConfig:
 
 @pytest.fixture(scope="module")
 def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """Simulate and calibrate seed 0 of every matrix case once for the module.
+    """Simulate and calibrate one session of every matrix case once for the module.
 
     Two worker processes (spawned: small_gicp's OpenMP state must not be forked; they run
     the library's own functions) halve the wall time on a 2-core machine; each case is a
@@ -100,18 +110,19 @@ def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     root = tmp_path_factory.mktemp("calib")
     workers = max(1, min(2, os.cpu_count() or 1))
     context = multiprocessing.get_context("spawn")
-    paths = {name: root / f"{name}.mcap" for name in MATRIX}
+    configs = {name: _case_config(name) for name in MATRIX}
+    paths = {name: root / f"{name}.mcap" for name in configs}
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         sims = {
-            name: pool.submit(simulate_calib_session, paths[name], _case_config(name))
-            for name in MATRIX
+            name: pool.submit(simulate_calib_session, paths[name], config)
+            for name, config in configs.items()
         }
         calibs = {
             name: pool.submit(calibrate_log, paths[name], CalibConfig())
-            for name in MATRIX
+            for name in configs
             if sims[name].result() is not None
         }
-        return {name: (paths[name], sims[name].result(), calibs[name].result()) for name in MATRIX}
+        return {name: (paths[name], sims[name].result(), calibs[name].result()) for name in configs}
 
 
 @pytest.mark.parametrize("case", list(MATRIX))
@@ -125,6 +136,23 @@ def test_matrix_case_meets_its_tolerance(matrix_runs: dict[str, Any], case: str)
     assert result.passed
     n = len(truth["stops"])
     assert all(sum(s.used for s in lidar.stops) >= n // 2 for lidar in result.lidars)
+
+
+def test_a_wrong_coarse_link_is_caught_across_lidars(matrix_runs: dict[str, Any]) -> None:
+    """The front LiDAR's 5-6 alignment disagrees with the rear's view of the same motion;
+    aligned again from it, it fits better and lands right, and the calibration meets the
+    64-beam target."""
+    assert SEEDS["drive-64-bumper"] == 2
+    _path, truth, result = matrix_runs["drive-64-bumper"]
+    rot_deg, trans_cm = error_to_truth(result, truth)
+    assert rot_deg <= 0.1 and trans_cm <= 1.0, (rot_deg, trans_cm)
+    (note,) = [n for n in result.notes if n.startswith("cross-LiDAR check")]
+    assert "/lidar/front/points 5->6 (139 cm from /lidar/rear/points" in note
+    front = next(lidar for lidar in result.lidars if lidar.topic == "/lidar/front/points")
+    pair = next(p for p in front.pairs if (p.first_stop, p.second_stop) == (5, 6))
+    # The wrong one fitted at 2.3 cm with 30 % overlap; the one now kept fits better.
+    after = pair.alignment.after
+    assert after.rmse_cm is not None and after.rmse_cm < 2.0 and after.overlap > 0.32
 
 
 def test_driving_stops_are_the_true_stops(matrix_runs: dict[str, Any]) -> None:
@@ -196,8 +224,21 @@ def test_result_json_html_and_console(matrix_runs: dict[str, Any], tmp_path: Pat
     assert "PASS" in buffer.getvalue() and "lidar_rear" in buffer.getvalue()
 
 
-def test_extrinsics_file_replaces_tf_static(matrix_runs: dict[str, Any], tmp_path: Path) -> None:
-    path, truth, _result = matrix_runs["turntable-32-roof"]
+@pytest.fixture(scope="module")
+def two_stops(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """A cheap session (16 beams, 2 stops: too few to calibrate) and its truth."""
+    out = tmp_path_factory.mktemp("two") / "two.mcap"
+    truth = simulate_calib_session(out, calib_scene_config(motion="drive", beams=16, n_stops=2))
+    return out, truth
+
+
+def test_extrinsics_file_replaces_tf_static(
+    two_stops: tuple[Path, dict[str, Any]], tmp_path: Path
+) -> None:
+    """The file's extrinsics (here the true ones) replace /tf_static's (0.05 deg / 0.3 cm
+    off) as the recorded ones the result reports and validates against. A session too
+    short to calibrate is enough: the recorded extrinsics are read before anything else."""
+    path, truth = two_stops
     entries = {
         lidar["frame_id"]: {
             "translation_m": lidar["true_base_from_lidar"]["translation_m"],
@@ -208,9 +249,16 @@ def test_extrinsics_file_replaces_tf_static(matrix_runs: dict[str, Any], tmp_pat
     file = tmp_path / "extrinsics.yaml"
     file.write_text(yaml.safe_dump({"base_frame": "base_link", "extrinsics": entries}))
     result = calibrate_log(path, CalibConfig(extrinsics_file=file))
-    assert result.passed and result.extrinsics_source == str(file)
+    assert result.extrinsics_source == str(file)
     (ext,) = result.extrinsics
-    assert ext.rotation_diff_deg is not None and ext.rotation_diff_deg < 0.1
+    rear = next(x for x in truth["lidars"] if x["topic"] == ext.topic)
+    from_file = np.array(ext.recorded.matrix)
+    true = np.array(rear[f"true_{truth['reference_lidar']}_from_lidar"]["matrix"])
+    tf_static = np.array(rear[f"recorded_{truth['reference_lidar']}_from_lidar"]["matrix"])
+    assert np.allclose(from_file, true, atol=1e-6)
+    assert se3.transform_difference(from_file, tf_static)[1] > 0.002
+    default = calibrate_log(path, CalibConfig())
+    assert np.allclose(np.array(default.extrinsics[0].recorded.matrix), tf_static, atol=1e-6)
     del entries["lidar_rear"]
     file.write_text(yaml.safe_dump({"extrinsics": entries}))
     with pytest.raises(NoDataError, match="lidar_rear"):
@@ -246,12 +294,34 @@ def test_degenerate_scene_is_refused_early_naming_the_free_direction(
     assert "along (" in result.reason
     assert cpu_s < 10.0, cpu_s
     assert "NOT CALIBRATABLE" in html_section(result)
+    # The same direction, structured: along the walls (world) seen from the named stop.
+    deg = result.degeneracy
+    assert deg is not None and deg.kind == "translation"
+    assert deg.information < deg.limit == pytest.approx(0.02)
+    match = re.fullmatch(r"base_link at stop (\d+)", deg.frame)
+    assert match is not None, deg.frame
+    world_from_base = np.array(truth["stops"][int(match[1])]["world_from_base"]["matrix"])
+    direction = world_from_base[:3, :3] @ np.array(deg.direction)
+    wall_yaw = math.radians(truth["scene"]["objects"][0]["yaw_deg"])
+    # ground_and_wall boxes are long along their y axis, corridor walls along x.
+    along = (
+        np.array([-math.sin(wall_yaw), math.cos(wall_yaw), 0.0])
+        if scene == "ground_and_wall"
+        else np.array([math.cos(wall_yaw), math.sin(wall_yaw), 0.0])
+    )
+    angle_deg = math.degrees(math.acos(min(1.0, abs(float(direction @ along)))))
+    assert angle_deg < 5.0, (scene, angle_deg)
+    assert f"({deg.direction[0]:.2f}, {deg.direction[1]:.2f}, {deg.direction[2]:.2f})" in (
+        result.reason
+    )
+    assert all(lidar.top_view is None for lidar in result.lidars)
+    assert result.to_json_dict()["degeneracy"]["kind"] == "translation"
 
 
-def test_too_few_stops_is_a_result_not_nothing_to_audit(tmp_path: Path) -> None:
-    out = tmp_path / "two.mcap"
-    simulate_calib_session(out, calib_scene_config(motion="drive", beams=16, n_stops=2))
-    result = calibrate_log(out, CalibConfig())
+def test_too_few_stops_is_a_result_not_nothing_to_audit(
+    two_stops: tuple[Path, dict[str, Any]],
+) -> None:
+    result = calibrate_log(two_stops[0], CalibConfig())
     assert not result.calibratable and result.reason is not None
     assert "has 2 stop(s) among" in result.reason and "at least 3" in result.reason
     assert json.loads(json.dumps(result.to_json_dict()))["calibratable"] is False
@@ -314,3 +384,83 @@ def test_log_and_config_errors(tmp_path: Path) -> None:
     nested.write_text("registration: {limits: {min_overlap_ratio: 0.5}}\n")
     loaded: CalibConfig = load_config(nested, CalibConfig)
     assert loaded.registration.limits.min_overlap_ratio == 0.5
+
+
+def _footprint_distance_m(xy_m: np.ndarray, objects: list[dict[str, Any]]) -> np.ndarray:
+    """Distance in the ground plane from each point to the nearest object's footprint
+    (0 inside it): where a top-view point of the true scene must lie."""
+    best = np.full(xy_m.shape[0], np.inf)
+    for obj in objects:
+        if obj["type"] == "pole":
+            d = np.linalg.norm(xy_m - np.array(obj["center_xy_m"]), axis=1) - obj["radius_m"]
+        else:
+            yaw = math.radians(obj["yaw_deg"])
+            rot = np.array([[math.cos(yaw), math.sin(yaw)], [-math.sin(yaw), math.cos(yaw)]])
+            local = (xy_m - np.array(obj["center_m"][:2])) @ rot.T
+            outside = np.maximum(np.abs(local) - np.array(obj["size_m"][:2]) / 2.0, 0.0)
+            d = np.linalg.norm(outside, axis=1)
+        best = np.minimum(best, np.maximum(d, 0.0))
+    return best
+
+
+def _top_view_in_world(
+    top: Any, truth: dict[str, Any], shift_m: float = 0.0
+) -> dict[int, np.ndarray]:
+    """Each stop's top-view points in the simulator's world, through the true vehicle pose
+    at the stop the view is anchored at (the frame text names it)."""
+    match = re.match(r"base_link at stop (\d+), ", top.frame)
+    assert match is not None, top.frame
+    world_from_base = np.array(truth["stops"][int(match[1])]["world_from_base"]["matrix"])
+    out = {}
+    for stop in top.stops:
+        xy = np.c_[stop.x_m, stop.y_m] + shift_m
+        out[stop.stop] = xy @ world_from_base[:2, :2].T + world_from_base[:2, 3]
+    return out
+
+
+def test_top_view_places_every_stop_on_the_true_scene(matrix_runs: dict[str, Any]) -> None:
+    """Each LiDAR's top view puts every used stop's points on the scene's objects (the
+    poses and the mount are right), the same wall seen from several stops draws one line,
+    and the JSON stays small."""
+    _path, truth, result = matrix_runs["drive-32-left-right"]
+    objects = truth["scene"]["objects"]
+    for lidar in result.lidars:
+        top = lidar.top_view
+        assert top is not None and top.cell_m == pytest.approx(0.2)
+        assert [s.stop for s in top.stops] == [s.stop for s in lidar.stops if s.used]
+        via = "recorded" if lidar.topic == result.reference_topic else "calibrated"
+        assert top.frame.endswith(f"{lidar.frame_id} placed by the {via} extrinsic"), top.frame
+        world = _top_view_in_world(top, truth)
+        for points in top.stops:
+            # Whole centimetres, one point per 0.2 m cell.
+            xy_cm = np.round(np.c_[points.x_m, points.y_m] * 100.0)
+            assert np.allclose(xy_cm / 100.0, np.c_[points.x_m, points.y_m], rtol=0, atol=1e-9)
+            cells = np.floor_divide(xy_cm.astype(np.int64), 20)
+            assert len(np.unique(cells, axis=0)) == len(cells)
+        for stop, xy in world.items():
+            assert xy.shape[0] >= 50, (lidar.topic, stop)
+            on_scene = float(np.mean(_footprint_distance_m(xy, objects) < 0.05))
+            assert on_scene > 0.97, (lidar.topic, stop, on_scene)
+        # The check can fail: the same points 5 cm off (in x and y) are not on the scene.
+        shifted = _top_view_in_world(top, truth, shift_m=0.05)
+        off = np.concatenate([_footprint_distance_m(xy, objects) for xy in shifted.values()])
+        assert float(np.mean(off < 0.05)) < 0.9
+        # Each wall seen from several stops: the stops' mean offsets from its face agree.
+        for wall in (o for o in objects if o["type"] == "wall"):
+            yaw = math.radians(wall["yaw_deg"])
+            thin = 0 if wall["size_m"][0] < wall["size_m"][1] else 1
+            axis = np.array(
+                [math.cos(yaw), math.sin(yaw)] if thin == 0 else [-math.sin(yaw), math.cos(yaw)]
+            )
+            half = wall["size_m"][thin] / 2.0
+            offsets = []
+            for xy in world.values():
+                across = np.abs((xy - np.array(wall["center_m"][:2])) @ axis) - half
+                near = (_footprint_distance_m(xy, [wall]) < 0.3) & (across > -half)
+                if near.sum() >= 20:
+                    offsets.append(float(np.mean(across[near])))
+            if len(offsets) >= 2:
+                assert max(offsets) - min(offsets) < 0.03, (lidar.topic, offsets)
+    # The written file (indented): measured 198 KB for these 8 stops, 25 KB per stop.
+    size = len(json.dumps(result.to_json_dict(), indent=2))
+    assert size < 35_000 * len(truth["stops"]), size

@@ -47,9 +47,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from syncaudit.calib import consensus, io, posegraph, se3, selection, topview
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import io, posegraph, se3, selection
 from syncaudit.calib.config import CalibConfig
+from syncaudit.calib.ground import remove_ground
 from syncaudit.calib.registration import (
     Alignment,
     Cloud,
@@ -65,6 +66,7 @@ from syncaudit.calib.registration import (
 from syncaudit.calib.result import (
     AlignmentOut,
     CalibrationResult,
+    DegeneracyOut,
     ExtrinsicOut,
     LidarOut,
     Limits,
@@ -72,6 +74,7 @@ from syncaudit.calib.result import (
     PairOut,
     PoseGraphOut,
     StopUse,
+    TopViewOut,
     TransformOut,
     VehicleStopOut,
 )
@@ -299,34 +302,6 @@ def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtr
         if stop in lidar.stop_scan
     ]
     return np.concatenate(parts)
-
-
-_GROUND_BAND_M = 0.3
-_GROUND_KEEP_M = 0.2
-
-
-def remove_ground(points_m: F64) -> F64:
-    """Points of a base-frame cloud that are not on the ground plane.
-
-    The plane is fitted (least squares, then once more on its inliers) to the low points
-    -- within a band above the 5th height percentile -- and points within 0.2 m of it are
-    dropped. Flat ground overlaps itself at any turn, so only the rest can tell turns apart.
-    """
-    if points_m.shape[0] < 50:
-        return points_m
-    z = points_m[:, 2]
-    low = points_m[z < float(np.percentile(z, 5)) + _GROUND_BAND_M]
-    design = np.c_[points_m[:, :2], np.ones(points_m.shape[0])]
-    low_design = np.c_[low[:, :2], np.ones(low.shape[0])]
-    coef: F64 = np.asarray(np.linalg.lstsq(low_design, low[:, 2], rcond=None)[0], dtype=np.float64)
-    for _ in range(2):
-        resid = z - design @ coef
-        inl = np.abs(resid) < _GROUND_KEEP_M
-        if inl.sum() < 3:
-            break
-        coef = np.asarray(np.linalg.lstsq(design[inl], z[inl], rcond=None)[0], dtype=np.float64)
-    keep = np.abs(z - design @ coef) > _GROUND_KEEP_M
-    return points_m[keep] if keep.sum() >= 50 else points_m
 
 
 _MIN_STRUCTURE_OVERLAP = 0.3
@@ -632,6 +607,165 @@ def _align_pairs(lidar: _Lidar, provisional: int, config: CalibConfig) -> None:
             results[(a, b)] = _align_pair(lidar, a, b, se3.invert(seed[a]) @ seed[b], config)
     lidar.candidates = candidates
     lidar.results = results
+
+
+_MAX_DISAGREEMENT_M = 0.3
+_MAX_DISAGREEMENT_DEG = 3.0
+_RESEED_M = 0.2
+_RESEED_DEG = 2.0
+"""A pair alignment whose vehicle motion (through the recorded extrinsic) is more than
+`_MAX_DISAGREEMENT_M` / `_MAX_DISAGREEMENT_DEG` from what all LiDARs' other alignments
+agree on is rejected; stops whose agreed pose is more than `_RESEED_M` / `_RESEED_DEG`
+from the coarse motion get that pose as their seed and their pairs are aligned again."""
+
+
+def _vehicle_motions(
+    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics
+) -> list[consensus.Motion]:
+    """Every accepted pair alignment as the vehicle's motion in the base frame."""
+    out = []
+    for lidar in lidars:
+        base = recorded.base_from_frame[lidar.frame_id]
+        base_inv = se3.invert(base)
+        for (a, b), res in sorted(lidar.results.items()):
+            if res.accepted:
+                motion = base @ res.target_from_source @ base_inv
+                out.append(consensus.Motion(lidar.topic, a, b, motion))
+    return out
+
+
+def _reject_misfits(lidars: list[_Lidar], agreed: consensus.Consensus) -> list[str]:
+    """Mark the alignments the cross-LiDAR check removed as rejected; one line each."""
+    by_topic = {lidar.topic: lidar for lidar in lidars}
+    lines = []
+    for misfit in agreed.removed:
+        m = misfit.motion
+        lidar = by_topic[m.source]
+        why = (
+            f"inconsistent: the vehicle's motion it implies is {misfit.translation_m * 100:.0f} "
+            f"cm / {misfit.rotation_deg:.1f} deg from what the other alignments of all LiDARs "
+            "agree on (through the recorded extrinsics)"
+        )
+        lidar.results[(m.first, m.second)] = dataclasses.replace(
+            lidar.results[(m.first, m.second)], accepted=False, reason=why
+        )
+        lines.append(f"{m.source} {m.first}->{m.second} ({misfit.translation_m * 100:.0f} cm)")
+    return lines
+
+
+def _measures(result: Alignment) -> bool:
+    """Whether an alignment converged onto the scene (accepted, or rejected only for a
+    weak direction), so its motion can be compared with another LiDAR's."""
+    return result.accepted or (result.reason or "").startswith(("degenerate", "slid"))
+
+
+def _cross_seed(
+    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
+) -> list[str]:
+    """Pairs of stops aligned by two LiDARs whose vehicle motions disagree: each is aligned
+    again from the other LiDAR's motion, and the new result replaces the old one when it
+    fits this LiDAR's own scans better (more overlap and a smaller error): the old one sat
+    in a local minimum. One line per replacement."""
+    motions = {
+        (lidar.topic, key): recorded.base_from_frame[lidar.frame_id]
+        @ res.target_from_source
+        @ se3.invert(recorded.base_from_frame[lidar.frame_id])
+        for lidar in lidars
+        for key, res in lidar.results.items()
+        if _measures(res)
+    }
+    lines = []
+    for lidar in lidars:
+        base = recorded.base_from_frame[lidar.frame_id]
+        for (a, b), mine in sorted(lidar.results.items()):
+            if not _measures(mine):
+                continue
+            for other in lidars:
+                theirs = motions.get((other.topic, (a, b)))
+                if other is lidar or theirs is None:
+                    continue
+                rot_deg, trans_m = se3.transform_difference(motions[(lidar.topic, (a, b))], theirs)
+                if rot_deg <= _MAX_DISAGREEMENT_DEG and trans_m <= _MAX_DISAGREEMENT_M:
+                    continue
+                initial = se3.invert(base) @ theirs @ base
+                again = _align_pair(lidar, a, b, initial, config)
+                if (
+                    again.after.overlap > mine.after.overlap
+                    and again.after.rmse_m < mine.after.rmse_m
+                ):
+                    lidar.results[(a, b)] = again
+                    lines.append(
+                        f"{lidar.topic} {a}->{b} ({trans_m * 100:.0f} cm from {other.topic}; "
+                        f"overlap {mine.after.overlap:.0%} -> {again.after.overlap:.0%}, error "
+                        f"{mine.after.rmse_m * 100:.1f} -> {again.after.rmse_m * 100:.1f} cm)"
+                    )
+                    break
+    return lines
+
+
+def _cross_check(
+    lidars: list[_Lidar],
+    recorded: extr.RecordedExtrinsics,
+    reference: int,
+    config: CalibConfig,
+    notes: list[str],
+) -> None:
+    """The vehicle's motion seen by every LiDAR must agree (through the recorded extrinsics).
+
+    First per pair of stops: an alignment that disagrees with another LiDAR's of the same
+    pair is aligned again from it and replaced when that fits better (`_cross_seed`). Then
+    over loops: reject pair alignments that contradict the vehicle motion all the others
+    agree on, re-seed the stops the coarse motion misplaced from that agreement and align
+    their pairs again, then check once more.
+
+    Catches a wrong coarse link whose pair alignment converged next to it (seeded there):
+    measured on a bumper 64-beam drive, the coarse motion 5->6 was 1.15 m off and the front
+    LiDAR's 5-6 alignment, accepted, placed stops 6-10 of its map 1.38 m off, while the rear
+    LiDAR's alignments across that link, seeded from the same wrong motion, moved to the
+    right one. With 8 stops no loop closes over that link; there the rear LiDAR's own 5-6
+    alignment (degenerate, rejected, but 0.5 cm right) seeds the front's again, which then
+    fits better (overlap 30 -> 34 %, error 2.3 -> 1.8 cm) and lands 1 cm from the truth."""
+    swapped = _cross_seed(lidars, recorded, config)
+    if swapped:
+        notes.append(
+            "cross-LiDAR check: alignment(s) disagreeing with another LiDAR's view of the same "
+            "motion were aligned again from it and fit their own scans better: "
+            + "; ".join(swapped)
+        )
+    kwargs = {"max_translation_m": _MAX_DISAGREEMENT_M, "max_rotation_deg": _MAX_DISAGREEMENT_DEG}
+    agreed = consensus.consensus(_vehicle_motions(lidars, recorded), reference, **kwargs)
+    lines = _reject_misfits(lidars, agreed)
+    if agreed.removed:
+        for lidar in lidars:
+            base = recorded.base_from_frame[lidar.frame_id]
+            moved = set()
+            for k, pose in agreed.poses.items():
+                if k not in lidar.chain:
+                    continue
+                seed = se3.invert(base) @ pose @ base
+                rot_deg, trans_m = se3.transform_difference(lidar.chain[k], seed)
+                if rot_deg > _RESEED_DEG or trans_m > _RESEED_M:
+                    lidar.chain[k] = seed
+                    moved.add(k)
+            for a, b, _sep, _pred in lidar.candidates:
+                if a in moved or b in moved:
+                    initial = se3.invert(lidar.chain[a]) @ lidar.chain[b]
+                    lidar.results[(a, b)] = _align_pair(lidar, a, b, initial, config)
+        agreed = consensus.consensus(_vehicle_motions(lidars, recorded), reference, **kwargs)
+        lines += _reject_misfits(lidars, agreed)
+    if lines:
+        notes.append(
+            "cross-LiDAR check: pair alignment(s) contradicting the vehicle's motion that the "
+            f"others agree on were rejected ({', '.join(lines)}); the stops the coarse motion "
+            "had misplaced were re-seeded from that agreement and aligned again"
+        )
+    if agreed.unresolved is not None:
+        m = agreed.unresolved
+        notes.append(
+            "cross-LiDAR check: the alignments disagree on the vehicle's motion by up to "
+            f"{m.translation_m * 100:.0f} cm / {m.rotation_deg:.1f} deg (e.g. {m.motion.source} "
+            f"{m.motion.first}->{m.motion.second}) and no single one is to blame"
+        )
 
 
 def _accepted_edges(lidar: _Lidar, nodes: set[int] | None = None) -> list[posegraph.Edge]:
@@ -992,7 +1126,9 @@ def _stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
     ]
 
 
-def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
+def _lidar_out(
+    lidar: _Lidar, stops: list[selection.VehicleStop], top: TopViewOut | None = None
+) -> LidarOut:
     uses = []
     for stop in stops:
         run = stop.runs.get(lidar.topic)
@@ -1028,7 +1164,39 @@ def _lidar_out(lidar: _Lidar, stops: list[selection.VehicleStop]) -> LidarOut:
         map_points=lidar.map_points,
         aligned=bool(lidar.graphs),
         reason=lidar.reason,
+        top_view=top,
     )
+
+
+def _top_views(
+    lidars: list[_Lidar],
+    anchors: list[int],
+    extrinsics: list[ExtrinsicOut],
+    recorded: extr.RecordedExtrinsics,
+) -> list[TopViewOut | None]:
+    """Each LiDAR's placed stops from above, in the base frame at the first anchor its
+    pose graph holds; a non-reference LiDAR is mounted through its calibrated extrinsic
+    when there is one, else the recorded one (the frame text says which)."""
+    ref = lidars[0]
+    base_from_ref = recorded.base_from_frame[ref.frame_id]
+    calibrated = {e.topic: np.array(e.result.matrix) for e in extrinsics if e.result is not None}
+    out: list[TopViewOut | None] = []
+    for lidar in lidars:
+        found = next(((a, p) for a in anchors if (p := _poses_at(lidar, a)) is not None), None)
+        if found is None:
+            out.append(None)
+            continue
+        anchor, poses = found
+        if lidar is ref:
+            mount, via = base_from_ref, "the recorded extrinsic"
+        elif lidar.topic in calibrated:
+            mount, via = base_from_ref @ calibrated[lidar.topic], "the calibrated extrinsic"
+        else:
+            mount, via = recorded.base_from_frame[lidar.frame_id], "the recorded extrinsic"
+        scans = {k: lidar.scans[lidar.stop_scan[k]].points_m for k in poses}
+        frame = f"{recorded.base_frame} at stop {anchor}, {lidar.frame_id} placed by {via}"
+        out.append(topview.top_view(scans, poses, mount, frame))
+    return out
 
 
 _DEGENERATE_INFORMATION = 0.02
@@ -1040,16 +1208,17 @@ Measured on the simulator's sessions: ground plus one wall and corridors 0.0005-
 
 def _degenerate_scene(
     lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
-) -> str | None:
-    """Why the scene itself cannot constrain an alignment, or None.
+) -> tuple[str, DegeneracyOut] | None:
+    """Why the scene itself cannot constrain an alignment, and its free direction; or None.
 
     Per stop, the normals of all LiDARs' points (base frame) give sum(n n^T); a direction
     with (almost) no constraint -- along a corridor, along a lone wall over flat ground --
-    makes every alignment slide. Refused before any registration when most stops show it.
+    makes every alignment slide. Refused before any registration when most stops show it;
+    the direction named is the weakest stop's, in the base frame at that stop.
     """
     reg = config.registration
     order = sorted({k for lidar in lidars for k in lidar.stop_scan})
-    free: list[tuple[float, F64]] = []
+    free: list[tuple[float, F64, int]] = []
     for k in order:
         cloud = prepare(
             _vehicle_points(lidars, k, recorded), reg.coarse_voxel_m, 20, reg.num_threads
@@ -1058,18 +1227,25 @@ def _degenerate_scene(
         if normals.shape[0] < 10:
             continue
         values, vectors = np.linalg.eigh(normals.T @ normals / normals.shape[0])
-        free.append((float(values[0]), vectors[:, 0]))
-    weak = [(v, d) for v, d in free if v < _DEGENERATE_INFORMATION]
+        free.append((float(values[0]), vectors[:, 0], k))
+    weak = [w for w in free if w[0] < _DEGENERATE_INFORMATION]
     if not free or len(weak) * 2 <= len(free):
         return None
-    value, direction = min(weak, key=lambda w: w[0])
+    value, direction, stop = min(weak, key=lambda w: w[0])
     direction = direction if direction[int(np.argmax(np.abs(direction)))] >= 0 else -direction
     x, y, z = (float(v) for v in direction)
-    return (
+    reason = (
         f"degenerate scene: at {len(weak)} of {len(free)} stops nothing constrains translation "
         f"along ({x:.2f}, {y:.2f}, {z:.2f}) in {recorded.base_frame} (information {value:.4f} "
         f"< {_DEGENERATE_INFORMATION}): a corridor or a lone wall over flat ground; "
         "calibrate where the LiDARs see structure facing several directions"
+    )
+    return reason, DegeneracyOut(
+        kind="translation",
+        direction=(x, y, z),
+        frame=f"{recorded.base_frame} at stop {stop}",
+        information=value,
+        limit=_DEGENERATE_INFORMATION,
     )
 
 
@@ -1082,8 +1258,11 @@ def _refusal(
     notes: list[str],
     timer: _Timer,
     config: CalibConfig,
+    *,
+    degeneracy: DegeneracyOut | None = None,
 ) -> CalibrationResult:
-    """A not-calibratable result for a log that has scans but cannot be calibrated."""
+    """A not-calibratable result for a log that has scans but cannot be calibrated
+    (`degeneracy`: the scene's free direction when that is why)."""
     for lidar in lidars:
         lidar.reason = why
     ref = lidars[0]
@@ -1122,6 +1301,7 @@ def _refusal(
         reference_stop=None,
         anchor_stops=[],
         limits=_limits_out(config),
+        degeneracy=degeneracy,
         stops=_stops_out(stops),
         lidars=[_lidar_out(lidar, stops) for lidar in lidars],
         extrinsics=extrinsics,
@@ -1150,7 +1330,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
     with timer.stage("degeneracy"):
-        refusal = _degenerate_scene(lidars, recorded, config)
+        degenerate = _degenerate_scene(lidars, recorded, config)
+    refusal, degeneracy = degenerate if degenerate is not None else (None, None)
     short = [
         f"{lidar.topic} has {len(lidar.stop_scan)} stop(s) among {len(lidar.scans)} scans"
         for lidar in lidars
@@ -1162,7 +1343,9 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
             f"(runs of {config.selection.min_static_scans}+ still scans) per LiDAR"
         )
     if refusal is not None:
-        return _refusal(path, lidars, recorded, stops, refusal, notes, timer, config)
+        return _refusal(
+            path, lidars, recorded, stops, refusal, notes, timer, config, degeneracy=degeneracy
+        )
     reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         odometry = io.read_odometry(path, recorded.base_frame)
@@ -1170,6 +1353,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     with timer.stage("align_pairs"):
         for lidar in lidars:
             _align_pairs(lidar, reference, config)
+    with timer.stage("cross_check"):
+        _cross_check(lidars, recorded, reference, config, notes)
     with timer.stage("pose_graphs"):
         anchors = _graph_lidars(lidars, config)
         reference = anchors[0]
@@ -1180,6 +1365,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         for lidar in lidars:
             local = _map_at(lidar, reference, config)
             lidar.map_points = 0 if local is None else local[0].size
+    with timer.stage("top_views"):
+        tops = _top_views(lidars, anchors, extrinsics, recorded)
     limits = config.validation
     for ext in extrinsics:
         spread_deg, spread_cm = ext.estimate_spread_deg, ext.estimate_spread_cm
@@ -1212,7 +1399,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         anchor_stops=anchors,
         limits=_limits_out(config),
         stops=_stops_out(stops),
-        lidars=[_lidar_out(lidar, stops) for lidar in lidars],
+        lidars=[_lidar_out(lidar, stops, top) for lidar, top in zip(lidars, tops, strict=True)],
         extrinsics=extrinsics,
         notes=notes,
         timings_s=dict(timer.seconds),
