@@ -11,7 +11,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from syncaudit.audit import AuditResult
-from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.cli import app
 from syncaudit.report.html import render_audit_html, render_report_html
 
@@ -26,7 +26,7 @@ CAMERA_PLOTS = (
     "exposure",
     "delay",
 )
-LIDAR_PLOTS = ("lidar-rpm", "lidar-packets", "lidar-clock")
+LIDAR_PLOTS = ("lidar-rpm", "lidar-packets", "lidar-drops", "lidar-clock")
 THREE_CAMERAS = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"
 Load = Callable[[str], CalibrationResult]
 
@@ -113,6 +113,23 @@ def test_plotted_values_are_the_audits(audit: AuditResult) -> None:
     np.testing.assert_allclose(
         _path_values(rpm["d"])[1], omega[np.isfinite(omega)] / 6.0, atol=0.0051
     )
+    # Drops: a dot per revolution that lost packets, at the count lost (own axis).
+    drops = next(a for kind, a in page.paths if kind == "lidar-drops")
+    lost = audit.revolutions.dropped_packets
+    assert int(drops["data-n"]) == (lost > 0).sum() > 0
+    nums = [float(v) for v in re.findall(r"-?\d+(?:\.\d+)?", drops["d"])]
+    np.testing.assert_allclose(-np.array(nums[1::4]), lost[lost > 0])
+    # The clock: host - sensor per revolution, and its rolling minimum over a second.
+    host, low = [a for kind, a in page.paths if kind == "lidar-clock"]
+    raw = audit.revolutions.zero_packet_driver_ns - audit.revolutions.zero_packet_sensor_ns
+    np.testing.assert_allclose(_path_values(host["d"])[1], raw / 1e3, atol=0.0051)
+    # 10 s at 10 Hz: 100 revolutions (the sample's first 100 points hold the minimum so far).
+    assert re.fullmatch(
+        r"minimum over 100 revolutions \(9\.\d+ s\): the offset, t1 jitter removed",
+        low["data-label"],
+    ), low["data-label"]
+    expected = [raw[max(0, i - 99) : i + 1].min() / 1e3 for i in range(raw.size)]
+    np.testing.assert_allclose(_path_values(low["d"])[1], expected, atol=0.0051)
 
 
 def test_log_text_is_escaped(hostile_audit: AuditResult, hostile: str) -> None:
@@ -140,8 +157,24 @@ def test_combined_report_of_audit_and_calibration(audit: AuditResult, calibratio
     refused = calibration("calib_ground_and_wall")
     page = _parse(render_report_html(None, refused))
     kinds = [k for k, _ in page.figures]
-    assert kinds.count("degenerate") == len(refused.lidars)  # one direction per LiDAR
+    # Refused before any alignment and without a structured direction: nothing to draw
+    # (the reasons' text is not parsed); the scene's direction is drawn when the field is set.
+    assert "degenerate" not in kinds and "scene-degeneracy" not in kinds
     assert "error" not in kinds and "NOT CALIBRATABLE" in " ".join(page.text)
+    free = DegeneracyOut(
+        kind="translation",
+        direction=(-0.70, 0.71, 0.0),
+        frame="base_link",
+        information=0.002,
+        limit=0.01,
+    )
+    kinds = [
+        k
+        for k, _ in _parse(
+            render_report_html(None, refused.model_copy(update={"degeneracy": free}))
+        ).figures
+    ]
+    assert kinds.count("scene-degeneracy") == 1
 
 
 def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> None:

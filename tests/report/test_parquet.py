@@ -12,12 +12,14 @@ import pandas as pd
 import polars as pl
 import pyarrow.parquet as pq
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from syncaudit.audit import AuditResult
 from syncaudit.cli import app
 from syncaudit.writers.parquet import cameras_path, write_parquet
 
+THREE_CAMERAS = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"
 STAMPS = (
     "exposure_start_ns",
     "exposure_duration_ns",
@@ -104,3 +106,81 @@ def test_without_pyarrow_parquet_stops_before_any_work(
     assert result.exit_code == 8, result.output
     assert "pip install 'syncaudit[parquet]'" in result.output
     assert list(tmp_path.iterdir()) == []
+
+
+def _odd_rig(tmp_path: Path, case: str) -> Path:
+    """The sample's rig without cameras, or with cameras whose exposures are not in the log."""
+    rig = yaml.safe_load(Path(f"{THREE_CAMERAS}.rig.yaml").read_text())
+    if case == "no cameras":
+        rig["cameras"] = []
+    else:
+        for camera in rig["cameras"]:
+            del camera["exposure_topic"]  # no t_l: no frame pairs
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    return path
+
+
+@pytest.mark.parametrize("case", ["no cameras", "no paired frames"])
+def test_same_typed_schema_without_cameras_or_paired_frames(
+    audit: AuditResult, tmp_path: Path, case: str
+) -> None:
+    full = write_parquet(audit, tmp_path / "full.parquet")
+    odd = (tmp_path / "odd.parquet", tmp_path / "odd.cameras.parquet")
+    run = CliRunner().invoke(
+        app,
+        [
+            "audit",
+            str(THREE_CAMERAS),
+            "--rig",
+            str(_odd_rig(tmp_path, case)),
+            "--parquet",
+            str(odd[0]),
+        ],
+    )
+    assert run.exit_code == 0, run.output
+    for whole, other in zip(full, odd, strict=True):
+        # Same columns, same Arrow types, in the same order (the metadata differs: the verdict).
+        assert pq.read_schema(other).remove_metadata() == pq.read_schema(whole).remove_metadata()
+        back, reference = pd.read_parquet(other), pd.read_parquet(whole)
+        assert list(back.columns) == list(reference.columns)
+        assert back.dtypes.to_dict() == reference.dtypes.to_dict()
+        described = "SELECT column_name, column_type FROM (DESCRIBE FROM '{}')"
+        with duckdb.connect() as con:
+            types = con.execute(described.format(other)).fetchall()
+            assert types == con.execute(described.format(whole)).fetchall()
+    frames, cameras = pd.read_parquet(odd[0]), pd.read_parquet(odd[1])
+    if case == "no cameras":
+        assert len(frames) == 0 and len(cameras) == 0
+        with duckdb.connect() as con:
+            assert con.execute(f"SELECT count(*) FROM '{odd[0]}'").fetchone() == (0,)
+        assert len(frames.columns) == len(audit.frames().columns) == 24
+        assert json.loads(pq.read_schema(odd[0]).metadata[b"syncaudit"])["verdict"] == "no cameras"
+    else:
+        assert len(frames) == 297 and not frames["paired"].any()
+        assert frames["t_l_ns"].isna().all() and frames["error_signed_ns"].isna().all()
+        # Missing statistics are nulls of a number column, not strings.
+        assert cameras["error_mean_us"].isna().all() and cameras["t5_mean_us"].isna().all()
+        assert list(cameras["unpaired_no exposure metadata"]) == [99, 99, 99]
+        query = f"SELECT count(*) FROM '{odd[1]}' WHERE error_mean_us IS NULL AND t1_mean_us > 0"
+        with duckdb.connect() as con:
+            assert con.execute(query).fetchone() == (3,)
+
+
+def test_real_lidar_log_without_cameras(
+    audit: AuditResult, tmp_path: Path, lidar_data: Path
+) -> None:
+    """A real VLP-16 recording (no cameras): the typed tables with zero rows, and a report."""
+    log = lidar_data / "velodyne_vlp16" / "1673400471837873222"
+    out = tmp_path / "vlp16.parquet"
+    run = CliRunner().invoke(
+        app, ["audit", str(log), "--parquet", str(out), "--html", str(tmp_path / "r.html")]
+    )
+    assert run.exit_code == 0, run.output
+    full = write_parquet(audit, tmp_path / "full.parquet")
+    for whole, other in zip(full, (out, cameras_path(out)), strict=True):
+        assert pq.read_schema(other).remove_metadata() == pq.read_schema(whole).remove_metadata()
+        assert pq.read_metadata(other).num_rows == 0
+    page = (tmp_path / "r.html").read_text()
+    assert "NO CAMERAS" in page and "less the median +1,531.183 s" in page
+    assert 'data-kind="lidar-drops"' in page and "none in 4 revolutions" in page

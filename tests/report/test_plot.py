@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
+from syncaudit.report.html import rolling_min
 from syncaudit.report.plot import (
     MAX_POINTS,
     Series,
@@ -69,3 +72,18 @@ def test_tick_labels_carry_the_decimals_their_spacing_needs() -> None:
     assert tick_labels(nice_ticks(2.0, 2.06)) == ["2.00", "2.02", "2.04", "2.06"]
     assert tick_labels(nice_ticks(0, 600, 10)) == ["0", "100", "200", "300", "400", "500", "600"]
     assert tick_labels([-4000.0, -2000.0, 0.0, 2000.0]) == ["-4,000", "-2,000", "0", "2,000"]
+
+
+def test_count_plots_start_at_zero_with_whole_ticks() -> None:
+    x = np.arange(5, dtype=float)
+    plot = TimePlot("drops", "packets", counts=True)
+    plot.series.append(Series("dropped", x, np.array([1.0, 2.0, 1.0, 1.0, 2.0]), dots=True))
+    svg = time_plot_svg(plot)
+    ticks = re.findall(r'class="yt">([^<]+)<', svg)
+    assert ticks[0] == "0" and all(t.isdigit() for t in ticks) and "2" in ticks
+
+
+def test_rolling_minimum_of_the_clock() -> None:
+    values = np.array([5.0, 3.0, 4.0, 9.0, 8.0, 7.0, 1.0])
+    np.testing.assert_array_equal(rolling_min(values, 3), [5, 3, 3, 3, 4, 7, 1])
+    np.testing.assert_array_equal(rolling_min(values, 1), values)

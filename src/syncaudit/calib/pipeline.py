@@ -1110,6 +1110,12 @@ def _extrinsic(
     )
 
 
+def _reference_mount(recorded: extr.RecordedExtrinsics, frame_id: str) -> TransformOut | None:
+    """The reference LiDAR's recorded base_from_frame (the report places mounts with it)."""
+    transform = recorded.base_from_frame.get(frame_id)
+    return None if transform is None else TransformOut.of(transform)
+
+
 def _limits_out(config: CalibConfig) -> Limits:
     """The validation limits as the result reports them."""
     return Limits(
@@ -1308,6 +1314,7 @@ def _refusal(
         notes=notes,
         timings_s=dict(timer.seconds),
         libraries=_library_versions(),
+        reference_mount=_reference_mount(recorded, ref.frame_id),
     )
 
 
@@ -1404,4 +1411,5 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         notes=notes,
         timings_s=dict(timer.seconds),
         libraries=_library_versions(),
+        reference_mount=_reference_mount(recorded, lidars[0].frame_id),
     )

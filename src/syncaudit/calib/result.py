@@ -279,6 +279,9 @@ class CalibrationResult(_Out):
     notes: list[str]
     timings_s: dict[str, float]
     libraries: dict[str, str]
+    reference_mount: TransformOut | None = None
+    """The reference LiDAR's recorded pose on the vehicle (base_from_reference): with it the
+    report places every mount on a map drawn in the base frame."""
 
     def to_json_dict(self) -> dict[str, Any]:
         """The result as plain JSON types."""

@@ -1,96 +1,27 @@
-"""Figures of a calibration result: mounts (recorded vs estimated), residuals, degeneracy.
+"""Figures of a calibration result: mounts, residuals, maps by stop, degenerate directions.
 
-Drawn from `syncaudit.calib.result` data only: the top view of every LiDAR's recorded and
-estimated mount in the reference frame, the estimate's difference against the limits,
-each cross-scan pair's residual after alignment, and for each refused alignment its
-weakest (degenerate) translation direction and rotation axis.
+Drawn from `syncaudit.calib.result` data only: every LiDAR's recorded and estimated mount
+from above in the reference frame, the estimate's difference against the limits, each
+cross-scan pair's residual after alignment, each LiDAR's map from above coloured by stop
+(`syncaudit.report.topview`), a degenerate scene's free direction (`degeneracy`), and for
+each alignment refused as degenerate its weakest translation direction and rotation axis
+(its structured conditioning; reasons are never parsed for numbers).
 """
 
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
-from syncaudit.calib.result import AlignmentOut, CalibrationResult, TransformOut
-from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
-
-SIZE = 420
-MARGIN = 40
-
-
-def _arrow(x: float, y: float, dx: float, dy: float, colour: str, cls: str) -> str:
-    """A line with a head, screen units."""
-    end_x, end_y = x + dx, y + dy
-    length = math.hypot(dx, dy) or 1.0
-    ux, uy = dx / length, dy / length
-    left = (end_x - 8 * ux + 4 * uy, end_y - 8 * uy - 4 * ux)
-    right = (end_x - 8 * ux - 4 * uy, end_y - 8 * uy + 4 * ux)
-    return (
-        f'<g class="{cls}"><line x1="{x:.1f}" y1="{y:.1f}" x2="{end_x:.1f}" y2="{end_y:.1f}" '
-        f'stroke="{colour}" stroke-width="2"/><polygon points="{end_x:.1f},{end_y:.1f} '
-        f'{left[0]:.1f},{left[1]:.1f} {right[0]:.1f},{right[1]:.1f}" fill="{colour}"/></g>'
-    )
-
-
-def mounts_svg(result: CalibrationResult) -> str:
-    """Top view (x forward, y left) of every LiDAR's mount: recorded and estimated."""
-    mounts: list[tuple[str, TransformOut, TransformOut | None]] = [
-        (e.frame_id, e.recorded, e.result) for e in result.extrinsics
-    ]
-    xs = [0.0] + [t.translation_m[0] for _, r, e in mounts for t in (r, e) if t is not None]
-    ys = [0.0] + [t.translation_m[1] for _, r, e in mounts for t in (r, e) if t is not None]
-    span = max(max(map(abs, xs)), max(map(abs, ys)), 0.5) * 1.25
-    scale = (SIZE / 2 - MARGIN) / span
-    cx = cy = SIZE / 2
-
-    def pos(x: float, y: float) -> tuple[float, float]:
-        # x forward is up, y left is left on the screen.
-        return cx - y * scale, cy - x * scale
-
-    out = [
-        f'<figure class="xy" data-kind="mounts" data-n="{len(mounts)}">'
-        "<figcaption>Mounts in the reference LiDAR's frame, top view "
-        '<span class="unit">[m; x forward up, y left; arrow = yaw]</span></figcaption>'
-        f'<svg class="plot" width="{SIZE}" height="{SIZE}" viewBox="0 0 {SIZE} {SIZE}" role="img" '
-        'aria-label="mounts top view">',
-        f'<rect x="0" y="0" width="{SIZE}" height="{SIZE}" fill="#fff" stroke="#bbb"/>',
-        f'<line x1="{cx}" y1="0" x2="{cx}" y2="{SIZE}" class="grid"/>'
-        f'<line x1="0" y1="{cy}" x2="{SIZE}" y2="{cy}" class="grid"/>',
-        f'<text x="{SIZE - 4}" y="{SIZE - 6}" class="yt">±{span:.2f} m</text>',
-        _arrow(cx, cy, 0, -24, "#444", "reference"),
-        f'<text x="{cx + 6}" y="{cy + 14}" class="legend">{esc(result.reference_frame_id)} (reference)</text>',
-    ]
-    for name, recorded, estimated in mounts:
-        for transform, colour, cls in (
-            (recorded, COLOURS[0], "recorded"),
-            (estimated, COLOURS[1], "estimated"),
-        ):
-            if transform is None:
-                continue
-            x, y = pos(transform.translation_m[0], transform.translation_m[1])
-            yaw = math.radians(transform.rpy_deg[2])
-            out.append(
-                f'<circle cx="{x:.1f}" cy="{y:.1f}" r="4" fill="{colour}"><title>{esc(name)} {cls}: '
-                f"xyz {', '.join(f'{v:.3f}' for v in transform.translation_m)} m, rpy "
-                f"{', '.join(f'{v:.2f}' for v in transform.rpy_deg)} deg</title></circle>"
-                + _arrow(x, y, -30 * math.sin(yaw), -30 * math.cos(yaw), colour, cls)
-            )
-        x, y = pos(recorded.translation_m[0], recorded.translation_m[1])
-        out.append(f'<text x="{x + 8:.1f}" y="{y + 16:.1f}" class="legend">{esc(name)}</text>')
-    out.append(
-        f'<rect x="8" y="8" width="10" height="3" fill="{COLOURS[0]}"/>'
-        '<text x="22" y="13" class="legend">recorded</text>'
-        f'<rect x="8" y="22" width="10" height="3" fill="{COLOURS[1]}"/>'
-        '<text x="22" y="27" class="legend">estimated</text></svg></figure>'
-    )
-    return "".join(out)
-
-
-_DEGENERATE = re.compile(
-    r"translation along \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+); "
-    r"rotation about \(([-+\d.]+), ([-+\d.]+), ([-+\d.]+)\): ([-+\d.e]+)"
+from syncaudit.calib.result import (
+    AlignmentOut,
+    CalibrationResult,
+    DegeneracyOut,
+    LidarOut,
 )
+from syncaudit.report.plot import COLOURS, Bar, bar_chart_svg, esc
+from syncaudit.report.topview import arrow as _arrow
+from syncaudit.report.topview import mounts_svg, top_view_svg
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,16 +49,6 @@ class Weakest:
         )
 
 
-def weakest_from_reason(label: str, reason: str) -> Weakest | None:
-    """The directions a 'degenerate view (translation along (..): i; rotation about (..): i)'
-    reason names (stops refused before any pair alignment keep only that text)."""
-    match = _DEGENERATE.search(reason)
-    if match is None:
-        return None
-    v = [float(g) for g in match.groups()]
-    return Weakest(label, reason, (v[0], v[1], v[2]), v[3], (v[4], v[5], v[6]), v[7])
-
-
 def degenerate_svg(w: Weakest) -> str:
     """A refused alignment's weakest translation direction (top view, z as text) and axis."""
     size, mid = 220, 110
@@ -152,6 +73,77 @@ def degenerate_svg(w: Weakest) -> str:
     )
 
 
+def _vector(v: tuple[float, float, float]) -> str:
+    """(+0.18, +0.98, +0.00): signed, two decimals, no negative zero."""
+    return "(" + ", ".join(f"{round(c, 2) + 0.0:+.2f}" for c in v) + ")"
+
+
+def scene_degeneracy_svg(degeneracy: DegeneracyOut) -> str:
+    """A degenerate scene's free direction from above, and its information against the limit.
+
+    A translation is drawn as a double arrow along the direction the scene lets everything
+    slide; a rotation as a dashed circle about the axis (its tilt as text). A direction
+    that is mostly vertical shows as a ring with a dot (pointing out of the page).
+    """
+    size, mid, radius = 260, 120, 88
+    dx, dy, dz = degeneracy.direction
+    horizontal = math.hypot(dx, dy)
+    colour = "#b00020"
+    if degeneracy.kind == "rotation":
+        drawing = (
+            f'<circle class="free-rotation" cx="{mid}" cy="{mid}" r="{radius * 0.7:.0f}" '
+            f'fill="none" stroke="{colour}" stroke-width="3" stroke-dasharray="10 5"/>'
+            + _arrow(mid, mid, -radius * dy, -radius * dx, "#9c3fbf", "axis")
+        )
+    elif horizontal < 0.3:
+        drawing = (
+            f'<circle class="free-translation" cx="{mid}" cy="{mid}" r="12" fill="none" '
+            f'stroke="{colour}" stroke-width="3"/><circle cx="{mid}" cy="{mid}" r="3" '
+            f'fill="{colour}"/>'
+        )
+    else:
+        drawing = _arrow(mid, mid, -radius * dy, -radius * dx, colour, "free-translation") + _arrow(
+            mid, mid, radius * dy, radius * dx, colour, "free-translation"
+        )
+    ratio = degeneracy.information / degeneracy.limit if degeneracy.limit > 0 else math.nan
+    bar_w = 200
+    filled = bar_w * min(ratio, 2.0) / 2.0 if math.isfinite(ratio) else 0.0
+    verb = "slides along" if degeneracy.kind == "translation" else "turns freely about"
+    return (
+        f'<figure class="xy" data-kind="scene-degeneracy" data-free="{esc(degeneracy.kind)}" '
+        f'data-direction="{dx:.4f} {dy:.4f} {dz:.4f}">'
+        f"<figcaption>Degenerate scene: everything {verb} {_vector(degeneracy.direction)} "
+        f'in {esc(degeneracy.frame)} <span class="unit">[from above; x forward up, y left]'
+        "</span></figcaption>"
+        f'<svg class="plot" width="{size}" height="{size + 40}" viewBox="0 0 {size} {size + 40}" '
+        'role="img" aria-label="degenerate direction of the scene">'
+        f'<rect x="0" y="0" width="{size}" height="{size + 40}" fill="#fff" stroke="#bbb"/>'
+        f'<circle cx="{mid}" cy="{mid}" r="{radius}" fill="none" stroke="#ececec"/>'
+        f'<line x1="{mid}" y1="{mid - radius}" x2="{mid}" y2="{mid + radius}" class="grid"/>'
+        f'<line x1="{mid - radius}" y1="{mid}" x2="{mid + radius}" y2="{mid}" class="grid"/>'
+        f'<text x="{mid + 4}" y="{mid - radius + 10}" class="legend">+x</text>'
+        f'<text x="{mid - radius + 2}" y="{mid - 4}" class="legend">+y</text>'
+        + drawing
+        + f'<text x="8" y="{size - 8}" class="legend">{esc(degeneracy.kind)} '
+        f"{_vector(degeneracy.direction)} (x, y, z)</text>"
+        f'<text x="8" y="{size + 8}" class="legend">information {degeneracy.information:.4g} '
+        f"vs limit {degeneracy.limit:.4g}</text>"
+        f'<rect x="8" y="{size + 16}" width="{bar_w}" height="10" fill="#f3f3f3" stroke="#bbb"/>'
+        f'<rect class="information" x="8" y="{size + 16}" width="{filled:.1f}" height="10" '
+        f'fill="{colour}"/><line x1="{8 + bar_w / 2}" x2="{8 + bar_w / 2}" y1="{size + 12}" '
+        f'y2="{size + 30}" class="limit"/></svg></figure>'
+    )
+
+
+def _on_map(result: CalibrationResult, lidar: LidarOut) -> DegeneracyOut | None:
+    """The scene's free direction when it can be drawn on this LiDAR's map (same frame)."""
+    d = result.degeneracy
+    if d is None or lidar.top_view is None:
+        return None
+    # "base_link at stop 3, lidar_rear placed by ...": the frame is what precedes the comma.
+    return d if lidar.top_view.frame.split(",")[0].strip() == d.frame.strip() else None
+
+
 def _degenerate(alignment: AlignmentOut) -> bool:
     """Refused because the scene left a direction unconstrained (not for overlap or fit)."""
     return not alignment.accepted and "degenerate" in (alignment.reason or "")
@@ -160,6 +152,8 @@ def _degenerate(alignment: AlignmentOut) -> bool:
 def calibration_figures(result: CalibrationResult) -> str:
     """The calibration's figures as an HTML fragment (inline SVG)."""
     parts = [mounts_svg(result)]
+    if result.degeneracy is not None:
+        parts.append(scene_degeneracy_svg(result.degeneracy))
     limits = result.limits
     rot = [
         Bar(e.frame_id, e.rotation_diff_deg if e.rotation_diff_deg is not None else math.nan)
@@ -226,6 +220,13 @@ def calibration_figures(result: CalibrationResult) -> str:
                     kind="graph-residuals",
                 )
             )
+    maps = [
+        top_view_svg(result, lidar.frame_id, lidar.top_view, degeneracy=_on_map(result, lidar))
+        for lidar in result.lidars
+        if lidar.top_view is not None and lidar.top_view.stops
+    ]
+    if maps:
+        parts.append("<h3>Each LiDAR's map from above, coloured by stop</h3>" + "".join(maps))
     refused = [
         Weakest.of(f"{e.frame_id} map-to-map at stop {m.anchor_stop}", m.alignment)
         for e in result.extrinsics
@@ -238,16 +239,6 @@ def calibration_figures(result: CalibrationResult) -> str:
         for p in lidar.pairs
         if _degenerate(p.alignment)
     ]
-    # Refused before any pair alignment: only the reasons name the directions. One per
-    # LiDAR (its own reason), else one per stop.
-    for lidar in result.lidars:
-        texts = [(lidar.frame_id, lidar.reason or "")]
-        texts += [(f"{lidar.frame_id} stop {st.stop}", st.reason or "") for st in lidar.stops]
-        for label, reason in texts:
-            weak = weakest_from_reason(label, reason)
-            if weak is not None:
-                refused.append(weak)
-                break
     if refused:
         parts.append(
             "<h3>Alignments refused as degenerate: the directions the scene did not constrain</h3>"

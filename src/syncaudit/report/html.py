@@ -4,8 +4,9 @@ The header says the verdict, what was judged and what was not (and why) and ever
 warning; each camera gets its signed error over log time (recorded and with the replayed
 self-adaptive correction, the Eq. 5 band), rolling Eq. 5 / Eq. 6 against their limits, a
 histogram of |error|, t1..t4 per frame, exposure against the Eq. 3 running average and
-the delay applied against Eq. 2's; the LiDAR gets RPM, packets and drops, and the
-sensor-vs-host clock per revolution. See docs/report.md for why plots are hand SVG.
+the delay applied against Eq. 2's; the LiDAR gets RPM, packets, drops (gaps in the packet
+cadence) and the sensor-vs-host clock (with its rolling minimum, the offset) per
+revolution. See docs/report.md for why plots are hand SVG.
 """
 
 from __future__ import annotations
@@ -193,8 +194,23 @@ def latency_plots(cam: CameraAudit, origin_ns: float) -> list[TimePlot]:
     return plots
 
 
+CLOCK_WINDOW_S = 10.0
+"""Span of the rolling minimum of host - sensor: the fastest packet in it had about no
+queueing, so the minimum follows the clock offset and its drift (minutes) without the t1
+jitter (one revolution's zero packet per point: 100 points at 10 Hz)."""
+
+
+def rolling_min(values: NDArray[np.float64], window: int) -> NDArray[np.float64]:
+    """Minimum over each value and the `window - 1` before it (fewer at the start)."""
+    if values.size == 0 or window <= 1:
+        return values.copy()
+    padded = np.concatenate([np.full(window - 1, np.inf), values])
+    out: NDArray[np.float64] = np.lib.stride_tricks.sliding_window_view(padded, window).min(axis=1)
+    return out
+
+
 def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
-    """RPM, packets and drops, and the sensor-vs-host clock, one point per revolution."""
+    """RPM, packets, drops and the sensor-vs-host clock, one point per revolution."""
     revs = result.revolutions
     if revs is None or revs.count == 0:
         return []
@@ -203,14 +219,30 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     rpm = TimePlot("Rotation rate per revolution", "RPM", kind="lidar-rpm")
     rpm.series.append(Series("RPM", t_s, revs.omega_deg_s / 6.0, COLOURS[0]))
     packets = TimePlot(
-        "Packets per revolution (the first and last are partial) and packets dropped (cadence gaps)",
+        "Packets per revolution (the first and last are partial)",
         "packets",
         kind="lidar-packets",
+        counts=True,
     )
-    packets.series += [
-        Series("packets", t_s, revs.packets.astype(np.float64), COLOURS[0]),
-        Series("dropped", t_s, revs.dropped_packets.astype(np.float64), COLOURS[4]),
-    ]
+    packets.series.append(Series("packets", t_s, revs.packets.astype(np.float64), COLOURS[0]))
+    dropped = revs.dropped_packets
+    hit = dropped > 0
+    counted = (
+        f"{int(dropped.sum()):,} in {int(hit.sum()):,} of {revs.count:,} revolutions"
+        if hit.any()
+        else f"none in {revs.count:,} revolutions"
+    )
+    drops = TimePlot(
+        "Packets dropped: gaps in the packet cadence, per revolution "
+        f"({counted}; a FOV crop is not counted)",
+        "packets",
+        kind="lidar-drops",
+        height=170,
+        counts=True,
+    )
+    drops.series.append(
+        Series("dropped", t_s[hit], dropped[hit].astype(np.float64), COLOURS[4], dots=True)
+    )
     raw = (revs.zero_packet_driver_ns - revs.zero_packet_sensor_ns).astype(np.float64)
     median = float(np.median(raw))
     big = abs(median) > 1e9
@@ -219,8 +251,20 @@ def lidar_plots(result: AuditResult, origin_ns: float) -> list[TimePlot]:
     if big:
         title += f", less the median {median / 1e9:+,.3f} s"
     clock = TimePlot(title, "µs", kind="lidar-clock")
-    clock.series.append(Series("host - sensor", t_s, (raw - ref) / 1e3, COLOURS[0]))
-    return [rpm, packets, clock]
+    period_s = float(np.median(np.diff(t_s))) if t_s.size > 1 else math.nan
+    window = max(1, round(CLOCK_WINDOW_S / period_s)) if period_s > 0 else 1
+    window = min(window, revs.count)  # a short log: over all of it
+    clock.series += [
+        Series("host - sensor", t_s, (raw - ref) / 1e3, COLOURS[0]),
+        Series(
+            f"minimum over {window} revolutions ({window * period_s:.3g} s): the offset, "
+            "t1 jitter removed",
+            t_s,
+            rolling_min(raw - ref, window) / 1e3,
+            COLOURS[1],
+        ),
+    ]
+    return [rpm, packets, drops, clock]
 
 
 def _camera_table(cam: CameraAudit) -> str:

@@ -69,6 +69,8 @@ class TimePlot:
     width: int = WIDTH
     kind: str = ""
     """Name of the plot for tests and styling (data-kind)."""
+    counts: bool = False
+    """A count (packets): the axis starts at zero and ticks are whole numbers."""
 
 
 def envelope(
@@ -202,6 +204,7 @@ def _extent(
     y_values = [float(a.min()) for a in ys] + [float(a.max()) for a in ys]
     y_values += [b.low for b in plot.bands] + [b.high for b in plot.bands]
     y_values += [v for v, _ in plot.limits]
+    y_values += [0.0, 1.0] if plot.counts else []
     y_values = [v for v in y_values if math.isfinite(v)]
     y0, y1 = (min(y_values), max(y_values)) if y_values else (0.0, 1.0)
     if y1 <= y0:
@@ -237,6 +240,8 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
     ]
     # y axis: ticks, grid, unit label
     y_ticks = nice_ticks(y0, y1)
+    if plot.counts:
+        y_ticks = [t for t in nice_ticks(y0, y1, 4) if t == int(t)]
     for tick, text in zip(y_ticks, tick_labels(y_ticks), strict=True):
         y = py(tick)
         out.append(

@@ -1,4 +1,4 @@
-"""The reports' inline style and script: hover read-outs and linked zoom on time.
+"""The reports' inline style and script: hover read-outs, linked zoom on time, map read-out.
 
 Plain DOM code, no library: it reads each time plot's own SVG (the path data are in
 data units), so there is no second copy of the data in the page. Text from the log is
@@ -30,6 +30,11 @@ svg.plot .sel{fill:#1f5fbf;fill-opacity:.12}svg.plot .hit{fill:transparent;curso
 .tip{position:fixed;pointer-events:none;background:#fffffff0;border:1px solid #999;
 padding:.25rem .45rem;font-size:12px;white-space:pre;box-shadow:0 1px 4px #0003;z-index:5}
 .hint{color:#666;font-size:12px}
+svg.map path.stop{stroke-width:2.4px;stroke-linecap:round;fill:none}
+ul.legend-list{list-style:none;padding:0;margin:.3rem 0;font-size:12px;line-height:1.6}
+.swatch,.mark{display:inline-block;width:10px;height:10px;margin-right:.4rem;vertical-align:-1px}
+.swatch,.mark.disc,.mark.ring{border-radius:50%}.mark.ring{width:6px;height:6px;border:2px solid}
+.mark.bar{height:3px;vertical-align:3px}
 """
 
 SCRIPT = r"""
@@ -62,10 +67,8 @@ SCRIPT = r"""
     }
     return out;
   }
-  function fmt(v) {
+  function fmt(v) {  // six significant digits: 3,007.19 us, 0.123456 ms
     if (!isFinite(v)) return '-';
-    var a = Math.abs(v);
-    if (a >= 100) return v.toLocaleString('en-US', {maximumFractionDigits: 0});
     return Number(v.toPrecision(6)).toLocaleString('en-US', {maximumFractionDigits: 6});
   }
   function nearest(xs, t) {
@@ -177,6 +180,41 @@ SCRIPT = r"""
     plots.forEach(function (p) { setRange(p, a, b); });
     try { history.replaceState(null, '', '#t=' + a.toFixed(3) + '-' + b.toFixed(3)); } catch (e) { /* no history */ }
   }
+  // Maps from above: hover reads the cursor's x, y and the nearest point's stop.
+  var mapPoints = 0;
+  document.querySelectorAll('figure[data-kind="top-view"]').forEach(function (fig) {
+    var map = fig.querySelector('svg.map'), inner = map.querySelector('svg.points');
+    var xs = [], ys = [], stops = [];
+    inner.querySelectorAll('path.stop').forEach(function (path) {
+      var d = path.getAttribute('d') || '', stop = path.getAttribute('data-stop'), mm;
+      var dot = /M(-?\d+(?:\.\d+)?),(-?\d+(?:\.\d+)?)h0/g;  // u = -y, v = -x
+      while ((mm = dot.exec(d)) !== null) {
+        xs.push(-Number(mm[2])); ys.push(-Number(mm[1])); stops.push(stop);
+      }
+    });
+    fig.setAttribute('data-rendered-points', String(xs.length));
+    mapPoints += xs.length;
+    map.addEventListener('mousemove', function (ev) {
+      var m = inner.getScreenCTM();
+      if (!m) return;
+      var at = new DOMPoint(ev.clientX, ev.clientY).matrixTransform(m.inverse());
+      var x = -at.y, y = -at.x, best = -1, bestD = Infinity;
+      for (var i = 0; i < xs.length; i++) {
+        var d = (xs[i] - x) * (xs[i] - x) + (ys[i] - y) * (ys[i] - y);
+        if (d < bestD) { bestD = d; best = i; }
+      }
+      var lines = ['x ' + x.toFixed(2) + ' m, y ' + y.toFixed(2) + ' m'];
+      if (best >= 0 && Math.sqrt(bestD) * m.a <= 12) {
+        lines.push('stop ' + stops[best] + ': x ' + xs[best].toFixed(2) + ' m, y ' + ys[best].toFixed(2) + ' m');
+      }
+      tip.textContent = lines.join('\n');
+      tip.hidden = false;
+      tip.style.left = (ev.clientX + 14) + 'px';
+      tip.style.top = (ev.clientY + 14) + 'px';
+    });
+    map.addEventListener('mouseleave', function () { tip.hidden = true; });
+  });
+  document.body.setAttribute('data-map-points', String(mapPoints));
   // A link to a time window: report.html#t=12.5-14 opens zoomed to 12.5 s .. 14 s.
   var linked = /^#t=(-?[\d.]+)-(-?[\d.]+)$/.exec(location.hash);
   if (linked && Number(linked[2]) > Number(linked[1])) zoom(Number(linked[1]), Number(linked[2]));

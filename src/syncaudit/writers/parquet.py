@@ -65,56 +65,133 @@ def _metadata(result: AuditResult, table: str) -> dict[bytes, bytes]:
     return {b"syncaudit": json.dumps(meta).encode()}
 
 
-def camera_summary(result: AuditResult) -> pd.DataFrame:
-    """One row per camera: verdict, Eq. 1-6 figures, latencies, replay (µs as the JSON)."""
+FRAME_DTYPES: dict[str, str] = {
+    "camera": "string",
+    "frame_sequence": "Int64",
+    "exposure_start_ns": "Int64",
+    "exposure_duration_ns": "Int64",
+    "t_l_ns": "Int64",
+    "t_estimated_ns": "Int64",
+    "error_signed_ns": "float64",
+    "t_error_ns": "float64",
+    "paired": "bool",
+    "revolution": "int64",
+    "revolution_start_ns": "Int64",
+    "header_stamp_ns": "Int64",
+    "t1_ns": "float64",
+    "t2_ns": "float64",
+    "t3_ns": "float64",
+    "t4_ns": "float64",
+    "t5_avg_ns": "float64",
+    "t_rotate_ns": "float64",
+    "packet_phase_ns": "float64",
+    "packet_phase_source": "string",
+    "t_sleep_ns": "float64",
+    "applied_delay_ns": "float64",
+    "rolling_error_mean_ns": "float64",
+    "rolling_error_var_ns2": "float64",
+}
+"""Every column of `AuditResult.frames()` with its type: an audit without cameras (whose
+`frames()` has no columns) still writes them all, with zero rows (a test keeps this equal
+to a real audit's table)."""
+
+UNPAIRED_REASONS = (
+    "error beyond a quarter revolution",
+    "no LiDAR revolution",
+    "no exposure metadata",
+)
+"""Why a frame is not paired (`CameraSync.unpaired` keys): a count column each, always."""
+
+_SUMMARY_HEAD: dict[str, str] = {
+    "camera": "string",
+    "theta_deg": "Float64",
+    "omega_deg_s": "Float64",
+    "t_rotate_us": "Float64",
+    "packet_phase_us": "Float64",
+    "packet_phase_source": "string",
+    "t5_mean_us": "Float64",
+    "delay_applied_us": "Float64",
+    "delay_recommended_us": "Float64",
+    "delay_from_error_us": "Float64",
+    "frames_total": "int64",
+    "frames_paired": "int64",
+    "error_signed_mean_us": "Float64",
+    "error_mean_us": "Float64",
+    "error_var_us2": "Float64",
+    "error_p99_us": "Float64",
+    "error_max_us": "Float64",
+    "rolling_mean_max_us": "Float64",
+    "rolling_var_max_us2": "Float64",
+    "mean_threshold_exceeded": "bool",
+    "var_threshold_exceeded": "bool",
+    "needs_correction": "bool",
+    "judged": "bool",
+    "not_judged_reason": "string",
+    "optional": "bool",
+    "verdict": "string",
+    "azimuth_deg": "Float64",
+    "azimuth_source": "string",
+}
+_LATENCY_STATS = {"status": "string", "mean_us": "Float64", "p50_us": "Float64"}
+_LATENCY_STATS |= {"p99_us": "Float64", "count": "Int64"}
+_CORRECTED: dict[str, str] = {
+    "adjustments": "Int64",
+    "final_delay_us": "Float64",
+    "error_mean_us": "Float64",
+    "error_var_us2": "Float64",
+    "error_signed_mean_us": "Float64",
+    "settled_error_mean_us": "Float64",
+    "settled_error_var_us2": "Float64",
+}
+
+
+def summary_dtypes(unpaired: tuple[str, ...] = UNPAIRED_REASONS) -> dict[str, str]:
+    """The per-camera summary's columns and types (the same with or without cameras)."""
+    dtypes = dict(_SUMMARY_HEAD)
+    for name in ("t1", "t2", "t3", "t4"):
+        dtypes |= {f"{name}_{stat}": kind for stat, kind in _LATENCY_STATS.items()}
+    dtypes |= {f"unpaired_{reason}": "int64" for reason in unpaired}
+    dtypes |= {f"corrected_{key}": kind for key, kind in _CORRECTED.items()}
+    dtypes["warnings"] = "string"
+    return dtypes
+
+
+def typed_frames(result: AuditResult) -> pd.DataFrame:
+    """`result.frames()` with every column of `FRAME_DTYPES` typed (zero rows without cameras)."""
     import pandas as pd
 
+    frames = result.frames()
+    if not len(frames.columns):
+        return pd.DataFrame({c: pd.Series([], dtype=t) for c, t in FRAME_DTYPES.items()})
+    return frames.astype({c: t for c, t in FRAME_DTYPES.items() if c in frames.columns})
+
+
+def camera_summary(result: AuditResult) -> pd.DataFrame:
+    """One row per camera: verdict, Eq. 1-6 figures, latencies, replay (µs as the JSON).
+
+    Typed by `summary_dtypes`, so a log without cameras gets the same columns, no rows.
+    """
+    import pandas as pd
+
+    extra = {k for c in result.cameras for k in c.sync.unpaired} - set(UNPAIRED_REASONS)
+    dtypes = summary_dtypes((*UNPAIRED_REASONS, *sorted(extra)))
     rows: list[dict[str, Any]] = []
-    unpaired_keys = sorted({k for c in result.cameras for k in c.sync.unpaired})
     for cam in result.cameras:
         d = cam.to_dict()
-        row: dict[str, Any] = {}
-        for key, value in d.items():
-            if key in ("latencies", "unpaired", "corrected", "warnings"):
-                continue
-            row[key] = value
+        row: dict[str, Any] = {k: d.get(k) for k in _SUMMARY_HEAD}
         for name in ("t1", "t2", "t3", "t4"):
             lat = d["latencies"].get(name, {})
-            row[f"{name}_status"] = lat.get("status")
-            for stat in ("mean_us", "p50_us", "p99_us", "count"):
-                row[f"{name}_{stat}"] = lat.get(stat)
-        for key in unpaired_keys:
-            row[f"unpaired_{key}"] = int(d["unpaired"].get(key, 0))
+            row |= {f"{name}_{stat}": lat.get(stat) for stat in _LATENCY_STATS}
+        for column in dtypes:
+            if column.startswith("unpaired_"):
+                row[column] = int(d["unpaired"].get(column[len("unpaired_") :], 0))
         corrected = d["corrected"] or {}
-        for key in (
-            "adjustments",
-            "final_delay_us",
-            "error_mean_us",
-            "error_var_us2",
-            "error_signed_mean_us",
-            "settled_error_mean_us",
-            "settled_error_var_us2",
-        ):
-            row[f"corrected_{key}"] = corrected.get(key)
+        row |= {f"corrected_{key}": corrected.get(key) for key in _CORRECTED}
         row["warnings"] = "; ".join(d["warnings"])
         rows.append(row)
-    frame = pd.DataFrame(rows)
-    for column in frame.columns:
-        if column.startswith("unpaired_") or column in ("frames_total", "frames_paired"):
-            frame[column] = frame[column].astype("int64")
-        elif column.endswith("_count") or column == "corrected_adjustments":
-            frame[column] = frame[column].astype("Int64")
-        elif frame[column].dtype == object and column not in _BOOL_COLUMNS:
-            if all(isinstance(v, str) or v is None for v in frame[column]):
-                frame[column] = frame[column].astype("string")
-            else:
-                frame[column] = frame[column].astype("Float64")
-    return frame
-
-
-_BOOL_COLUMNS = frozenset(
-    {"mean_threshold_exceeded", "var_threshold_exceeded", "needs_correction", "judged", "optional"}
-)
+    frame = pd.DataFrame(rows, columns=list(dtypes))
+    # Missing numbers (None) become nulls of their column's type, never an object column.
+    return frame.astype(dtypes)
 
 
 def _table_bytes(frame: pd.DataFrame, metadata: dict[bytes, bytes]) -> bytes:
@@ -132,7 +209,7 @@ def _table_bytes(frame: pd.DataFrame, metadata: dict[bytes, bytes]) -> bytes:
 def frames_parquet(result: AuditResult) -> bytes:
     """The per-frame table (every column of `frames()`) as Parquet bytes."""
     _pyarrow()
-    return _table_bytes(result.frames(), _metadata(result, "frames"))
+    return _table_bytes(typed_frames(result), _metadata(result, "frames"))
 
 
 def cameras_parquet(result: AuditResult) -> bytes:
