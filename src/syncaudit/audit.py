@@ -225,8 +225,9 @@ def _owner(owners: list[CameraTableBuilder]) -> str:
 
 
 def _import_analysis() -> None:
-    """Import the analysis (and pandas, ~0.2 s) while the extraction workers run, rather
-    than after the last item, when it would add to the wall time."""
+    """Import the analysis (and pandas, ~0.2 s) while the extraction workers read their
+    first tasks, rather than before they start or after the last item, when it would add
+    to the wall time."""
     importlib.import_module("syncaudit.analysis.sync")
     importlib.import_module("syncaudit.analysis.replay")
 
@@ -272,9 +273,7 @@ def _read(
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
     plan, router = _plan(log, rig, [c for c, _, _ in located], check_crc)
-    for count, (kind, topic, payload) in enumerate(iter_items(log, plan, jobs)):
-        if count == 0:
-            _import_analysis()
+    for kind, topic, payload in iter_items(log, plan, jobs, meanwhile=_import_analysis):
         if kind == "lidar":
             scanner.feed(payload)
         else:
@@ -327,9 +326,6 @@ def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[st
 
 def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
     """Locate the cameras, read the log once, find the clock offset, analyse each camera."""
-    from syncaudit.analysis.replay import replay_controller
-    from syncaudit.analysis.sync import analyze_camera
-
     # Camera topics in encodings that cannot be read are dropped (warned); see rig_vs_log.
     rig, warnings = check_rig_against_log(log, rig)
     missing: list[str] = []
@@ -337,6 +333,10 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings)
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
+    # Imported only now (pandas, ~0.2 s): `_read` has them imported while workers read.
+    from syncaudit.analysis.replay import replay_controller
+    from syncaudit.analysis.sync import analyze_camera
+
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     if scan.revolutions.count < MIN_ZERO_CROSSINGS:

@@ -16,9 +16,9 @@ import gc
 import heapq
 import multiprocessing
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from syncaudit.camera.cdr_fast import has_fast_reader, read_fast
@@ -33,6 +33,9 @@ from syncaudit.workers import worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
+IMAGE_PREFIX_BYTES = 256
+"""Bytes of an image payload the audit reads: its header (stamp, ROS 1 seq) lies in the
+first 12-16; the rest (pixels) is never looked at, and readers that can skip it do."""
 TASKS_PER_WORKER = 8
 """Tasks in flight per worker: enough queued work that workers never wait on a parent
 busy with something else (its one-off imports); results are small, so memory stays low."""
@@ -99,21 +102,35 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Item]:
-    """Every item of the plan's topics, in log-time order; parallel where the log allows."""
+def iter_items(
+    log: LogReader,
+    plan: ExtractPlan,
+    jobs: int = 1,
+    *,
+    meanwhile: Callable[[], object] | None = None,
+) -> Iterator[Item]:
+    """Every item of the plan's topics, in log-time order; parallel where the log allows.
+
+    `meanwhile` is work of the caller's (e.g. imports it needs afterwards) run once: in
+    the parallel path as soon as the workers have their first tasks, so it overlaps them;
+    otherwise before the read.
+    """
     topics = frozenset(plan.topics)
     units = log.read_units(topics)
+    groups = group_units(units, GROUP_BYTES) if units is not None else []
+    if meanwhile is not None and not (jobs > 1 and len(groups) > 1):
+        meanwhile()
     if units is None:
         for msg in log.messages(plan.topics):
             item = extract(plan, msg, log)
             if item is not None:
                 yield item
         return
-    groups = group_units(units, GROUP_BYTES)
-    channels = log.unit_channels(topics)
+    channels = _with_prefixes(log.unit_channels(topics), plan)
     ranks = _source_ranks(units)
     if jobs > 1 and len(groups) > 1:
-        yield from _merged(groups, _parallel_results(log, groups, channels, plan, jobs))
+        results = _parallel_results(log, groups, channels, plan, jobs, meanwhile)
+        yield from _merged(groups, results)
         return
     readers = _Readers(plan.check_crc)
     try:
@@ -121,6 +138,16 @@ def iter_items(log: LogReader, plan: ExtractPlan, jobs: int = 1) -> Iterator[Ite
         yield from _merged(groups, results)
     finally:
         readers.close()
+
+
+def _with_prefixes(channels: dict[int, ChannelInfo], plan: ExtractPlan) -> dict[int, ChannelInfo]:
+    """The channels, image topics marked as read for their header only."""
+    if IMAGE_PREFIX_BYTES <= 0:
+        return channels
+    return {
+        cid: replace(info, prefix_bytes=IMAGE_PREFIX_BYTES) if info.topic in plan.images else info
+        for cid, info in channels.items()
+    }
 
 
 def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
@@ -219,8 +246,10 @@ def _parallel_results(
     channels: dict[int, ChannelInfo],
     plan: ExtractPlan,
     jobs: int,
+    meanwhile: Callable[[], object] | None = None,
 ) -> Iterator[list[Keyed]]:
-    """Each group's extracted items, in group order, computed by `jobs` worker processes."""
+    """Each group's extracted items, in group order, computed by `jobs` worker processes;
+    `meanwhile` runs here once the first tasks are submitted."""
     path = log.summary.path
     task = _Task(path, channels, _source_ranks([u for g in groups for u in g]), plan)
     methods = multiprocessing.get_all_start_methods()
@@ -238,13 +267,16 @@ def _parallel_results(
     if freeze:
         gc.freeze()
     try:
-        with worker_pool(jobs, context) as pool:
+        with worker_pool(jobs, context, label=f"{path}: a reader worker process") as pool:
             window: list[Future[list[Keyed]]] = []
             submitted = 0
             for _ in range(len(groups)):
                 while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
                     window.append(pool.submit(_extract_group, task, groups[submitted]))
                     submitted += 1
+                if meanwhile is not None:
+                    meanwhile()
+                    meanwhile = None
                 yield window.pop(0).result()
     finally:
         if freeze:

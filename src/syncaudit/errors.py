@@ -85,6 +85,21 @@ class UsageError(SyncauditError):
     exit_code = EXIT_USAGE
 
 
+class WorkerDiedError(SyncauditError):
+    """A worker process reading the log died under the run (killed, or crashed).
+
+    Killed from outside (the kernel's OOM killer, `kill -9`): neither the log's fault nor
+    a bug, the run was stopped like an interrupt, so exit 130; a crash (a fatal signal
+    such as SIGSEGV, or an exit status) is a bug of ours or of a library, exit 70.
+    """
+
+    exit_code = EXIT_INTERRUPTED
+
+    def __init__(self, message: str, *, exit_code: int = EXIT_INTERRUPTED) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
 class Interrupted(BaseException):
     """SIGTERM turned into an exception in the main process, so outputs are rolled back."""
 

@@ -6,6 +6,9 @@ ask the kernel to kill them when their parent dies (PR_SET_PDEATHSIG), so a pare
 outright leaves no orphan. While the pool runs, SIGTERM to the parent raises
 KeyboardInterrupt like SIGINT does (the CLI exits 130 on either); the pool's workers are
 then terminated at once, never waited for (a worker blocked on a pipe must not hang it).
+A worker that dies under the pool (the OOM killer's SIGKILL, a crash) ends the block with
+one `WorkerDiedError` saying how it died, rather than concurrent.futures'
+BrokenProcessPool.
 """
 
 from __future__ import annotations
@@ -16,13 +19,21 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.context import BaseContext
+from multiprocessing.process import BaseProcess
 from types import FrameType
+
+from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
 
 _PR_SET_PDEATHSIG = 1
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+_CRASH_SIGNALS = {signal.SIGSEGV, signal.SIGBUS, signal.SIGABRT, signal.SIGILL, signal.SIGFPE}
+"""Signals a process raises on itself when it crashes: a bug, not a kill from outside."""
+_REAP_S = 1.0
+"""How long to wait for a dead worker's exit status (it is dead: the pool saw its end)."""
 
 
 def _init_worker(parent_pid: int) -> None:
@@ -46,8 +57,13 @@ def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
 
 
 @contextlib.contextmanager
-def worker_pool(jobs: int, context: BaseContext) -> Iterator[ProcessPoolExecutor]:
-    """A ProcessPoolExecutor of `jobs` workers, terminated at once if the block fails."""
+def worker_pool(
+    jobs: int, context: BaseContext, *, label: str = "a worker process"
+) -> Iterator[ProcessPoolExecutor]:
+    """A ProcessPoolExecutor of `jobs` workers, terminated at once if the block fails.
+
+    A worker dying under the pool raises `WorkerDiedError` ("`label` died (how)").
+    """
     main = threading.current_thread() is threading.main_thread()
     # Workers are forked with SIGINT/SIGTERM blocked, so a signal arriving before a
     # worker's initializer has set its handlers stays pending there instead of raising
@@ -59,6 +75,9 @@ def worker_pool(jobs: int, context: BaseContext) -> Iterator[ProcessPoolExecutor
     )
     try:
         pool.submit(os.getpid)  # starts the workers now, while the signals are blocked
+        # Forked workers are all started by that first submit; the pool forgets them once
+        # it breaks, so keep them to read how one died.
+        workers = list((getattr(pool, "_processes", None) or {}).values())
         if main:
             signal.signal(signal.SIGTERM, _raise_interrupt)
     finally:
@@ -67,6 +86,10 @@ def worker_pool(jobs: int, context: BaseContext) -> Iterator[ProcessPoolExecutor
     try:
         yield pool
         clean = True
+    except BrokenProcessPool as exc:
+        workers += (getattr(pool, "_processes", None) or {}).values()  # spawned later
+        how, code = death_cause(workers)
+        raise WorkerDiedError(f"{label} died ({how})", exit_code=code) from exc
     finally:
         if main:
             signal.signal(signal.SIGTERM, previous_term)
@@ -86,3 +109,47 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
     for process in processes:
         with contextlib.suppress(Exception):
             process.join(timeout=1.0)
+
+
+def death_cause(workers: Iterable[BaseProcess]) -> tuple[str, int]:
+    """How a pool's dead worker died, as a few words, and the exit code that fits.
+
+    When one worker dies the pool SIGTERMs the others, so a worker that died any other
+    way is the one to report. Killed by a signal from outside (the OOM killer's SIGKILL,
+    `kill`): the run was interrupted, exit 130. Crashed (SIGSEGV and kin, an exit
+    status): a bug, exit 70.
+    """
+    codes: list[int] = []
+    for worker in dict.fromkeys(workers):
+        with contextlib.suppress(Exception):
+            worker.join(timeout=_REAP_S)
+            if worker.exitcode is not None:
+                codes.append(worker.exitcode)
+    if not codes:
+        return "no exit status found", EXIT_INTERNAL
+    code = min(codes, key=_telling)
+    if code == 0:
+        return "it exited normally mid-run", EXIT_INTERNAL
+    if code > 0:
+        return f"exited with status {code}", EXIT_INTERNAL
+    number = -code
+    try:
+        name = signal.Signals(number).name
+    except ValueError:
+        name = "an unknown signal"
+    if number in _CRASH_SIGNALS:
+        return f"crashed with signal {number}, {name}: a bug, please report it", EXIT_INTERNAL
+    if number == signal.SIGKILL:
+        return (
+            f"killed by signal {number} — out of memory? fewer jobs or more free memory may help",
+            EXIT_INTERRUPTED,
+        )
+    return f"killed by signal {number}, {name}", EXIT_INTERRUPTED
+
+
+def _telling(exitcode: int) -> int:
+    """Rank of a worker's exit status as the cause: a kill or a crash first, then an exit
+    status, then the SIGTERM the pool itself sends the others, then a normal exit."""
+    if exitcode < 0:
+        return 2 if exitcode == -signal.SIGTERM else 0
+    return 1 if exitcode > 0 else 3

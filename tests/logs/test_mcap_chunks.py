@@ -160,3 +160,26 @@ def test_damaged_zstd_chunk_is_a_log_read_error(tmp_path: Path, probe: Any, dama
         assert len(reader.read(refs[2].offset, refs[2].length)) > 0
     finally:
         reader.close()
+
+
+def test_uncompressed_chunk_is_read_in_place(tmp_path: Path, probe: Any) -> None:
+    """An uncompressed chunk's records are a view of a mapping (no copy, untouched payload
+    pages never read), and a view held across later reads stays valid."""
+    import mmap
+
+    path = tmp_path / "log.mcap"
+    _write(path, probe, CompressionType.NONE)
+    with open_log(path) as log:
+        refs = _refs(log)
+    reader = ChunkReader(str(path))
+    try:
+        first = reader.read(refs[0].offset, refs[0].length)
+        assert isinstance(first.obj, mmap.mmap)
+        before = bytes(first)
+        for ref in refs[1:]:
+            reader.read(ref.offset, ref.length)
+        assert bytes(first) == before
+        copied = ChunkReader(str(path), reuse=False).read(refs[0].offset, refs[0].length)
+        assert not isinstance(copied.obj, mmap.mmap) and bytes(copied) == before
+    finally:
+        reader.close()

@@ -162,6 +162,31 @@ def test_units_read_serially_and_in_processes_equal_rosbags(
         assert _merged(pool.map(_read_unit, jobs)) == expected
 
 
+@pytest.mark.parametrize("compression", COMPRESSIONS)
+def test_one_reader_for_every_unit_keeps_earlier_payloads_intact(
+    compression: str, bags: dict[str, Path]
+) -> None:
+    """The reader reads each chunk into one reused buffer: payloads of earlier units, held
+    as they were given (views, as the serial merge holds them), still equal rosbags'."""
+    path = bags[compression]
+    topics = frozenset({"/a", "/c"})
+    with open_log(path) as log:
+        units = log.read_units(topics)
+        channels = log.unit_channels(topics)
+    assert units is not None
+    reader = Rosbag1ChunkReader()
+    try:
+        held = [
+            (t, unit.offset, i, channels[c].topic, p)
+            for unit in units
+            for t, i, c, p in reader.messages(unit, channels)
+        ]
+        rows = sorted((t, o, i, topic, bytes(p)) for t, o, i, topic, p in held)
+    finally:
+        reader.close()
+    assert [(topic, t, data) for t, _o, _i, topic, data in rows] == reference(path, set(topics))
+
+
 def _cut_positions(size: int) -> list[int]:
     return sorted({*range(13, 4200, 397), *range(4200, size, 83), size - 1, size - 4})
 

@@ -8,6 +8,7 @@ foreign serialization format) are read with a warning, never a dependency's mess
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import shutil
 import sqlite3
@@ -367,3 +368,29 @@ def test_split_bag_whose_files_number_topics_differently(
     assert units is not None and {Path(u.source).name for u in units} == {"p0.db3", "p1.db3"}
     want = [m for m in expected if m[0] in {"/a", "/c"}]
     assert _merged(map(_read_unit, [(u, channels) for u in units])) == want
+
+
+@pytest.mark.parametrize("compression", [CompressionMode.NONE, CompressionMode.MESSAGE])
+def test_prefix_channels_give_the_payloads_first_bytes(
+    tmp_path: Path, ros2_store: Typestore, compression: CompressionMode
+) -> None:
+    """A channel marked `prefix_bytes` (an image: only its header is read) gets the first
+    bytes of each payload through blob I/O, a zstd-compressed one whole and decompressed;
+    the other channels and every time and order are unchanged."""
+    path = write_bag(tmp_path / "bag", ros2_store, compression=compression)
+    topics = frozenset({"/a", "/b"})
+    with open_log(path) as log:
+        units = log.read_units(topics)
+        channels = log.unit_channels(topics)
+    assert units is not None
+    marked = {
+        cid: dataclasses.replace(info, prefix_bytes=16) if info.topic == "/a" else info
+        for cid, info in channels.items()
+    }
+    whole = [row for u in units for row in _read_unit((u, channels))]
+    short = [row for u in units for row in _read_unit((u, marked))]
+    assert [r[:5] for r in short] == [r[:5] for r in whole]
+    cut = compression == CompressionMode.NONE  # a zstd frame only decodes whole
+    for (*_, topic, full), (*_, _topic, head) in zip(whole, short, strict=True):
+        assert head == (full[:16] if topic == "/a" and cut else full)
+    assert any(len(r[5]) > 16 for r in whole if r[4] == "/a")

@@ -15,6 +15,7 @@ after at most that many bytes.
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
 import struct
@@ -46,6 +47,9 @@ MAX_RATIO = 1024
 """Largest uncompressed/compressed ratio accepted for chunks above `RATIO_FLOOR_BYTES`."""
 RATIO_FLOOR_BYTES = 16 * 1024 * 1024
 """Chunks up to this size are accepted at any ratio (a small chunk cannot exhaust memory)."""
+MAX_READ_BYTES = MAX_CHUNK_BYTES + MAX_CHUNK_BYTES // 64 + 1024 * 1024
+"""Longest chunk record read into a buffer: the largest chunk accepted, plus what zstd or
+lz4 may add to incompressible data (under 1 %) and the record's header fields."""
 
 
 def chunk_where(path: str, offset: int) -> str:
@@ -166,12 +170,20 @@ def decompress_upto(
 
 
 class ChunkReader:
-    """Reads chunks of one MCAP file: mapped, never copied, decompressed into one buffer.
+    """Reads chunks of one MCAP file: read into one buffer, decompressed into another.
 
-    Each chunk is mapped on its own (so resident memory stays one chunk, however large the
-    log) and decompressed straight from the mapping into a reused output buffer: no read
-    copy and no fresh allocation per chunk, about a fifth less CPU than read-then-decompress.
-    With `reuse=False` every chunk gets its own buffer (for callers holding several).
+    Each chunk record is read (`preadv`) into a reused input buffer and decompressed from
+    there into a reused output buffer, so resident memory stays one chunk however large
+    the log, and nothing is allocated, mapped or unmapped per chunk: on the 2 GB bench log
+    this costs a sixth less CPU than mapping each chunk (whose unmapping and page faults
+    cost more than the copy out of the page cache). A record longer than any chunk can
+    legitimately be (`MAX_READ_BYTES`) is mapped instead, never allocated, so a hostile
+    length costs no memory before the size checks refuse it.
+    A chunk stored uncompressed (rosbags' and some recorders' MCAP) is mapped and its
+    records are returned as a view of the mapping: nothing is copied, and the pages of
+    payloads nobody reads (image pixels) are never touched. The mapping goes when the
+    last view of it does.
+    With `reuse=False` every chunk gets its own output buffer (for callers holding several).
     """
 
     def __init__(self, path: str, check_crc: bool = False, *, reuse: bool = True) -> None:
@@ -181,6 +193,7 @@ class ChunkReader:
         self._file = open(path, "rb")  # noqa: SIM115 - closed in close()
         self._size = os.fstat(self._file.fileno()).st_size
         self._out = bytearray()
+        self._in = bytearray()
         self._zstd: zstandard.ZstdDecompressor | None = None
 
     def read(self, offset: int, length: int) -> memoryview:
@@ -189,6 +202,54 @@ class ChunkReader:
         where = chunk_where(self.path, offset)
         if offset < 0 or length < _RECORD_HEAD.size or offset + length > self._size:
             raise LogReadError(f"{where} runs past the end of the file")
+        if self.reuse and self._stored_uncompressed(offset, length):
+            size, crc, records = self._read_in_place(offset, length, where)
+        elif length > MAX_READ_BYTES:
+            size, crc, records = self._read_mapped(offset, length, where)
+        else:
+            if len(self._in) < length:
+                self._in = bytearray(length)
+            with memoryview(self._in)[:length] as view:
+                if os.preadv(self._file.fileno(), [view], offset) != length:
+                    raise LogReadError(f"{where} runs past the end of the file")
+                size, crc, records = self._records(view, where)
+        if len(records) != size or (self.check_crc and crc and zlib.crc32(records) != crc):
+            raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
+        return records
+
+    def _stored_uncompressed(self, offset: int, length: int) -> bool:
+        """Whether the chunk record at `offset` names no compression (from its first bytes;
+        a damaged head says no, and the buffered read then reports the damage)."""
+        name_at = _RECORD_HEAD.size + _CHUNK_HEAD.size
+        head = os.pread(self._file.fileno(), min(length, name_at + 4), offset)
+        if len(head) < name_at + 4 or head[0] != OP_CHUNK:
+            return False
+        (name_len,) = struct.unpack_from("<I", head, name_at)
+        return bool(name_len == 0)
+
+    def _read_in_place(self, offset: int, length: int, where: str) -> tuple[int, int, memoryview]:
+        """`_records` of an uncompressed chunk as a view of a mapping of it (no copy)."""
+        start = offset - offset % mmap.ALLOCATIONGRANULARITY
+        mapped = mmap.mmap(
+            self._file.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
+        )
+        whole = memoryview(mapped)
+        view = whole[offset - start :]
+        try:
+            return self._records(view, where, in_place=True)
+        except BaseException:
+            view.release()
+            whole.release()
+            with contextlib.suppress(BufferError):
+                mapped.close()
+            raise
+        finally:
+            # The records view (if any) keeps the mapping; it is unmapped when that goes.
+            view.release()
+            whole.release()
+
+    def _read_mapped(self, offset: int, length: int, where: str) -> tuple[int, int, memoryview]:
+        """`_records` of a chunk record read through a mapping of it (no allocation)."""
         start = offset - offset % mmap.ALLOCATIONGRANULARITY
         mapped = mmap.mmap(
             self._file.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
@@ -197,17 +258,17 @@ class ChunkReader:
             with memoryview(mapped) as whole:
                 view = whole[offset - start :]
                 try:
-                    size, crc, records = self._records(view, where)
+                    return self._records(view, where)
                 finally:
                     view.release()
         finally:
             mapped.close()
-        if len(records) != size or (self.check_crc and crc and zlib.crc32(records) != crc):
-            raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
-        return records
 
-    def _records(self, view: memoryview, where: str) -> tuple[int, int, memoryview]:
-        """(uncompressed size, CRC, records) of the chunk record in `view`."""
+    def _records(
+        self, view: memoryview, where: str, *, in_place: bool = False
+    ) -> tuple[int, int, memoryview]:
+        """(uncompressed size, CRC, records) of the chunk record in `view`; `in_place`: an
+        uncompressed chunk's records are a view of `view`'s memory, not a copy."""
         import zstandard
 
         try:
@@ -226,7 +287,9 @@ class ChunkReader:
             pos += 8
             if pos + data_len > len(view):
                 raise LogReadError(f"{where} is corrupt: its data runs past the chunk record")
-            with view[pos : pos + data_len] as data:
+            data = view[pos : pos + data_len]
+            keep = False
+            try:
                 if compression not in ("zstd", "lz4", ""):
                     raise LogReadError(f"{where}: unsupported compression {compression!r}")
                 check_chunk_size(where, compression, size, data)
@@ -234,7 +297,13 @@ class ChunkReader:
                     return size, crc, self._unzstd(data, size)
                 if compression == "lz4":
                     return size, crc, self._unlz4(data, size)
+                if in_place:
+                    keep = True
+                    return size, crc, data
                 return size, crc, self._copy(data)
+            finally:
+                if not keep:
+                    data.release()
         except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
             raise LogReadError(f"{where} is corrupt: {' '.join(str(exc).split())}") from exc
 

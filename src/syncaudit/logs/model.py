@@ -88,3 +88,7 @@ class ChannelInfo:
     """ROS 2 style type name."""
     encoding: str
     """'cdr' or 'ros1'."""
+    prefix_bytes: int = 0
+    """0: the whole payload is wanted. N > 0: its reader only looks at the first N bytes
+    (an image's header), so a unit reader may hand over just those where that saves
+    reading the rest (SQLite blobs); others give the whole payload."""

@@ -21,6 +21,7 @@ off: it is then read by scanning the chunks from the start, as `rosbag reindex` 
 from __future__ import annotations
 
 import bz2
+import os
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -394,7 +395,9 @@ def _scan_chunk(
     return found
 
 
-def chunk_body(record: bytes, offset: int, *, partial: bool = False) -> bytes | memoryview:
+def chunk_body(
+    record: bytes | memoryview, offset: int, *, partial: bool = False
+) -> bytes | memoryview:
     """The uncompressed records of the chunk record `record` (at `offset` in its file).
 
     `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
@@ -427,7 +430,10 @@ def chunk_body(record: bytes, offset: int, *, partial: bool = False) -> bytes | 
         elif compression == "bz2":
             body = bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
         elif compression == "lz4":
-            body = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+            # The low-level call takes the view as it is (LZ4FrameDecompressor copies a
+            # memoryview to bytes first: a whole chunk per chunk).
+            context = lz4.frame.create_decompression_context()
+            body, _read, _end = lz4.frame.decompress_chunk(context, data, max_length=size + 1)
         else:
             raise LogReadError(
                 f"{where}: chunk compression {compression!r} is not one of {COMPRESSIONS}"
@@ -505,6 +511,8 @@ class Rosbag1ChunkReader:
 
     def __init__(self, source: str | None = None) -> None:
         self._files: dict[str, BagFile] = {}
+        self._buffer = bytearray()
+        """Chunk records are read into this one buffer (no allocation per chunk)."""
         del source  # files are opened when their first unit is read
 
     def messages(
@@ -522,7 +530,7 @@ class Rosbag1ChunkReader:
             except OSError as exc:
                 raise LogReadError(f"{unit.source}: cannot read: {one_line(exc)}") from exc
             self._files[unit.source] = bag
-        record = bag.read(unit.offset, unit.length)
+        record = self._read(bag, unit.offset, unit.length)
         if len(record) < unit.length:
             raise LogReadError(
                 f"{unit.source}: ROS 1 chunk at byte {unit.offset} cut off "
@@ -531,6 +539,10 @@ class Rosbag1ChunkReader:
         partial = _declared_length(record) > unit.length
         try:
             body = chunk_body(record, unit.offset, partial=partial)
+            if isinstance(body, memoryview):
+                # An uncompressed chunk's payloads are views of the buffer: callers may hold
+                # them past the next unit (the serial merge does), so it is theirs now.
+                self._buffer = bytearray()
             index = 0
             for op, fields, data in walk_records(body, unit.offset, partial=partial):
                 if op != OP_MSG_DATA:
@@ -546,6 +558,18 @@ class Rosbag1ChunkReader:
                 f"{unit.source}: ROS 1 chunk at byte {unit.offset}: bad message record ({exc})"
             ) from None
 
+    def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
+        """Up to `length` bytes at `offset`, read into the reused buffer (overwritten by
+        the next unit's read unless an uncompressed chunk's payloads took it over)."""
+        length = max(0, min(length, bag.size - offset))
+        if offset < 0 or length == 0:
+            return memoryview(b"")
+        if len(self._buffer) < length:
+            self._buffer = bytearray(length)  # views of the old one keep it alive
+        view = memoryview(self._buffer)[:length]
+        got = os.preadv(bag.handle.fileno(), [view], offset)
+        return view[:got]
+
     def close(self) -> None:
         """Close the files opened so far."""
         for bag in self._files.values():
@@ -553,7 +577,7 @@ class Rosbag1ChunkReader:
         self._files.clear()
 
 
-def _declared_length(record: bytes) -> int:
+def _declared_length(record: bytes | memoryview) -> int:
     """Length the chunk record says it has (header and data lengths), or 0 if unreadable."""
     if len(record) < 4:
         return 0

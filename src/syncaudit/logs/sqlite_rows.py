@@ -339,6 +339,20 @@ def _plan_salvaged(info: SqliteFile, topic_ids: set[int]) -> list[ReadUnit]:
     return units
 
 
+def _blob_prefix(db: sqlite3.Connection, rowid: int, size: int) -> bytes | None:
+    """The first `size` bytes of a row's payload, or all of it where a prefix cannot do
+    (a zstd-compressed payload, a value that is not a blob)."""
+    try:
+        with db.blobopen("messages", "data", rowid, readonly=True) as blob:
+            head = blob.read(size)
+            if head[:4] == ZSTD_MAGIC:  # message-compressed: only the whole frame decodes
+                return head + blob.read()
+            return head
+    except sqlite3.OperationalError:  # NULL or a number: as the plain query gives it
+        row = db.execute("SELECT data FROM messages WHERE id = ?", (rowid,)).fetchone()
+        return None if row is None else row[0]
+
+
 class SqliteRowsReader:
     """Per-worker reader of 'sqlite-rows' units: one read-only connection per file, reused.
 
@@ -380,14 +394,18 @@ class SqliteRowsReader:
         }  # file topic id -> channel id
         if not local:
             return
-        marks = ",".join("?" * len(local))
+        # Payloads of which only a prefix is wanted (images: their header) are read through
+        # sqlite's incremental blob I/O: only the blob's first page, not its overflow chain.
+        prefix = {tid: channels[cid].prefix_bytes for tid, cid in local.items()}
+        whole = [tid for tid, n in prefix.items() if n <= 0]
+        marks = ",".join("?" * len(whole))
         # every row of the range, the payload only of wanted ones (sqlite loads a column when
         # asked for it); the LIMIT ends the scan on the unit's last row, so sqlite never
         # steps onto the row after it (which a cut-off file may not have)
         cursor = db.execute(
             f"SELECT id, topic_id, timestamp, CASE WHEN topic_id IN ({marks}) THEN data END "
             "FROM messages WHERE id >= ? AND id < ? ORDER BY id LIMIT ?",
-            [*local, unit.offset, unit.length, unit.length - unit.offset],
+            [*whole, unit.offset, unit.length, unit.length - unit.offset],
         )
         decompress = self._zstd.decompress
         try:
@@ -400,6 +418,8 @@ class SqliteRowsReader:
                             f"{unit.source}: bag database row {rowid} has timestamp {t!r}, "
                             "not an integer"
                         )
+                    if prefix[topic_id] > 0:
+                        data = _blob_prefix(db, rowid, prefix[topic_id])
                     if not isinstance(data, bytes):
                         data = b"" if data is None else str(data).encode()
                     elif data[:4] == ZSTD_MAGIC:

@@ -1,4 +1,8 @@
-"""Message definitions for a log: the log's own first, then `schemas/`, then ROS defaults."""
+"""Message definitions for a log: the log's own first, then `schemas/`, then ROS defaults.
+
+rosbags' type system is imported where a definition is first parsed or a registry built,
+not with this module: an audit whose messages all have struct readers never needs it.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +10,6 @@ from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from syncaudit.errors import LogReadError, UnknownTypeError
 
@@ -36,6 +38,8 @@ def _project_schemas() -> tuple[Typesdict, tuple[str, ...]]:
     A bad file is reported, not raised: one broken definition must not make every log
     unreadable, only the types that need it.
     """
+    from rosbags.typesys import get_types_from_msg
+
     types: Typesdict = {}
     problems: list[str] = []
     for path in sorted(schemas_dir().glob("*/msg/*.msg")):
@@ -63,6 +67,8 @@ def parse_definition(encoding: str, text: str, name: str) -> Typesdict:
     `encoding` is the MCAP schema encoding ('ros1msg', 'ros2msg', 'ros2idl') or 'msg'/'idl';
     other encodings hold no ROS definitions and give an empty dict.
     """
+    from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
     if encoding in IDL_SCHEMA_ENCODINGS:
         if not text.startswith(f"{_SECTION}IDL: "):
             return dict(get_types_from_idl(text))
@@ -110,6 +116,8 @@ class TypeRegistry:
     def __init__(self, ros1: bool, log_types: Typesdict | None = None, eager: bool = False) -> None:
         """`eager` registers every known type at once (writers build arbitrary messages);
         otherwise a type and what it nests are registered when first deserialised."""
+        from rosbags.typesys import Stores, get_typestore
+
         base = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
         available: dict[str, Any] = dict(log_types or {})
         for source in (project_types(), base.fielddefs):

@@ -1,0 +1,67 @@
+"""The parent's one-off work overlaps the workers' reading (issue 13's fixed cost).
+
+Importing the audit does not import pandas (~0.2 s): the analysis is imported while the
+reader workers run their first tasks (`iter_items(meanwhile=...)`), or before a serial
+read, never both and never twice.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from syncaudit import collect
+from syncaudit.audit import _plan
+from syncaudit.logs import open_log
+from syncaudit.rig import load_rig
+
+REPO = Path(__file__).resolve().parents[2]
+LOG = REPO / "sample_logs" / "pandar40p_adaptive.mcap"
+"""Seven zstd chunks."""
+
+
+def _items(jobs: int, calls: list[int]) -> list[collect.Item]:
+    rig = load_rig(Path(f"{LOG}.rig.yaml"))
+
+    def meanwhile() -> None:
+        calls.append(len(multiprocessing.active_children()))
+
+    with open_log(LOG) as log:
+        plan, _ = _plan(log, rig, list(rig.cameras))
+        return list(collect.iter_items(log, plan, jobs, meanwhile=meanwhile))
+
+
+def test_meanwhile_runs_once_while_the_workers_read(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Parallel path: called once, with the pool's two workers alive."""
+    monkeypatch.setattr(collect, "GROUP_BYTES", 1)  # a task per chunk: seven tasks
+    calls: list[int] = []
+    items = _items(2, calls)
+    assert calls == [2]
+    assert len(items) > 100
+
+
+def test_meanwhile_runs_once_before_a_serial_read() -> None:
+    """Serial path (one group, or jobs=1): called once, no worker process."""
+    for jobs in (1, 2):
+        calls: list[int] = []
+        items = _items(jobs, calls)
+        assert calls == [0]
+        assert len(items) > 100
+
+
+def test_importing_the_audit_does_not_import_pandas_or_rosbags() -> None:
+    """The library API is importable without the analysis' pandas or rosbags' type system
+    (imported where first needed)."""
+    code = (
+        "import sys, syncaudit.audit, syncaudit.collect\n"
+        "from syncaudit.audit import audit_log, AuditResult\n"
+        "print(sorted(m for m in ('pandas', 'rosbags.typesys') if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
+    )
+    assert done.stdout.strip() == "[]"

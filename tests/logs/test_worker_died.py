@@ -1,0 +1,165 @@
+"""A reader worker that dies mid-read (the OOM killer's SIGKILL, a crash) ends the run with
+one line saying how it died and the exit code that fits, never exit 70 for a kill.
+
+The kill is real: `os.kill` on the pid of one of the pool's worker processes while the
+chunk-parallel read runs; the crash cases are real processes that crash or exit.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
+from syncaudit.workers import death_cause
+
+REPO = Path(__file__).resolve().parents[2]
+LOG = REPO / "sample_logs" / "pandar40p_adaptive.mcap"
+"""Seven zstd chunks: seven tasks with one chunk per task."""
+
+# The real CLI, one chunk per task and each task held 0.5 s in its worker, so that the
+# read lasts seconds and a worker can be killed while it runs.
+RUN = """
+import sys, time
+import syncaudit.collect as c
+
+c.GROUP_BYTES = 1
+c.TASKS_PER_WORKER = 1
+_extract = c._extract_group
+
+
+def slow(*args):
+    time.sleep(0.5)
+    return _extract(*args)
+
+
+c._extract_group = slow
+from syncaudit.cli import main
+
+sys.argv = ["syncaudit", *sys.argv[1:]]
+main()
+"""
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(p) for p in text.split()]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead, just unreaped
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None:
+    """SIGKILL to a worker (what the OOM killer sends) mid-read: exit 130, one line naming
+    the log and the signal, no traceback, no output file, no worker left alive."""
+    json_out = tmp_path / "audit.json"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            RUN,
+            "audit",
+            str(LOG),
+            "--rig",
+            f"{LOG}.rig.yaml",
+            "--jobs",
+            "2",
+            "--json-out",
+            str(json_out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        workers: list[int] = []
+        while time.monotonic() < deadline and proc.poll() is None:
+            workers = _children(proc.pid)
+            if len(workers) == 2:
+                break
+            time.sleep(0.02)
+        assert len(workers) == 2, "the pool's two workers never started"
+        time.sleep(0.3)  # both are now inside their first task
+        os.kill(workers[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == EXIT_INTERRUPTED, err
+    lines = err.strip().splitlines()
+    assert lines == [
+        f"error: {LOG}: a reader worker process died (killed by signal 9 — out of memory? "
+        "fewer jobs or more free memory may help)"
+    ]
+    assert not json_out.exists()
+    assert not list(tmp_path.iterdir())  # no temporary left either
+    assert not [pid for pid in workers if _alive(pid)]
+
+
+def _die(how: str) -> None:
+    if how == "crash":
+        faulthandler.disable()  # pytest's would print this deliberate crash's stack
+        os.kill(os.getpid(), signal.SIGSEGV)
+    elif how == "exit":
+        os._exit(3)
+    else:
+        time.sleep(60)
+
+
+def _dead(how: str) -> multiprocessing.process.BaseProcess:
+    process = multiprocessing.get_context("fork").Process(target=_die, args=(how,))
+    process.start()
+    if how == "kill":
+        os.kill(process.pid, signal.SIGKILL)
+    process.join(10)
+    return process
+
+
+@pytest.mark.parametrize(
+    ("how", "words", "code"),
+    [
+        ("kill", "killed by signal 9 — out of memory?", EXIT_INTERRUPTED),
+        ("crash", "crashed with signal 11, SIGSEGV: a bug, please report it", EXIT_INTERNAL),
+        ("exit", "exited with status 3", EXIT_INTERNAL),
+    ],
+)
+def test_death_cause_names_how_the_worker_died(how: str, words: str, code: int) -> None:
+    """The dead worker is told apart from the others the pool SIGTERMs after it."""
+    dead = _dead(how)
+    terminated = multiprocessing.get_context("fork").Process(target=_die, args=("sleep",))
+    terminated.start()
+    terminated.terminate()
+    terminated.join(10)
+    said, exit_code = death_cause([terminated, dead])
+    assert said.startswith(words)
+    assert exit_code == code
+
+
+def test_worker_died_error_keeps_its_exit_code_across_pickling() -> None:
+    """Fleet workers send errors back pickled: a crash stays 70, a kill 130."""
+    import pickle
+
+    crash = pickle.loads(pickle.dumps(WorkerDiedError("x", exit_code=EXIT_INTERNAL)))
+    assert (str(crash), crash.exit_code) == ("x", EXIT_INTERNAL)
+    kill = pickle.loads(pickle.dumps(WorkerDiedError("y")))
+    assert (str(kill), kill.exit_code) == ("y", EXIT_INTERRUPTED)
