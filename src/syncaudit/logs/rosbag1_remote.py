@@ -194,6 +194,11 @@ class _RunFile:
         self._pos += size
         return bytes(self._data[at : at + size])
 
+    def view(self, offset: int, length: int) -> memoryview:
+        """Up to `length` held bytes at file offset `offset` (no copy)."""
+        at = max(0, offset - self._offset)
+        return self._data[at : at + max(0, length)]
+
     def close(self) -> None:
         """Nothing to close (the buffer belongs to the reader)."""
 
@@ -211,6 +216,11 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
             return
         self._object = open_object(source)
         self._tracker = find_tracker(source)  # the parent's, inherited by fork
+
+    def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
+        """The chunk's bytes straight from the run held in memory (the local reader reads
+        them from the file descriptor)."""
+        return cast(_RunFile, bag.handle).view(offset, length)
 
     def messages(
         self, unit: ReadUnit, channels: dict[int, ChannelInfo]
