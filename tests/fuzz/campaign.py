@@ -341,15 +341,37 @@ class Run:
     orphans: list[int] = field(default_factory=list)
 
 
+_MEASURE = """
+import os, sys
+pid = os.fork()
+if pid == 0:
+    try:
+        os.execvp(sys.argv[2], sys.argv[2:])
+    finally:
+        os._exit(127)
+_, status, usage = os.wait4(pid, 0)
+with open(sys.argv[1], "w") as out:
+    out.write(f"{os.waitstatus_to_exitcode(status)} {usage.ru_maxrss}")
+"""
+"""Runs the CLI as the child of a small interpreter and writes its exit code and peak RSS.
+
+Linux keeps a process's peak RSS across exec, and a child forked from this (test) process
+starts with this process's resident pages: measured directly, the CLI's peak would be
+pytest's size, not its own (a full test run's pytest passed 500 MB). Forked from the
+small shim, the CLI's own peak is what wait4 reports."""
+
+
 def run_cli(args: list[str], *, cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
-    """Run the CLI in a session of its own; memory from wait4, orphans from /proc."""
+    """Run the CLI in a session of its own; memory from wait4 (in a shim), orphans from /proc."""
     argv = [*syncaudit_cmd(), *args]
     env = {**os.environ, "COLUMNS": "200", "SYNCAUDIT_DEBUG": ""}
     env.pop("SYNCAUDIT_DEBUG")
+    measured = cwd / ".measured"
+    measured.unlink(missing_ok=True)
     start = time.monotonic()
     with open(cwd / ".stderr", "w+b") as err:
         proc = subprocess.Popen(
-            argv,
+            [sys.executable, "-c", _MEASURE, str(measured), *argv],
             cwd=cwd,
             stdout=subprocess.DEVNULL,
             stderr=err,
@@ -360,19 +382,21 @@ def run_cli(args: list[str], *, cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
         code: int | None = None
         rss_kb = 0
         while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
             if pid:
                 code = os.waitstatus_to_exitcode(status)
-                rss_kb = usage.ru_maxrss
                 break
             if time.monotonic() - start > timeout_s:
                 _kill_session(proc.pid)
-                _, status, usage = os.wait4(proc.pid, 0)
-                rss_kb = usage.ru_maxrss
+                os.wait4(proc.pid, 0)
                 break
             time.sleep(0.01)
         proc.returncode = -1  # reaped above; keep Popen from waiting again
         seconds = time.monotonic() - start
+        if code is not None and measured.exists():
+            cli_code, cli_rss_kb = measured.read_text().split()
+            code, rss_kb = int(cli_code), int(cli_rss_kb)
+            measured.unlink()
         orphans = _session_members(proc.pid)
         if orphans:
             _kill_session(proc.pid)
