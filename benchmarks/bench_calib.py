@@ -45,19 +45,15 @@ import numpy as np
 
 from syncaudit.calib import CalibConfig, calibrate_log, se3
 from syncaudit.calib.config import calib_scene_config
-from syncaudit.simulate.calib_session import MATRIX, simulate_calib_session, truth_path
+from syncaudit.simulate.calib_session import (
+    MATRIX,
+    matrix_tolerance,
+    simulate_calib_session,
+    truth_path,
+)
 
 TARGET_S = 30.0
 REFUSAL_TARGET_S = 10.0
-
-
-def tolerance(beams: int) -> tuple[float, float]:
-    """Accuracy target (deg, cm) per beam class; 16 beams is documented as wider."""
-    if beams <= 16:
-        return 0.3, 2.0
-    if beams <= 64:
-        return 0.1, 1.0
-    return 0.05, 0.5
 
 
 def _cpu_s() -> float:
@@ -136,7 +132,7 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
     for case in cases:
         mine = [r for r in rows if r["case"] == case]
         done = [r for r in mine if r["rot_deg"] is not None]
-        lim_rot, lim_cm = tolerance(MATRIX[case]["beams"])
+        lim_rot, lim_cm = matrix_tolerance(MATRIX[case]["beams"])
         rot = [r["rot_deg"] for r in done] or [float("nan")]
         cm = [r["trans_cm"] for r in done] or [float("nan")]
         walls = [r["wall_s"] for r in mine]

@@ -48,19 +48,10 @@ from syncaudit.calib.config import (
     rig_preset,
 )
 from syncaudit.errors import ConfigError, NoDataError
-from syncaudit.simulate.calib_session import MATRIX, simulate_calib_session
+from syncaudit.simulate.calib_session import MATRIX, matrix_tolerance, simulate_calib_session
 
 FAST_STOPS = 8
 """Stops per driving session in the fast subset (the benchmark runs 12)."""
-
-
-def tolerance(beams: int) -> tuple[float, float]:
-    """Accuracy target (deg, cm) per beam class; 16 beams is documented as wider."""
-    if beams <= 16:
-        return 0.3, 2.0
-    if beams <= 64:
-        return 0.1, 1.0
-    return 0.05, 0.5
 
 
 def error_to_truth(result: CalibrationResult, truth: dict[str, Any]) -> tuple[float, float]:
@@ -130,7 +121,7 @@ def test_matrix_case_meets_its_tolerance(matrix_runs: dict[str, Any], case: str)
     _path, truth, result = matrix_runs[case]
     assert result.calibratable, result.reason
     rot_deg, trans_cm = error_to_truth(result, truth)
-    max_rot, max_cm = tolerance(MATRIX[case]["beams"])
+    max_rot, max_cm = matrix_tolerance(MATRIX[case]["beams"])
     assert rot_deg <= max_rot and trans_cm <= max_cm, (case, rot_deg, trans_cm)
     # The recorded error (0.05 deg / 0.3 cm) is within the limits: validation passes.
     assert result.passed
