@@ -15,12 +15,12 @@ from __future__ import annotations
 import os
 import re
 import struct
-from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError, UsageError
+from syncaudit.remote.ranges import FetchStats as FetchStats  # re-exported
 from syncaudit.remote.ranges import public_url as public_url  # re-exported
 
 URL = re.compile(r"^(s3|s3a|gs|gcs|az|abfs|abfss|http|https)://", re.IGNORECASE)
@@ -37,24 +37,6 @@ GAP_BYTES = 64 << 10
 TRIES = 3
 IN_FLIGHT = 16
 """Requests fetched concurrently (at most IN_FLIGHT x PIECE_BYTES = 256 MiB in memory)."""
-
-
-@dataclass(slots=True)
-class FetchStats:
-    """What a remote read cost: bytes fetched against the file size and the needed chunks."""
-
-    url: str
-    size_bytes: int
-    fetched_bytes: int = 0
-    requests: int = 0
-    needed_chunk_bytes: int = 0
-    chunks_fetched: int = 0
-    chunks_total: int = 0
-    ranged: bool = True
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready."""
-        return asdict(self)
 
 
 def is_url(item: str) -> bool:

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 from urllib.parse import urlsplit
 
@@ -82,6 +82,24 @@ class FetchCounter:
 
 
 @dataclass(slots=True)
+class FetchStats:
+    """What a remote read cost: bytes fetched against the file size and the needed chunks."""
+
+    url: str
+    size_bytes: int
+    fetched_bytes: int = 0
+    requests: int = 0
+    needed_chunk_bytes: int = 0
+    chunks_fetched: int = 0
+    chunks_total: int = 0
+    ranged: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return asdict(self)
+
+
+@dataclass(slots=True)
 class Tracker:
     """What one process knows of a remote log while it is being audited: the bytes its
     parent fetched (header, summary: reused by a second open), the shared counter, and
@@ -101,17 +119,17 @@ class Tracker:
     users: int = 0
 
     def stats(self) -> dict[str, Any]:
-        """The `remote_read` entry of `--json-out` (`remote.fetch.FetchStats` fields)."""
-        return {
-            "url": public_url(self.url),
-            "size_bytes": self.size_bytes,
-            "fetched_bytes": self.counter.fetched_bytes,
-            "requests": self.counter.requests,
-            "needed_chunk_bytes": self.needed_chunk_bytes,
-            "chunks_fetched": self.chunks_fetched,
-            "chunks_total": self.chunks_total,
-            "ranged": self.ranged,
-        }
+        """The `remote_read` entry of `--json-out`."""
+        return FetchStats(
+            url=public_url(self.url),
+            size_bytes=self.size_bytes,
+            fetched_bytes=self.counter.fetched_bytes,
+            requests=self.counter.requests,
+            needed_chunk_bytes=self.needed_chunk_bytes,
+            chunks_fetched=self.chunks_fetched,
+            chunks_total=self.chunks_total,
+            ranged=self.ranged,
+        ).to_dict()
 
 
 _TRACKERS: dict[str, Tracker] = {}
