@@ -129,6 +129,43 @@ def test_matrix_case_meets_its_tolerance(matrix_runs: dict[str, Any], case: str)
     assert all(sum(s.used for s in lidar.stops) >= n // 2 for lidar in result.lidars)
 
 
+def test_map_pairs_are_built_from_the_stops_both_graphs_hold(
+    matrix_runs: dict[str, Any],
+) -> None:
+    """Each anchor's map-to-map alignment compares the two LiDARs over the same stops, so
+    a stop only one LiDAR's graph placed (perhaps through weak links) cannot bias it; the
+    whole maps are aligned, after all of those, only when none of them was accepted as
+    well constrained as a cross-scan alignment must be."""
+    limits = CalibConfig().registration.limits
+
+    def firm(pair: Any) -> bool:
+        cond = pair.alignment.conditioning
+        return (
+            pair.result is not None
+            and cond.translation_information >= limits.min_translation_information
+            and cond.rotation_information >= limits.min_rotation_information
+        )
+
+    kinds = set()
+    for case, (_path, _truth, result) in matrix_runs.items():
+        for ext in result.extrinsics:
+            assert ext.map_pairs, case
+            assert all(p.anchor_stop in p.reference_stops for p in ext.map_pairs), case
+            shared = [p for p in ext.map_pairs if p.reference_stops == p.lidar_stops]
+            whole = [p for p in ext.map_pairs if p.reference_stops != p.lidar_stops]
+            assert ext.map_pairs == shared + whole, case
+            if any(firm(p) for p in shared):
+                assert not whole, case
+                used = [p for p in shared if firm(p)]
+            else:
+                used = [p for p in whole if p.result is not None]
+            kinds.add(bool(whole))
+            assert ext.result is not None and used, case
+            if len(used) == 1 and used[0].result is not None:
+                assert ext.result.matrix == used[0].result.matrix, case
+    assert kinds == {True, False}  # the fast subset has both kinds
+
+
 def test_a_wrong_coarse_link_is_caught_across_lidars(matrix_runs: dict[str, Any]) -> None:
     """The front LiDAR's 5-6 alignment disagrees with the rear's view of the same motion;
     aligned again from it, it fits better and lands right, and the calibration meets the
