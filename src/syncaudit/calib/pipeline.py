@@ -309,6 +309,11 @@ def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtr
 _MIN_STRUCTURE_OVERLAP = 0.3
 _MAX_STRUCTURE_RMSE_FACTOR = 0.5
 _TURN_LOOKBACK = 3
+_MAX_TURN_TILT_DEG = 10.0
+"""A coarse vehicle motion between stops that tilts the base more than this, or moves it
+more than a coarse voxel up or down, is no drive on level ground (the planar model):
+measured on a diagonal-mount drive, a 28 deg turn came out as 80 deg with a 3.84 m rise,
+verified on structure alone, and every later stop's angle was wrong (none used)."""
 
 
 def _verify_turn(
@@ -318,6 +323,14 @@ def _verify_turn(
     ground must overlap and lie on itself within half a coarse voxel, and the full clouds
     must constrain every direction."""
     reg = config.registration
+    if config.pose_graph.motion == "planar":
+        tilt_deg = math.degrees(math.acos(min(1.0, max(-1.0, float(turn[2, 2])))))
+        rise_m = abs(float(turn[2, 3]))
+        if tilt_deg > _MAX_TURN_TILT_DEG or rise_m > reg.coarse_voxel_m:
+            return (
+                f"not a motion on level ground (tilt {tilt_deg:.1f} deg, rise "
+                f"{rise_m * 100:.0f} cm)"
+            )
     fit = evaluate(structure[0], structure[1], turn, reg.coarse_voxel_m, reg.num_threads)
     if fit.overlap < _MIN_STRUCTURE_OVERLAP:
         return f"structure off the ground overlaps {fit.overlap:.0%} < {_MIN_STRUCTURE_OVERLAP:.0%}"
@@ -379,14 +392,17 @@ def _angular_chain(
     config: CalibConfig,
     odometry: io.Odometry | None,
     notes: list[str],
-) -> None:
+) -> int:
     """Coarse vehicle motion between stops, hence each LiDAR's seeds and stop angles.
 
     The motion is unknown but common to every LiDAR, so it is estimated once from all
     LiDARs' scans merged in the base frame (through the recorded extrinsics). Each stop is
     linked to the nearest earlier stop (up to three back) whose motion verifies, so one
     weak link does not cut the stops after it; stops that link to nothing start a new
-    segment, and only the segment holding the reference gets angles.
+    segment, and only the segment holding the reference gets angles. Unless configured,
+    the reference moves to the largest segment (the first stop there every LiDAR saw):
+    a first stop whose only link failed must not leave the others without angles.
+    Returns the reference stop.
     """
     reg = config.registration
     order = sorted({k for lidar in lidars for k in lidar.stop_scan})
@@ -425,6 +441,12 @@ def _angular_chain(
             n_segments += 1
             pose[b] = np.eye(4)
             broken[b] = "motion unknown (" + "; ".join(reasons) + ")"
+    size = {seg: list(segment_of.values()).count(seg) for seg in set(segment_of.values())}
+    common = [k for k in order if all(k in lidar.stop_scan for lidar in lidars)]
+    if config.selection.reference_stop is None and common:
+        best = max(common, key=lambda k: (size[segment_of[k]], -k))
+        if size[segment_of[best]] > size[segment_of.get(reference, 0)]:
+            reference = best
     home = segment_of.get(reference, 0)
     ref_inv = se3.invert(pose[reference])
     up = np.array([0.0, 0.0, 1.0])
@@ -450,6 +472,7 @@ def _angular_chain(
                         if start == k
                         else f"in the group of stops from stop {start}: {broken[start]}"
                     )
+    return reference
 
 
 def _strength(cond: Conditioning) -> float:
@@ -1445,7 +1468,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     reference = _provisional_reference(stops, lidars, config)
     with timer.stage("turn_chain"):
         odometry = io.read_odometry(path, recorded.base_frame)
-        _angular_chain(lidars, recorded, reference, config, odometry, notes)
+        reference = _angular_chain(lidars, recorded, reference, config, odometry, notes)
     with timer.stage("align_pairs"):
         for lidar in lidars:
             _align_pairs(lidar, reference, config)
