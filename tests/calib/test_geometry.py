@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 
 from syncaudit.calib import se3
+from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.io import decode_xyz, pointcloud2_dtype
+from syncaudit.calib.pipeline import _verify_turn
+from syncaudit.calib.registration import prepare
 from syncaudit.calib.scene import Box, Pole, Scene
 from syncaudit.errors import LogReadError, NoDataError
 
@@ -129,3 +132,33 @@ def test_decode_rejects_broken_clouds() -> None:
     with pytest.raises(NoDataError, match="x/y/z"):
         decode_xyz(_cloud([("a", 0, 7, 1)], bytes(4), 1, 1, 4, 4), "/t")
     assert decode_xyz(_cloud(fields, b"", 0, 1, 12, 0), "/t").shape == (0, 3)
+
+
+def test_a_coarse_turn_that_tilts_or_rises_is_not_a_drive_on_level_ground() -> None:
+    """The turn chain's second criterion refuses a motion no vehicle on level ground makes
+    (a yaw search that converged upside down: tilt 179 deg, rise 3.8 m, as measured on a
+    diagonal-mount drive) before looking at the scans; a level turn is judged on them."""
+    rng = np.random.default_rng(5)
+    walls = [
+        np.column_stack([rng.uniform(-8, 8, 400), np.full(400, y), rng.uniform(0, 3, 400)])
+        for y in (-6.0, 6.0)
+    ] + [
+        np.column_stack([np.full(400, x), rng.uniform(-6, 6, 400), rng.uniform(0, 3, 400)])
+        for x in (-8.0, 8.0)
+    ]
+    cloud = prepare(np.concatenate(walls), 0.5, 20, 1)
+    config = CalibConfig()
+    flipped = se3.make_transform(se3.rpy_to_matrix(math.pi, 0.0, 0.4), (0.1, 0.6, 3.84))
+    why = _verify_turn((cloud, cloud), (cloud, cloud), flipped, config)
+    assert why == "not a motion on level ground (tilt 180.0 deg, rise 384 cm)"
+    risen = se3.make_transform(se3.rot_z(0.5), (0.3, 0.1, 0.8))
+    assert (_verify_turn((cloud, cloud), (cloud, cloud), risen, config) or "").startswith(
+        "not a motion on level ground (tilt 0.0 deg, rise 80 cm)"
+    )
+    assert _verify_turn((cloud, cloud), (cloud, cloud), np.eye(4), config) is None
+    free = config.model_copy(
+        update={"pose_graph": config.pose_graph.model_copy(update={"motion": "free"})}
+    )
+    assert not (_verify_turn((cloud, cloud), (cloud, cloud), flipped, free) or "").startswith(
+        "not a motion on level ground"
+    )
