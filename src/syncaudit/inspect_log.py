@@ -14,12 +14,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
+from syncaudit.camera.census import shared_topic_census
+from syncaudit.camera.routing import SharedTopicCount
+from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES
 from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
+from syncaudit.rig_guess import guess_cameras
 from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import json_ready
 
@@ -70,11 +73,36 @@ class CameraRow:
     name: str
     image_topic: str | None
     frames: int
+    """Its images: the image topic's messages, or those naming it on a shared topic."""
     rate_hz: float | None
     exposure_metadata: str | None
     stamp_semantics: str
     trigger_topic: str | None
     checkpoints: tuple[int, ...]
+    frame_id: str | None = None
+    """The header.frame_id its messages carry (rig, or the frame the image topic showed)."""
+    shared_topics: tuple[str, ...] = ()
+    """Its topics that other cameras read too (messages told apart by frame id)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SharedTopicRow:
+    """A topic several cameras share: which camera its messages went to, as `audit` routes them."""
+
+    topic: str
+    kind: str
+    """'image', 'exposure' or 'trigger'."""
+    msgtype: str
+    messages: int
+    cameras: dict[str, int]
+    """Camera name -> messages it gets."""
+    frame_ids: dict[str, int]
+    """header.frame_id seen -> messages carrying it ("" for none)."""
+    unnamed: int
+    """Messages naming no camera (no frame id, no camera field)."""
+    unknown: dict[str, int]
+    """Messages naming a frame or camera of no camera of the topic, by what they name."""
+    damaged: int
 
 
 @dataclass(slots=True)
@@ -90,6 +118,7 @@ class InfoReport:
     topics: list[TopicRow] = field(default_factory=list)
     lidars: list[LidarRow] = field(default_factory=list)
     cameras: list[CameraRow] = field(default_factory=list)
+    shared_topics: list[SharedTopicRow] = field(default_factory=list)
     guessed: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     error: str | None = None
@@ -217,13 +246,16 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
-    cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)
-    if not (rig and rig.cameras) and cameras:
-        report.guessed.append(
-            "cameras by topic type and name: " + ", ".join(c.name for c in cameras)
-        )
+    if rig and rig.cameras:
+        cameras = list(rig.cameras)
+    else:
+        cameras, camera_notes = guess_cameras(log)
+        report.guessed.extend(camera_notes)
+    census = shared_topic_census(log, cameras)
+    report.shared_topics.extend(_shared_row(log, count) for count in census.topics)
+    report.warnings.extend(census.warnings)
     for cam in cameras:
-        report.cameras.append(_camera_row(log, cam, duration))
+        report.cameras.append(_camera_row(log, cam, duration, census.topics))
     report.warnings.extend(w.message for w in log.warnings)
     if failure is not None:
         report.error = str(failure)
@@ -236,11 +268,32 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
     return report, failure
 
 
-def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> CameraRow:
+def _shared_row(log: LogReader, count: SharedTopicCount) -> SharedTopicRow:
+    return SharedTopicRow(
+        topic=count.topic,
+        kind=count.kind,
+        msgtype=log.topics[count.topic].msgtype,
+        messages=sum(count.frame_ids.values()) + count.damaged,
+        cameras=count.per_camera,
+        frame_ids=count.frame_ids,
+        unnamed=count.unnamed,
+        unknown=count.unknown,
+        damaged=count.damaged,
+    )
+
+
+def _camera_row(
+    log: LogReader, cam: CameraConfig, duration: float | None, shared: list[SharedTopicCount]
+) -> CameraRow:
     image = log.topics.get(cam.image_topic) if cam.image_topic else None
     exposure = log.topics.get(cam.exposure_topic) if cam.exposure_topic else None
     trigger = log.topics.get(cam.trigger_topic) if cam.trigger_topic else None
-    frames = image.count or 0 if image else 0
+    mine = [s for s in shared if cam.name in s.cameras]
+    shared_image = next((s for s in mine if s.kind == "image"), None)
+    if shared_image is not None:
+        frames = shared_image.per_camera[cam.name]
+    else:
+        frames = image.count or 0 if image else 0
     return CameraRow(
         name=cam.name,
         image_topic=cam.image_topic,
@@ -254,4 +307,6 @@ def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> Ca
         checkpoints=CHECKPOINTS_BY_TYPE.get(trigger.msgtype, ())
         if trigger and trigger.msgtype in TRIGGER_TYPES
         else (),
+        frame_id=cam.frame_id,
+        shared_topics=tuple(s.topic for s in mine),
     )
