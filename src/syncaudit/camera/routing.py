@@ -37,7 +37,11 @@ def camera_topics(cam: CameraConfig, recorded: Container[str]) -> list[tuple[str
     Frames come from the image headers, or from CameraInfo where no image was recorded.
     """
     frame_topic = cam.image_topic if cam.image_topic in recorded else cam.info_topic
-    wanted = (("image", frame_topic), ("exposure", cam.exposure_topic), ("trigger", cam.trigger_topic))
+    wanted = (
+        ("image", frame_topic),
+        ("exposure", cam.exposure_topic),
+        ("trigger", cam.trigger_topic),
+    )
     return [(kind, topic) for kind, topic in wanted if topic is not None and topic in recorded]
 
 
@@ -225,7 +229,9 @@ class CameraRouter:
                 unknown=dict(sorted(s.unknown.items())),
                 damaged=len(s.damaged),
             )
-            for _, s in sorted(self._shared.items(), key=lambda kv: (KINDS.index(kv[0][0]), kv[0][1]))
+            for _, s in sorted(
+                self._shared.items(), key=lambda kv: (KINDS.index(kv[0][0]), kv[0][1])
+            )
         ]
 
     def finish(self) -> list[str]:
