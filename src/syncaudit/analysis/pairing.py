@@ -1,7 +1,7 @@
 """Which trigger and which LiDAR revolution each camera frame belongs to.
 
-Frames pair with triggers by sequence number when the numbers can be trusted, else by
-time. Frames pair with revolutions through the packet their trigger names: that packet
+Frames pair with triggers by sequence number when the numbers can be trusted (both count
+the same messages, see `camera.sequences`, and agree in time), else by time. Frames pair with revolutions through the packet their trigger names: that packet
 lies a few packets before or after the zero crossing that started the revolution
 (drivers differ in which packet they trigger from), so it pairs with the nearest zero
 *crossing* time; frames whose trigger names no packet pair with the nearest crossing of
@@ -17,6 +17,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from syncaudit.analysis.stamps import MISSING_NS, delta_ns, present, stamps_ns
+from syncaudit.camera.sequences import SequenceCounter, incomparable
 from syncaudit.columns.lidar import RevolutionColumns
 
 PAIR_TOLERANCE_NS = 50_000_000
@@ -27,6 +28,10 @@ and a rounded exposure (ImageMetaData holds whole microseconds: `exposure_end` s
 start up to 0.5 us early) may fall just before the trigger's own record of it (248)."""
 SEQUENCE_AGREEMENT = 0.9
 """Sequence pairing is trusted when this share of its pairs also agree in time."""
+BY_SEQUENCE = "sequence number"
+BY_TIME = "time"
+NO_TRIGGERS = "none"
+"""How frames were paired with their triggers (`TriggerPairing.method`)."""
 PHASE_FROM_TRIGGER = "trigger packet"
 PHASE_FROM_TRACKER = "tracker zero packet"
 
@@ -61,12 +66,18 @@ def _trigger_time_ns(triggers: pd.DataFrame, *, at_trigger: bool = False) -> NDA
     return start if present(start).any() else sensor
 
 
-def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None:
+def sequence_problem(
+    frames: pd.DataFrame,
+    triggers: pd.DataFrame,
+    counters: tuple[SequenceCounter, SequenceCounter] | None = None,
+) -> str | None:
     """Why sequence numbers cannot pair these frames and triggers (None: they can).
 
-    Usable numbers are present everywhere, unique, increasing with log time on both sides,
-    and the frames they pair agree in time with their triggers (ROS 1 bags converted from
-    ROS 2, or drivers that leave `seq` alone, have 0 everywhere).
+    Usable numbers are present everywhere, count the same messages on both sides
+    (`counters`: what the frames' and the triggers' numbers count; a ROS 1 header.seq of a
+    topic several cameras share counts all their messages), are unique, increase with log
+    time on both sides, and the frames they pair agree in time with their triggers (ROS 1
+    bags converted from ROS 2, or drivers that leave `seq` alone, have 0 everywhere).
     """
     for what, table in (("frame", frames), ("trigger", triggers)):
         seq = table["frame_sequence"]
@@ -74,6 +85,9 @@ def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None
             return f"{int(seq.isna().sum())} of {len(seq)} {what}s have no sequence number"
         if not seq.is_unique:
             return f"{what} sequence numbers repeat ({seq.nunique()} distinct in {len(seq)})"
+    if counters is not None and (mismatch := incomparable(*counters)) is not None:
+        return mismatch
+    for what, table in (("frame", frames), ("trigger", triggers)):
         ordered = table.sort_values("log_time_ns", kind="stable")["frame_sequence"]
         if len(ordered) > 1 and not bool((np.diff(ordered.to_numpy(np.int64)) > 0).all()):
             return f"{what} sequence numbers do not increase with log time"
@@ -115,17 +129,42 @@ def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class TriggerPairing:
+    """Frames with their trigger's checkpoints (`trig_*`), and how they were paired."""
+
+    frames: pd.DataFrame
+    method: str
+    """`BY_SEQUENCE`, `BY_TIME` or `NO_TRIGGERS`."""
+    reason: str | None
+    """Why not by sequence number, where by time (None otherwise)."""
+    warning: str | None
+    """The reason as a warning, where both sides had numbers that could not be used."""
+
+
 def pair_triggers(
     frames: pd.DataFrame, triggers: pd.DataFrame, *, trigger_stamped: bool = False
 ) -> tuple[pd.DataFrame, str | None]:
-    """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
+    """Frames with their trigger's checkpoints, and a warning if any (see `pair_frames`)."""
+    pairing = pair_frames(frames, triggers, trigger_stamped=trigger_stamped)
+    return pairing.frames, pairing.warning
 
-    By sequence number where `sequence_problem` finds none, else by time: the latest
-    trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
-    where it has no exposure metadata), or at most `PAIR_LEAD_NS` after it.
-    `trigger_stamped`: the frames' times are their triggers (checkpoint 246, the rig's
-    `stamp: trigger`), so they pair with the triggers' 246 rather than their 248, which
-    lies t4 after.
+
+def pair_frames(
+    frames: pd.DataFrame,
+    triggers: pd.DataFrame,
+    *,
+    trigger_stamped: bool = False,
+    counters: tuple[SequenceCounter, SequenceCounter] | None = None,
+) -> TriggerPairing:
+    """Frames with their trigger's checkpoints (`trig_*`), and the method used.
+
+    By sequence number where `sequence_problem` finds none (`counters`: what each side's
+    numbers count), else by time: the latest trigger at most `PAIR_TOLERANCE_NS` before
+    the frame's exposure (its header stamp where it has no exposure metadata), or at most
+    `PAIR_LEAD_NS` after it. `trigger_stamped`: the frames' times are their triggers
+    (checkpoint 246, the rig's `stamp: trigger`), so they pair with the triggers' 246
+    rather than their 248, which lies t4 after.
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
     triggers = _unset_as_missing(triggers)
@@ -133,14 +172,14 @@ def pair_triggers(
         out = frames.copy()
         for col in checkpoint_cols:
             out[f"trig_{col}"] = pd.array([pd.NA] * len(out), dtype="Int64")
-        return out, None
+        return TriggerPairing(out, NO_TRIGGERS, None, None)
     trig = triggers[["frame_sequence", *checkpoint_cols]].add_prefix("trig_")
-    problem = sequence_problem(frames, triggers)
+    problem = sequence_problem(frames, triggers, counters)
     if problem is None:
         merged = frames.merge(
             trig, left_on="frame_sequence", right_on="trig_frame_sequence", how="left"
         )
-        return merged.drop(columns="trig_frame_sequence"), None
+        return TriggerPairing(merged.drop(columns="trig_frame_sequence"), BY_SEQUENCE, None, None)
     warning = None
     if frames["frame_sequence"].notna().any() and triggers["frame_sequence"].notna().any():
         warning = f"frames paired with triggers by time, not sequence number: {problem}"
@@ -160,7 +199,8 @@ def pair_triggers(
     if not untimed.empty:
         merged = pd.concat([merged, untimed], ignore_index=True)
     merged = merged.sort_values("_row", kind="stable")
-    return merged.drop(columns=["_t", "_row"]).reset_index(drop=True), warning
+    paired = merged.drop(columns=["_t", "_row"]).reset_index(drop=True)
+    return TriggerPairing(paired, BY_TIME, problem, warning)
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,6 +22,7 @@ from syncaudit.analysis.pairing import (
     PHASE_FROM_TRACKER,
     PHASE_FROM_TRIGGER,
     RevolutionPairing,
+    pair_frames,
     pair_revolutions,
     pair_triggers,
 )
@@ -108,6 +109,9 @@ class CameraSync:
     optional: bool = False
     """The rig marks the camera optional: not judged does not fail the audit."""
     warnings: list[str] = field(default_factory=list)
+    trigger_pairing: str = "none"
+    """How frames were paired with their triggers: 'sequence number', 'time' or 'none' (no
+    triggers); where by time although numbers were recorded, a warning says why."""
 
     @property
     def needs_correction(self) -> bool:
@@ -130,6 +134,7 @@ class CameraSync:
             "t_rotate_us": ns_to_us(self.t_rotate_ns),
             "packet_phase_us": ns_to_us(self.packet_phase_ns),
             "packet_phase_source": self.packet_phase_source,
+            "trigger_pairing": self.trigger_pairing,
             "latencies": {k: v.to_dict() for k, v in self.latencies.items()},
             "t5_mean_us": ns_to_us(self.t5_mean_ns),
             "delay_applied_us": ns_to_us(self.delay_applied_ns),
@@ -474,9 +479,15 @@ def analyze_camera(
     `target_index` is the camera's column in the revolutions' target crossings.
     """
     rotation = _rotation(scan, camera_azimuth_deg, lidar)
-    frames, pairing_warning = pair_triggers(
-        tables.frames, tables.triggers, trigger_stamped=camera.stamp == "trigger"
+    trigger_pairing = pair_frames(
+        tables.frames,
+        tables.triggers,
+        trigger_stamped=camera.stamp == "trigger",
+        counters=None
+        if tables.frame_counter is None or tables.trigger_counter is None
+        else (tables.frame_counter, tables.trigger_counter),
     )
+    frames, pairing_warning = trigger_pairing.frames, trigger_pairing.warning
     frames, t4_warning = _start_after_trigger(frames, camera, analysis)
     t_l = _t_l_ns(frames)
     period = rotation.period_ns
@@ -524,6 +535,7 @@ def analyze_camera(
         warnings,
         thresholds,
         shared_topic_notes=tables.shared_topic_notes,
+        trigger_pairing=trigger_pairing.method,
     )
 
 
@@ -539,6 +551,7 @@ def _camera_sync(
     thresholds: Thresholds,
     *,
     shared_topic_notes: tuple[str, ...] = (),
+    trigger_pairing: str = "none",
 ) -> CameraSync:
     """Eq. 5/6 over the paired frames, the thresholds and the judgement, as a CameraSync.
 
@@ -581,4 +594,5 @@ def _camera_sync(
         not_judged_reason=reason,
         optional=camera.optional,
         warnings=warnings,
+        trigger_pairing=trigger_pairing,
     )

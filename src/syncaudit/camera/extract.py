@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from syncaudit.camera.sequences import SequenceCounter, field_counter, header_seq_counter
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage
@@ -274,6 +275,10 @@ class CameraTables:
     shared_topic_notes: tuple[str, ...] = ()
     """Why messages of a topic this camera shares with others could not be given to it
     (nothing in them tells the cameras apart): the reason it is not judged, if it is not."""
+    frame_counter: SequenceCounter | None = None
+    """What the frames' `frame_sequence` numbers count (None: unknown, as one camera's)."""
+    trigger_counter: SequenceCounter | None = None
+    """What the triggers' `frame_sequence` numbers count."""
 
 
 CAMERA_EXPOSURE = "syncaudit_msgs/msg/CameraExposure"
@@ -289,6 +294,15 @@ class CameraTableBuilder:
     exposures: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
     triggers: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
     shared_topic_notes: list[str] = field(default_factory=list)
+    topic_readers: dict[str, tuple[str, tuple[str, ...]]] = field(default_factory=dict)
+    """Kind ('image', 'exposure', 'trigger') -> (topic it reads, the cameras reading it)."""
+
+    def sequence_counter(self, kind: str, source: str | None) -> SequenceCounter:
+        """What the `frame_sequence` of its `kind` rows count, given their message type."""
+        if source in CAMERA_FIELD_TYPES:  # the frame counter of the camera it names
+            return field_counter(source, self.camera.name)
+        topic, cameras = self.topic_readers.get(kind, (None, (self.camera.name,)))
+        return header_seq_counter(topic, cameras)
 
     def build(self) -> CameraTables:
         """The camera's frame, image and trigger tables, damaged messages left out.
@@ -345,6 +359,11 @@ class CameraTableBuilder:
             trigger_rows[0][_SOURCE] if trigger_rows else None,
             warnings,
             tuple(self.shared_topic_notes),
+            self.sequence_counter(
+                "exposure" if exposure_rows else "image",
+                exposure_rows[0][_SOURCE] if exposure_rows else None,
+            ),
+            self.sequence_counter("trigger", trigger_rows[0][_SOURCE] if trigger_rows else None),
         )
 
 

@@ -197,6 +197,9 @@ class CameraRouter:
         owners = self._owners.setdefault((kind, topic), [])
         if builder not in owners:
             owners.append(builder)
+        readers = tuple(o.camera.name for o in owners)
+        for owner in owners:
+            owner.topic_readers[kind] = (topic, readers)
         key = (kind, topic)
         if len(owners) == 1:
             self._single[key] = _rows_of(builder, kind)

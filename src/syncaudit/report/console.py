@@ -163,6 +163,7 @@ def render_audit(result: AuditResult, console: Console) -> None:
             "packet phase (zero crossing - packet)",
             f"{_us(d['packet_phase_us'])} us  (measured from: {d['packet_phase_source']})",
         )
+        table.add_row("frames paired with triggers by", d["trigger_pairing"])
         table.add_row(
             "t_sleep applied -> recommended (Eq. 2)",
             f"{_us(d['delay_applied_us'])} -> [bold]{_us(d['delay_recommended_us'])}[/] us "
