@@ -155,37 +155,34 @@ def test_one_topic_per_camera_still_pairs_by_sequence(
     _assert_own_triggers(result, truth, pairings)
 
 
-def test_shared_topics_with_seq_zero_pair_by_time(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize(
+    ("log_format", "ros1_header_seq", "reason", "warned"),
+    [
+        # seq = 0 everywhere (converted bags, some drivers): repeats, whatever the sharing.
+        ("bag", False, "frame sequence numbers repeat (1 distinct", True),
+        # ROS 2 headers have no seq: time is the only way, and nothing to warn about.
+        ("mcap", True, "no sequence number", False),
+    ],
+)
+def test_shared_topics_without_usable_seq_pair_by_time(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    log_format: str,
+    ros1_header_seq: bool,
+    reason: str,
+    warned: bool,
 ) -> None:
-    """seq = 0 everywhere (converted bags, some drivers): repeats, whatever the sharing."""
     result, truth, pairings = _audit(
         tmp_path,
         monkeypatch,
+        log_format=log_format,
         shared_topics=("meta", "trigger"),
         trigger_message="time_reference",
-        ros1_header_seq=False,
-    )
-    for pairing in pairings.values():
-        assert pairing.method == BY_TIME
-        assert "frame sequence numbers repeat (1 distinct" in (pairing.reason or "")
-    _assert_own_triggers(result, truth, pairings)
-
-
-def test_ros2_shared_topics_pair_by_time_without_a_warning(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """ROS 2 headers have no seq: time is the only way, and nothing to warn about."""
-    result, truth, pairings = _audit(
-        tmp_path,
-        monkeypatch,
-        log_format="mcap",
-        shared_topics=("meta", "trigger"),
-        trigger_message="time_reference",
+        ros1_header_seq=ros1_header_seq,
     )
     for name, pairing in pairings.items():
-        assert pairing.method == BY_TIME and "no sequence number" in (pairing.reason or "")
-        assert _pairing_warnings(result, name) == []
+        assert pairing.method == BY_TIME and reason in (pairing.reason or "")
+        assert len(_pairing_warnings(result, name)) == int(warned)
     _assert_own_triggers(result, truth, pairings)
 
 
