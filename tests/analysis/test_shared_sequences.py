@@ -10,6 +10,8 @@ result says which method was used and why.
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -237,3 +239,31 @@ def test_shared_topics_published_in_another_order_fail_the_time_check() -> None:
     pairing = pair_frames(frames, triggers, counters=counters)
     assert pairing.method == BY_TIME
     assert pairing.frames["trig_exposure_start_ns"].tolist() == starts
+
+
+def test_console_and_html_say_how_frames_were_paired(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    out = tmp_path / "log.bag"
+    cfg = SyncSimConfig(
+        cameras=CAMERAS[:1],
+        duration_s=2.5,  # 20 frames or more: the camera is judged, its table shown
+        seed=3,
+        log_format="bag",
+        exposure_messages=("flir_meta",),
+        trigger_message="time_reference",
+    )
+    simulate_sync_log(out, cfg)
+    rig = tmp_path / "rig.json"
+    rig.write_text(
+        rig_from_truth(json.loads(Path(f"{out}.truth.json").read_text())).model_dump_json()
+    )
+    html = tmp_path / "report.html"
+    result = CliRunner().invoke(app, ["audit", str(out), "--rig", str(rig), "--html", str(html)])
+    assert result.exit_code == 0, result.output
+    assert re.search(r"frames paired with triggers by[\s│]+sequence number", result.stdout)
+    assert re.search(
+        r"frames paired with triggers by</th><td[^>]*>sequence number</td>", html.read_text()
+    )
