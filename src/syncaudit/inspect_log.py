@@ -14,9 +14,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from syncaudit.camera.census import shared_topic_census
+from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
-from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES
+from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.topics import guess_lidar_topics
@@ -246,12 +246,12 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
-    if rig and rig.cameras:
-        cameras = list(rig.cameras)
-    else:
-        cameras, camera_notes = guess_cameras(log)
-        report.guessed.extend(camera_notes)
-    census = shared_topic_census(log, cameras)
+    cameras = _cameras(log, rig, report)
+    try:
+        census = shared_topic_census(log, cameras)
+    except SyncauditError as exc:  # info goes on: the LiDAR decides its exit code
+        report.warnings.append(f"topics cameras share could not be counted: {exc}")
+        census = SharedCensus([], [])
     report.shared_topics.extend(_shared_row(log, count) for count in census.topics)
     report.warnings.extend(census.warnings)
     for cam in cameras:
@@ -266,6 +266,21 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
     if not report.cameras:
         report.warnings.append("no camera topic found: only the LiDAR side can be audited")
     return report, failure
+
+
+def _cameras(log: LogReader, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:
+    """The rig's cameras, else those the audit would guess (by topic types alone where the
+    camera topics cannot be read)."""
+    if rig and rig.cameras:
+        return list(rig.cameras)
+    try:
+        cameras, notes = guess_cameras(log)
+    except SyncauditError as exc:
+        cameras = detect_cameras(log.topics)
+        notes = ["cameras by topic type and name: " + ", ".join(c.name for c in cameras)]
+        report.warnings.append(f"camera topics could not be read to guess the cameras: {exc}")
+    report.guessed.extend(notes if cameras else [])
+    return cameras
 
 
 def _shared_row(log: LogReader, count: SharedTopicCount) -> SharedTopicRow:
