@@ -80,7 +80,7 @@ def _identity(kind: str, row: tuple[Any, ...]) -> tuple[str, str]:
     return str(row[0] or ""), str(row[-1] or "")
 
 
-def named_camera(
+def _named_camera(
     builders: list[CameraTableBuilder], name: str, frame: str
 ) -> CameraTableBuilder | None:
     """The builder of the camera a message names: by `camera` field, else by frame_id."""
@@ -116,7 +116,7 @@ class _SharedTopic:
             return
         name, frame = _identity(self.kind, row)
         self.frame_ids[frame] += 1
-        target = named_camera(self.builders, name, frame)
+        target = _named_camera(self.builders, name, frame)
         if target is not None:
             _rows_of(target, self.kind).append(row)
             self.routed[target.camera.name] += 1
