@@ -65,6 +65,10 @@ def cluster(hooks: Path) -> Iterator[str]:
         # One log per worker thread at a time: a log queued behind a dying one is not
         # charged with its deaths (Dask's default 1.1 sends two per 1-thread worker).
         "distributed.scheduler.worker-saturation": 1.0,
+        # LocalCluster closes the nanny of a worker that is not back this long after it
+        # left (default 15 s): under load a restart takes longer, and the cluster would
+        # keep one worker for good. Read when a worker leaves: set for the module's life.
+        "distributed.deploy.lost-worker-timeout": f"{WORKER_START_S}s",
     }
     with dask.config.set(settings):
         local = LocalCluster(
@@ -75,13 +79,13 @@ def cluster(hooks: Path) -> Iterator[str]:
             dashboard_address=":0",
             protocol="tcp",
         )
-    try:
-        assert local.scheduler_address.startswith("tcp://127.0.0.1:")
-        yield local.scheduler_address
-    finally:
-        local.close()
-        os.environ.clear()
-        os.environ.update(saved)
+        try:
+            assert local.scheduler_address.startswith("tcp://127.0.0.1:")
+            yield local.scheduler_address
+        finally:
+            local.close()
+            os.environ.clear()
+            os.environ.update(saved)
 
 
 def _wait_for_workers(address: str) -> None:
