@@ -238,13 +238,17 @@ def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
             msg.msgtype,
             _frame_id(m),
         )
+    seq: int | None = None
     if msg.msgtype == "builtin_interfaces/msg/Time":
-        sent, frame_id = _time_ns(m), ""  # a bare time: nothing names the camera
+        # A bare time: nothing names the camera, and no header holds a seq (its first
+        # four bytes are the seconds, in ROS 1 too).
+        sent, frame_id = _time_ns(m), ""
     else:  # sensor_msgs/TimeReference: frame_id "not used" by the message's docs; source
         sent, frame_id = _time_ns(m.time_ref), _frame_id(m) or str(getattr(m, "source", ""))
+        seq = _ros1_seq(msg)
     return (
         camera,
-        _ros1_seq(msg),
+        seq,
         msg.log_time_ns,
         None,
         None,
