@@ -6,6 +6,10 @@ fails (damaged packets, unreadable encoding, a rig contradicting the packets) th
 records the error and its exit code. By default `inspect_log` then raises it (so `info`
 exits as `audit` would); with `partial=True` it returns the report with `error` and
 `exit_code` set, for a caller that prints what could be read and then exits non-zero.
+
+The cameras are the rig's, else the ones `audit` guesses (`rig_guess.guess_cameras`): a
+topic several cameras share is counted per camera as the audit routes its messages
+(`camera.census`), so `info` shows each camera's own frames and the frame ids seen.
 """
 
 from __future__ import annotations
