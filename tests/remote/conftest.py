@@ -30,6 +30,10 @@ class ServerState:
     ignore_range: bool = False
     """Answer every GET with the whole file (200), as a server without Range support."""
     delay_s: float = 0.0
+    redirects: dict[str, tuple[int, str]] = field(default_factory=dict)
+    """Request path (query string included) -> (status, Location) answered instead."""
+    authorizations: list[tuple[str, str | None]] = field(default_factory=list)
+    """(path, Authorization header) of every GET."""
     served_bytes: int = 0
     requests: list[str] = field(default_factory=list)
     ranged_bytes: int = 0
@@ -52,6 +56,14 @@ class RangeHandler(SimpleHTTPRequestHandler):
         state = self.state
         with state.lock:
             state.requests.append(f"{self.path} {self.headers.get('Range')}")
+            state.authorizations.append((self.path, self.headers.get("Authorization")))
+        redirect = state.redirects.get(self.path)
+        if redirect is not None:
+            self.send_response(redirect[0])
+            self.send_header("Location", redirect[1])
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
         if state.delay_s:
             time.sleep(state.delay_s)
         path = Path(self.translate_path(self.path))
@@ -123,7 +135,16 @@ class RangeHandler(SimpleHTTPRequestHandler):
 @pytest.fixture()
 def http_root(tmp_path: Path) -> Iterator[tuple[str, ServerState]]:
     """(base URL, state) of a threaded Range server over a fresh folder, on 127.0.0.1."""
-    root = tmp_path / "www"
+    yield from _server(tmp_path / "www")
+
+
+@pytest.fixture()
+def other_http_root(tmp_path: Path) -> Iterator[tuple[str, ServerState]]:
+    """A second server (another port: another origin), for redirects across hosts."""
+    yield from _server(tmp_path / "www-other")
+
+
+def _server(root: Path) -> Iterator[tuple[str, ServerState]]:
     root.mkdir()
     state = ServerState(root)
     handler = type("Handler", (RangeHandler,), {"state": state})
