@@ -34,6 +34,8 @@ class ServerState:
     """Request path (query string included) -> (status, Location) answered instead."""
     authorizations: list[tuple[str, str | None]] = field(default_factory=list)
     """(path, Authorization header) of every GET."""
+    required_query: str | None = None
+    """Refuse (403) a GET of a file whose query string is not this (a signed URL's)."""
     served_bytes: int = 0
     requests: list[str] = field(default_factory=list)
     ranged_bytes: int = 0
@@ -69,6 +71,10 @@ class RangeHandler(SimpleHTTPRequestHandler):
         path = Path(self.translate_path(self.path))
         if path.is_dir() or not path.is_file():
             super().do_GET()
+            return
+        query = self.path.partition("?")[2]
+        if state.required_query is not None and query != state.required_query:
+            self.send_error(403, "signature does not match")
             return
         size = path.stat().st_size
         match = RANGE.match(self.headers.get("Range", "") or "")

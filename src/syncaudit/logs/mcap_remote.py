@@ -53,6 +53,7 @@ from syncaudit.remote.ranges import (
     read_head,
     read_range,
     release_tracker,
+    signed_url,
 )
 
 KIND = "mcap-remote-chunks"
@@ -326,7 +327,7 @@ class RemoteMcapLog(McapLog):
         self._tracker.chunks_total = len(summary.chunk_indexes) if summary else 0
         self._tracker.chunks_fetched = len(chunks)
         self._tracker.needed_chunk_bytes = sum(unit.length for unit in chunks)
-        return coalesce_units(chunks, self.url)
+        return coalesce_units(chunks, str(self.path))
 
     def fetch_stats(self) -> Tracker:
         """What this log's reading has fetched so far (shared with its workers)."""
@@ -373,7 +374,7 @@ class RemoteChunksUnitReader:
 
     def __init__(self, source: str, *, check_crc: bool = False) -> None:
         self.source = source
-        self._object = open_object(source)
+        self._object = open_object(signed_url(source))
         # The parent's tracker, inherited by fork: its counter, and the bytes it holds.
         self._tracker = find_tracker(source)
         self._counter = self._tracker.counter if self._tracker is not None else None

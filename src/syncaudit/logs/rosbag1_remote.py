@@ -47,6 +47,7 @@ from syncaudit.remote.ranges import (
     read_head,
     read_range,
     release_tracker,
+    signed_url,
 )
 
 KIND = "rosbag1-remote-chunk"
@@ -167,7 +168,9 @@ class RemoteRosbag1Log(Rosbag1Log):
                     cost=end - last.offset,
                 )
                 continue
-            runs.append(dataclasses.replace(span, source=self.url, kind=KIND, cost=span.length))
+            runs.append(
+                dataclasses.replace(span, source=str(self.path), kind=KIND, cost=span.length)
+            )
         return runs
 
     def fetch_stats(self) -> Tracker:
@@ -214,7 +217,7 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
         self._tracker: Tracker | None = None
         if source is None:
             return
-        self._object = open_object(source)
+        self._object = open_object(signed_url(source))
         self._tracker = find_tracker(source)  # the parent's, inherited by fork
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:

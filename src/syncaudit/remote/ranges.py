@@ -143,30 +143,49 @@ class Tracker:
 
 
 _TRACKERS: dict[str, Tracker] = {}
+"""Public URL (no query string, no user info) -> the tracker of the log behind it."""
 _TRACKERS_LOCK = threading.Lock()
 
 
 def acquire_tracker(url: str) -> Tracker:
-    """The tracker of `url` in this process (forked workers inherit it), made on first use."""
+    """The tracker of `url` in this process (forked workers inherit it), made on first use.
+
+    Kept under the public URL: read units and messages name the log by it, and the
+    tracker alone holds the URL as given (a signed URL's query string), for the readers
+    of this process and of the workers it forks (`signed_url`)."""
+    key = public_url(url)
     with _TRACKERS_LOCK:
-        tracker = _TRACKERS.get(url)
+        tracker = _TRACKERS.get(key)
         if tracker is None:
-            tracker = _TRACKERS[url] = Tracker(url)
+            tracker = _TRACKERS[key] = Tracker(url)
         tracker.users += 1
         return tracker
 
 
 def release_tracker(tracker: Tracker) -> None:
     """Drop one use of a tracker; the last user removes it."""
+    key = public_url(tracker.url)
     with _TRACKERS_LOCK:
         tracker.users -= 1
-        if tracker.users <= 0 and _TRACKERS.get(tracker.url) is tracker:
-            del _TRACKERS[tracker.url]
+        if tracker.users <= 0 and _TRACKERS.get(key) is tracker:
+            del _TRACKERS[key]
 
 
 def find_tracker(url: str) -> Tracker | None:
-    """The tracker of `url` if this process (or the parent it forked from) holds one."""
-    return _TRACKERS.get(url)
+    """The tracker of `url` (public or as given) if this process, or the parent it forked
+    from, holds one."""
+    return _TRACKERS.get(public_url(url))
+
+
+def signed_url(url: str) -> str:
+    """The URL as the log was opened with (query string, user info) for its public form,
+    where this process holds its tracker; else `url` itself.
+
+    Read units carry the public URL only (they may be shown); a worker turns it back
+    into the URL it must ask with here. A forked worker inherits the tracker; a spawned
+    worker gets the URL in its task (never shown) and opens the log with it first."""
+    tracker = find_tracker(url)
+    return tracker.url if tracker is not None else url
 
 
 @contextmanager
