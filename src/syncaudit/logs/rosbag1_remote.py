@@ -139,6 +139,7 @@ class RemoteRosbag1Log(Rosbag1Log):
     def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
         """No scan over ranged reads (it would read every record): refused, to be fetched."""
         self._tracker.ranged = False
+        self._tracker.whole_reason = f"ROS 1 bag {reason}: downloaded whole and scanned"
         raise RemoteUnindexedError(
             f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}"
         )

@@ -103,6 +103,8 @@ class FetchStats:
     chunks_fetched: int = 0
     chunks_total: int = 0
     ranged: bool = True
+    whole_reason: str = ""
+    """Why the log was downloaded whole rather than read by ranges (when `ranged` is false)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -126,6 +128,8 @@ class Tracker:
     chunks_fetched: int = 0
     chunks_total: int = 0
     ranged: bool = True
+    whole_reason: str = ""
+    """Why the log cannot be read by ranges (set with `ranged = False`)."""
     users: int = 0
 
     def stats(self) -> dict[str, Any]:
@@ -139,6 +143,7 @@ class Tracker:
             chunks_fetched=self.chunks_fetched,
             chunks_total=self.chunks_total,
             ranged=self.ranged,
+            whole_reason=self.whole_reason,
         ).to_dict()
 
 
