@@ -121,3 +121,12 @@ def test_a_sqlite_bag_prefix_is_downloaded_whole_saying_why_once(
     assert read["ranged"] is False and read["whole_reason"] == SQLITE_REASON
     assert log.get("error") is None
     assert json.dumps(log).count("random") + json.dumps(log).count("B-tree") == 1
+
+
+def test_a_url_that_is_no_log_says_so(http_root: tuple[str, ServerState]) -> None:
+    from syncaudit.errors import LogOpenError
+
+    base, state = http_root
+    (state.root / "notes.txt").write_text("hello")
+    with pytest.raises(LogOpenError, match=r"notes.txt: neither an .mcap/.bag file nor a ROS 2"):
+        open_log(f"{base}/notes.txt?sig=secret")

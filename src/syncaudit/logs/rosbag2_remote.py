@@ -90,7 +90,12 @@ class RemoteMcapBag(McapBag):
         where = f"{self.path}/metadata.yaml"
         obj = open_object(file_url(self.url, "metadata.yaml"))
         counter = self._tracker.counter
-        data, size = read_head(obj, METADATA_BYTES, counter)
+        try:
+            data, size = read_head(obj, METADATA_BYTES, counter)
+        except LogOpenError as exc:
+            raise LogOpenError(
+                f"{self.path}: neither an .mcap/.bag file nor a ROS 2 bag prefix ({exc})"
+            ) from None
         if size > MAX_METADATA_BYTES:
             raise LogOpenError(f"{where}: {size} bytes, more than any bag's metadata")
         if size > len(data):
