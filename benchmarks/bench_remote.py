@@ -21,8 +21,12 @@ The log: `--quick` (alias `--short`) the bundled sample (seconds; run by the tes
 by default the 2 GB log of `bench_audit.py` from its cache (`--cache-dir`, never written
 to when the log is there); `--log PATH` any MCAP with `PATH.rig.yaml` beside it.
 `--clients` instead measures the HTTP clients the reader could use on the same server.
+`--transfer` adds the transfer alone (the log moved into one buffer by `preadv` and by
+ranged GETs, client and server CPU split into user and system) and the floor ratio that
+CPU puts under the audit on this machine's cores, with and without the server's share.
 
-    flock /work/bench/machine.lock python benchmarks/bench_remote.py --cache-dir /work/bench/cache
+    flock /work/bench/machine.lock python benchmarks/bench_remote.py --cache-dir /work/bench/cache \
+        --repeat 5 --transfer
 """
 
 from __future__ import annotations
