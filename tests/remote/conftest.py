@@ -47,6 +47,7 @@ class RangeHandler(SimpleHTTPRequestHandler):
     """Static files with single-range `Range: bytes=a-b` support (RFC 9110 206 replies)."""
 
     state: ServerState
+    disable_nagle_algorithm = True  # TCP_NODELAY, as real servers (nginx, aiohttp) set it
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, directory=str(self.state.root), **kwargs)
