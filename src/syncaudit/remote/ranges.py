@@ -6,10 +6,11 @@ socket): each range is one `GET` with `Range: bytes=a-b`, read with `readinto` s
 into the caller's buffer (no intermediate copy; `benchmarks/bench_remote.py --clients`
 measured it against urllib3, requests and fsspec). Redirects (301, 302, 303, 307, 308)
 are followed, at most `MAX_REDIRECTS` per request, keeping the Range header; user info
-in the URL is sent as Basic credentials to its own host only, never after a redirect to
-another host (as curl and requests do). A permanent redirect (301, 308) is remembered
-for the object's later ranges; a temporary one is asked again each time. Other stores (s3://, gs://, az://)
-go through fsspec: each range is one `cat_file(path, start, end)`.
+in the URL is sent as Basic credentials to its own origin only, never after a redirect
+to another host, port or scheme (as curl and requests do). A permanent redirect (301,
+308) is remembered for the object's later ranges; a temporary one is asked again each
+time. Other stores (s3://, gs://, az://) go through fsspec: each range is one
+`cat_file(path, start, end)`.
 
 A failed or dropped read is retried from the byte where it stopped, `TRIES` attempts in
 all per range, then a LogReadError (exit 3) names the URL (without query string or user
