@@ -2,8 +2,9 @@
 
 An MCAP file, a ROS 1 bag or a ROS 2 bag prefix with MCAP storage is opened by
 `logs.open_log(URL)` (its index fetched by the parent, its chunk runs by each chunk worker
-into memory): nothing is written to disk. Other logs are copied to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows),
-else the system temp folder, and the copy is removed when the audit ends. Runs in the
+into memory): nothing is written to disk. Other logs are copied to
+$SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows), else the system temp
+folder, and the copy is removed when the audit ends. Runs in the
 gate's worker (a local process or a cluster worker), so the bytes travel from the object
 store to where the audit runs, never through the driver.
 """
