@@ -325,7 +325,7 @@ def floor_ratio(figures: dict[str, Any], cores: int) -> dict[str, float]:
     extra = figures["transfer"]["http_extra_cpu_s"]
     http = figures["transfer"]["http"]
     server = http["server_user_s"] + http["server_sys_s"]
-    used = local_cpu / local_s
+    used = max(local_cpu, 0.01) / local_s  # (CPU times tick in 10 ms)
     return {
         "local_cores_used": round(used, 2),
         "floor_all_cores": round((local_cpu + extra) / cores / local_s, 3),
