@@ -130,3 +130,27 @@ def test_a_url_that_is_no_log_says_so(http_root: tuple[str, ServerState]) -> Non
     (state.root / "notes.txt").write_text("hello")
     with pytest.raises(LogOpenError, match=r"notes.txt: neither an .mcap/.bag file nor a ROS 2"):
         open_log(f"{base}/notes.txt?sig=secret")
+
+
+def test_the_gate_reads_an_mcap_bag_prefix_by_ranges(
+    http_root: tuple[str, ServerState], split_bag: tuple[Path, Rig], tmp_path: Path
+) -> None:
+    base, state = http_root
+    folder, rig = split_bag
+    bag = state.root / "bags" / "car9" / folder.name
+    bag.mkdir(parents=True)  # a real folder: the listing does not follow folder links
+    for file in folder.iterdir():
+        (bag / file.name).symlink_to(file)
+    rig_file = tmp_path / "rig.json"
+    rig_file.write_text(rig.model_dump_json())
+    policy = parse_policy({**POLICY, "default_rig": str(rig_file)}, "policy.yaml")
+    summary = tmp_path / "summary.json"
+    run = run_gate([f"{base}/bags/"], policy, GateOptions(db=None, json_out=summary, jobs=2))
+    (log,) = json.loads(summary.read_text())["logs"]
+    assert log["path"] == f"{base}/bags/car9/{folder.name}" and run.logs[0].error is None
+    read = log["remote_read"]
+    assert read["ranged"] is True and read["whole_reason"] == ""
+    assert read["chunks_fetched"] == read["chunks_total"] > 0
+    assert read["size_bytes"] == sum(f.stat().st_size for f in folder.glob("*.mcap"))
+    files = [r for r in state.requests if r.split()[0].endswith((".mcap", ".yaml"))]
+    assert files and all(" bytes=" in r for r in files)  # (the rest: folder listings)
