@@ -1102,7 +1102,18 @@ def _store_figures(cache: Path, figures: list[Figures], load: float) -> None:
             "same": f.same,
             "measured": f"stored run of {when}, syncaudit {_git_rev()}, load {load:.2f}",
             "runs": {
-                n: {k: getattr(r, k) for k in ("wall_s", "cpu_s", "rss_mb", "pss_mb", "returncode")}
+                n: {
+                    k: getattr(r, k)
+                    for k in (
+                        "wall_s",
+                        "cpu_s",
+                        "rss_mb",
+                        "pss_mb",
+                        "returncode",
+                        "other_cpu_s",
+                        "warm_gbps",
+                    )
+                }
                 for n, r in f.runs.items()
             },
         }
@@ -1132,10 +1143,10 @@ def measure_container(
             ("floor", floor_argv),
             ("limit", limit_argv),
         ):
-            _warm_any(path)
-            runs.setdefault(name, []).append(
-                measure(f"{kind} {size} {name}", argv, scratch, timeout_s)
-            )
+            warm_gbps = _warm_any(path)
+            run = measure(f"{kind} {size} {name}", argv, scratch, timeout_s)
+            run.warm_gbps = warm_gbps
+            runs.setdefault(name, []).append(run)
     medians = {name: median_run(r) for name, r in runs.items()}
     same = "-"
     if medians["audit"].ok:
@@ -1177,10 +1188,17 @@ def whole_file_table(figures: list[Figures]) -> list[str]:
     head = (
         f"{'container':<17}{'log':>4}{'on disk':>10}{'audit s':>9}{'floor s':>9}{'limit s':>9}"
         f"{'audit/floor':>12}{'audit/limit':>12}{'audit MB':>10}{'CPU s audit/floor/limit':>25}"
-        "  same result as bare mcap"
+        f"{'others':>18}{'warm GB/s':>11}  same result as bare mcap"
     )
     lines = [head, "-" * len(head)]
     for f in figures:
+        # Cores the rest of the machine kept busy during each median run, and the slowest
+        # page-cache warm-up read before them (low: the file was partly read from disk).
+        others = " / ".join(
+            _fmt(f.runs[n].other_cpu_s / f.runs[n].wall_s, 2) if f.ok(n) else "-"
+            for n in ("audit", "floor", "limit")
+        )
+        warm = min(f.runs[n].warm_gbps for n in ("audit", "floor", "limit") if n in f.runs)
 
         def wall(name: str, f: Figures = f) -> str:
             return f"{f.wall(name):.2f}" if f.ok(name) else "FAILED"
@@ -1193,7 +1211,8 @@ def whole_file_table(figures: list[Figures]) -> list[str]:
         lines.append(
             f"{f.kind:<17}{f.size:>4}{_gb(f.disk_bytes):>10}{wall('audit'):>9}{wall('floor'):>9}"
             f"{wall('limit'):>9}{_ratio(f.wall('audit'), f.wall('floor')):>12}"
-            f"{_ratio(f.wall('audit'), f.wall('limit')):>12}{_fmt(pss, 0):>10}{cpu:>25}  {f.same}"
+            f"{_ratio(f.wall('audit'), f.wall('limit')):>12}{_fmt(pss, 0):>10}{cpu:>25}"
+            f"{others:>18}{_fmt(warm, 1):>11}  {f.same}"
             + ("" if f.measured == "now" else f"  ({f.measured})")
         )
         for run in f.runs.values():
@@ -1208,6 +1227,7 @@ def per_gb_table(figures: list[Figures]) -> list[str]:
     head = (
         f"{'container':<17}{'extra GB':>9}{'audit s/GB':>11}{'floor s/GB':>11}{'limit s/GB':>11}"
         f"{'audit/floor':>12}{'audit/limit':>12}{'audit fixed s':>14}"
+        f"{'CPU s/GB audit/floor/limit':>29}"
     )
     lines = [head, "-" * len(head)]
     by_kind: dict[str, dict[str, Figures]] = {}
@@ -1221,10 +1241,16 @@ def per_gb_table(figures: list[Figures]) -> list[str]:
         extra_gb = (two.disk_bytes - one.disk_bytes) / 1e9
         rate = {n: (two.wall(n) - one.wall(n)) / extra_gb for n in ("audit", "floor", "limit")}
         fixed = one.wall("audit") - rate["audit"] * one.disk_bytes / 1e9
+        cpu = " / ".join(
+            f"{(two.runs[n].cpu_s - one.runs[n].cpu_s) / extra_gb:.2f}"
+            if one.ok(n) and two.ok(n)
+            else "-"
+            for n in ("audit", "floor", "limit")
+        )
         lines.append(
             f"{kind:<17}{extra_gb:>9.2f}{_fmt(rate['audit'], 3):>11}{_fmt(rate['floor'], 3):>11}"
             f"{_fmt(rate['limit'], 3):>11}{_ratio(rate['audit'], rate['floor']):>12}"
-            f"{_ratio(rate['audit'], rate['limit']):>12}{_fmt(fixed, 2):>14}"
+            f"{_ratio(rate['audit'], rate['limit']):>12}{_fmt(fixed, 2):>14}{cpu:>29}"
         )
     return lines
 
