@@ -358,6 +358,7 @@ def measure(
     timeout_s: float,
     cwd: Path | None = None,
     warm: Path | None = None,
+    env: dict[str, str] | None = None,
 ) -> Run:
     """Run `argv` once, with stdout/stderr to files in `scratch`, and measure it; read
     `warm` first so that the run finds its log in the page cache."""
@@ -370,7 +371,7 @@ def measure(
         busy_before = _machine_busy_s()
         start = time.perf_counter()
         proc = subprocess.Popen(
-            run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True
+            run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True, env=env
         )
         sampler = TreeSampler(proc.pid)
         sampler.start()
@@ -1131,26 +1132,43 @@ def _stored_figures(cache: Path, kind: str, size: str) -> Figures | None:
 
 
 def measure_container(
-    kind: str, size: str, path: Path, facts: LogFacts, scratch: Path, timeout_s: float, repeat: int
+    kind: str,
+    size: str,
+    path: Path,
+    facts: LogFacts,
+    scratch: Path,
+    timeout_s: float,
+    repeat: int,
+    baseline: dict[str, str] | None = None,
 ) -> Figures:
-    """Audit, floor and limit on one container file/folder, `repeat` interleaved rounds."""
+    """Audit, floor and limit on one container file/folder, `repeat` interleaved rounds;
+    with `baseline` (an environment), the audit of another syncaudit too ("baseline")."""
     floor_argv, limit_argv = container_commands(kind, path, facts.audit_topics)
     json_out = scratch / f"audit-{kind}-{size}.json"
+    contenders: list[tuple[str, list[str], dict[str, str] | None]] = [
+        ("audit", audit_argv(path, json_out), None),
+        ("floor", floor_argv, None),
+        ("limit", limit_argv, None),
+    ]
+    if baseline is not None:
+        base_json = scratch / f"audit-{kind}-{size}-baseline.json"
+        contenders.append(("baseline", audit_argv(path, base_json), baseline))
     runs: dict[str, list[Run]] = {}
     for _ in range(repeat):
-        for name, argv in (
-            ("audit", audit_argv(path, json_out)),
-            ("floor", floor_argv),
-            ("limit", limit_argv),
-        ):
+        for name, argv, env in contenders:
             warm_gbps = _warm_any(path)
-            run = measure(f"{kind} {size} {name}", argv, scratch, timeout_s)
+            run = measure(f"{kind} {size} {name}", argv, scratch, timeout_s, env=env)
             run.warm_gbps = warm_gbps
             runs.setdefault(name, []).append(run)
     medians = {name: median_run(r) for name, r in runs.items()}
     same = "-"
     if medians["audit"].ok:
         same = _same_result(scratch / f"audit-mcap-{size}.json", json_out)
+        if baseline is not None and medians["baseline"].ok:
+            # The JSON of both versions byte for byte (the path is the same file).
+            same += ", baseline's JSON " + (
+                "identical" if json_out.read_bytes() == base_json.read_bytes() else "DIFFERS"
+            )
     return Figures(kind, size, _disk_bytes(path), medians, same)
 
 
@@ -1161,6 +1179,7 @@ def bench_containers(
     timeout_s: float,
     repeat: int,
     kinds: Sequence[str] = CONTAINERS,
+    baseline: dict[str, str] | None = None,
 ) -> list[Figures]:
     """Audit, floor and limit on every container (of `kinds`) of each log in `logs`
     ("1x", "2x"), the sizes of one container one after the other; stored in the cache."""
@@ -1218,6 +1237,23 @@ def whole_file_table(figures: list[Figures]) -> list[str]:
         for run in f.runs.values():
             if not run.ok and f.measured == "now":
                 lines.append(f"    {run.name} FAILED: {run.error_line()}")
+    return lines
+
+
+def baseline_table(figures: list[Figures]) -> list[str]:
+    """The audit against the baseline syncaudit's, run for run interleaved."""
+    head = f"{'container':<17}{'log':>4}{'baseline s':>11}{'audit s':>9}{'change':>8}{'CPU s base/audit':>19}"
+    lines = [head, "-" * len(head)]
+    for f in figures:
+        if "baseline" not in f.runs or f.measured != "now":
+            continue
+        base, new = f.runs["baseline"], f.runs["audit"]
+        change = f"{new.wall_s / base.wall_s - 1:+.0%}" if base.ok and new.ok else "-"
+        cpu = f"{_fmt(base.cpu_s, 2)} / {_fmt(new.cpu_s, 2)}"
+        lines.append(
+            f"{f.kind:<17}{f.size:>4}{_fmt(base.wall_s, 2):>11}{_fmt(new.wall_s, 2):>9}"
+            f"{change:>8}{cpu:>19}"
+        )
     return lines
 
 
@@ -1318,6 +1354,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--skip-bz2",
         action="store_true",
         help="leave out the ROS 1 bz2 bag (minutes per run; its conversion too)",
+    )
+    parser.add_argument(
+        "--baseline-src",
+        type=Path,
+        help="containers: also audit with syncaudit imported from this src folder (e.g. "
+        "`git archive <commit> src | tar -x -C DIR`), interleaved: before/after",
     )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--convert-to", choices=CONTAINERS, help=argparse.SUPPRESS)
@@ -1518,7 +1560,13 @@ def _bench_containers(
         f"{repeat} round(s), load average {os.getloadavg()[0]:.2f} at the start:"
     )
     run_logs = {size: logs[size] for size in sizes}
-    figures = bench_containers(cache, run_logs, scratch, args.timeout_s, repeat, kinds)
+    baseline = None
+    if args.baseline_src is not None:
+        baseline = dict(os.environ, PYTHONPATH=str(args.baseline_src.resolve()))
+        _log(f"baseline: the audit also run with syncaudit from {args.baseline_src}")
+    figures = bench_containers(
+        cache, run_logs, scratch, args.timeout_s, repeat, kinds, baseline=baseline
+    )
     # Sizes not run now: the last stored figures, marked with when they were measured.
     for kind in kinds:
         for size in ("1x", "2x"):
@@ -1534,6 +1582,11 @@ def _bench_containers(
     )
     for line in per_gb_table(figures):
         _log(line)
+    if baseline is not None:
+        _log()
+        _log("the audit against the baseline (same rounds, interleaved; medians):")
+        for line in baseline_table(figures):
+            _log(line)
     _log(f"load average at the end: {os.getloadavg()[0]:.2f} (1 min)")
     return 0
 
