@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import pytest
 
 import syncaudit.analysis.sync as sync_module
@@ -30,6 +29,7 @@ from syncaudit.analysis.pairing import (
 )
 from syncaudit.audit import AuditResult, audit_log
 from syncaudit.camera.sequences import field_counter, header_seq_counter, incomparable
+from syncaudit.columns.table import Table, int_column
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
@@ -216,19 +216,19 @@ def test_shared_topics_published_in_another_order_fail_the_time_check() -> None:
     """Two topics of the same cameras whose driver publishes them in different orders: the
     numbers are alike in kind, but pair frames with other cameras' triggers; time decides."""
     starts = [T0 + 100_000_000 * i for i in range(6)]
-    frames = pd.DataFrame(
+    frames = Table(
         {
-            "frame_sequence": pd.array([0, 2, 4, 6, 8, 10], dtype="Int64"),
-            "header_stamp_ns": pd.array(starts, dtype="Int64"),
-            "log_time_ns": pd.array([s + 9_000_000 for s in starts], dtype="int64"),
-            "exposure_start_ns": pd.array(starts, dtype="Int64"),
+            "frame_sequence": int_column([0, 2, 4, 6, 8, 10]),
+            "header_stamp_ns": int_column(starts),
+            "log_time_ns": int_column([s + 9_000_000 for s in starts]),
+            "exposure_start_ns": int_column(starts),
         }
     )
-    triggers = pd.DataFrame(
+    triggers = Table(
         {
-            "frame_sequence": pd.array([1, 3, 5, 7, 9, 11], dtype="Int64"),
-            "log_time_ns": pd.array(starts, dtype="int64"),
-            "exposure_start_ns": pd.array(starts, dtype="Int64"),
+            "frame_sequence": int_column([1, 3, 5, 7, 9, 11]),
+            "log_time_ns": int_column(starts),
+            "exposure_start_ns": int_column(starts),
         }
     )
     counters = (
