@@ -85,18 +85,19 @@ FLOOR_CODE = """\
 import sys
 from mcap.reader import make_reader
 
-path, topics = sys.argv[1], sys.argv[2:]
+files, topics = sys.argv[1].split(","), sys.argv[2:]
 count = 0
-with open(path, "rb") as f:
-    for _ in make_reader(f).iter_messages(topics=topics):
-        count += 1
+for path in files:
+    with open(path, "rb") as f:
+        for _ in make_reader(f).iter_messages(topics=topics):
+            count += 1
 print(count)
 """
 """The floor for a Python tool: bare mcap iteration over the audit's topics, nothing done
-per message (counting them only proves they were all read)."""
+per message (counting them only proves they were all read); a bag folder's MCAP files
+(comma-separated) in turn."""
 
-LIMIT_CODE = """\
-import mmap
+MCAP_LIMIT = """\
 import multiprocessing
 import os
 import sys
@@ -137,25 +138,29 @@ def work(job):
 
 
 if __name__ == "__main__":
-    path, workers = sys.argv[1], os.cpu_count() or 1
-    with open(path, "rb") as f:
-        chunks = make_reader(f).get_summary().chunk_indexes
-    # A chunk's records are the last field of its record: they end where the chunk ends.
-    spans = [
-        (c.chunk_start_offset + c.chunk_length - c.compressed_size, c.compressed_size,
-         c.compression, c.uncompressed_size)
-        for c in chunks
-    ]
-    size = max(1, len(spans) // (8 * workers))
-    jobs = [(path, spans[i : i + size]) for i in range(0, len(spans), size)]
+    files, workers = sys.argv[1].split(","), os.cpu_count() or 1
+    jobs, chunks = [], []
+    for path in files:
+        with open(path, "rb") as f:
+            indexes = make_reader(f).get_summary().chunk_indexes
+        # A chunk's records are the last field of its record: they end where the chunk ends.
+        spans = [
+            (c.chunk_start_offset + c.chunk_length - c.compressed_size, c.compressed_size,
+             c.compression, c.uncompressed_size)
+            for c in indexes
+        ]
+        size = max(1, len(spans) // (8 * workers))
+        jobs += [(path, spans[i : i + size]) for i in range(0, len(spans), size)]
+        chunks += indexes
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         total = sum(pool.imap_unordered(work, jobs))
     expected = sum(c.uncompressed_size for c in chunks)
     assert total == expected, (total, expected)
     print(len(chunks), total, workers)
 """
-"""The machine's limit: every chunk read and decompressed (as recorded) by a pool of all
-cores, nothing else."""
+"""The machine's limit for MCAP files (a bare `.mcap`, or a bag folder's comma-separated
+files): every chunk read and decompressed (as recorded) by a pool of all cores, nothing
+else."""
 
 
 # ================================================================================ helpers
@@ -353,6 +358,7 @@ def measure(
     timeout_s: float,
     cwd: Path | None = None,
     warm: Path | None = None,
+    env: dict[str, str] | None = None,
 ) -> Run:
     """Run `argv` once, with stdout/stderr to files in `scratch`, and measure it; read
     `warm` first so that the run finds its log in the page cache."""
@@ -365,7 +371,7 @@ def measure(
         busy_before = _machine_busy_s()
         start = time.perf_counter()
         proc = subprocess.Popen(
-            run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True
+            run.argv, stdout=out, stderr=err, cwd=cwd or scratch, start_new_session=True, env=env
         )
         sampler = TreeSampler(proc.pid)
         sampler.start()
@@ -826,62 +832,6 @@ CONTAINERS: tuple[str, ...] = (
 )
 SPLIT_PARTS = 4
 
-MCAP_FILES_FLOOR = """\
-import sys
-from mcap.reader import make_reader
-
-files, topics = sys.argv[1].split(","), sys.argv[2:]
-count = 0
-for path in files:
-    with open(path, "rb") as f:
-        for _ in make_reader(f).iter_messages(topics=topics):
-            count += 1
-print(count)
-"""
-"""Floor of a bag folder with MCAP storage: mcap over each file in turn."""
-
-MCAP_FILES_LIMIT = """\
-import mmap, multiprocessing, os, sys
-import lz4.frame, zstandard
-from mcap.reader import make_reader
-
-def work(job):
-    # As LIMIT_CODE: each chunk read into a reused buffer (an uncompressed one too: every
-    # byte brought in), decompressed into another.
-    path, spans = job
-    dctx = zstandard.ZstdDecompressor()
-    out = bytearray(max(u for _, _, _, u in spans))
-    buf = bytearray(max(s for _, s, _, _ in spans))
-    total = 0
-    with open(path, "rb") as f:
-        for offset, size, compression, uncompressed in spans:
-            data = memoryview(buf)[:size]
-            assert os.preadv(f.fileno(), [data], offset) == size
-            if compression == "zstd":
-                r = dctx.stream_reader(data, read_across_frames=False, closefd=False)
-                got = r.readinto(memoryview(out)[:uncompressed]); r.close(); del r
-            elif compression == "lz4":
-                got = len(lz4.frame.decompress(data))
-            else:
-                got = len(data)
-            data.release()
-            total += got
-    return total
-
-if __name__ == "__main__":
-    files, workers = sys.argv[1].split(","), os.cpu_count() or 1
-    jobs = []
-    for path in files:
-        with open(path, "rb") as f:
-            chunks = make_reader(f).get_summary().chunk_indexes
-        spans = [(c.chunk_start_offset + c.chunk_length - c.compressed_size, c.compressed_size,
-                  c.compression, c.uncompressed_size) for c in chunks]
-        size = max(1, len(spans) // (8 * workers))
-        jobs += [(path, spans[i:i + size]) for i in range(0, len(spans), size)]
-    with multiprocessing.get_context("fork").Pool(workers) as pool:
-        print(sum(pool.imap_unordered(work, jobs)))
-"""
-
 SQLITE_FLOOR = """\
 import sqlite3, sys
 
@@ -999,66 +949,28 @@ def container_path(cache: Path, one: Path, kind: str) -> Path:
     }[kind]
 
 
-def _write_rosbag2(src: Path, dst: Path, parts: int, storage: str) -> None:
+def _write_rosbag2(src: Path, dst: Path, parts: int, storage: str, stem: str) -> None:
     """The bare MCAP's messages as a rosbag2 folder (rosbags' writer), split into `parts`
-    files by time as rosbag2 does (each file declares its channels anew)."""
-    import yaml
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
+    files by time as rosbag2 does (each file declares its channels anew), named `stem_N`."""
     from syncaudit.logs.mcap_log import McapLog
     from syncaudit.logs.typesys import TypeRegistry
+    from syncaudit.writers.rosbag2_split import SplitBagWriter
 
-    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with McapLog(src) as log:
         start, end = log.summary.start_ns, log.summary.end_ns
         assert start is not None and end is not None
         registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
-        topics = {name: info.msgtype for name, info in log.topics.items()}
-        dst.mkdir()
-        metas = []
+        topics = [(name, info.msgtype) for name, info in log.topics.items()]
+        bag = SplitBagWriter(dst, registry.store, storage=storage, stem=stem)
         stream = log.messages()
         pending = next(stream, None)
         for part in range(parts):
             hi = start + (end - start + 1) * (part + 1) // parts
-            scratch = dst / f".part{part}"
-            writer = Writer(scratch, version=8, storage_plugin=plugin)
-            writer.open()
-            conns = {
-                t: writer.add_connection(t, ty, typestore=registry.store)
-                for t, ty in topics.items()
-            }
+            bag.start_part(topics)
             while pending is not None and pending.log_time_ns < hi:
-                writer.write(conns[pending.topic], pending.log_time_ns, bytes(pending.data))
+                bag.write(pending.topic, pending.log_time_ns, bytes(pending.data))
                 pending = next(stream, None)
-            writer.close()
-            meta = yaml.safe_load((scratch / "metadata.yaml").read_text())[
-                "rosbag2_bagfile_information"
-            ]
-            for entry in meta["files"]:
-                name = f"{dst.name}_{part}{Path(entry['path']).suffix}"
-                (scratch / entry["path"]).rename(dst / name)
-                entry["path"] = name
-            shutil.rmtree(scratch)
-            metas.append(meta)
-    info = metas[0]
-    info["files"] = [f for m in metas for f in m["files"]]
-    info["relative_file_paths"] = [f["path"] for f in info["files"]]
-    info["message_count"] = sum(m["message_count"] for m in metas)
-    counts: dict[str, int] = {}
-    for m in metas:
-        for t in m["topics_with_message_count"]:
-            name = t["topic_metadata"]["name"]
-            counts[name] = counts.get(name, 0) + t["message_count"]
-    for t in info["topics_with_message_count"]:
-        t["message_count"] = counts[t["topic_metadata"]["name"]]
-    first = min(m["starting_time"]["nanoseconds_since_epoch"] for m in metas)
-    last = max(
-        m["starting_time"]["nanoseconds_since_epoch"] + m["duration"]["nanoseconds"] for m in metas
-    )
-    info["starting_time"] = {"nanoseconds_since_epoch": first}
-    info["duration"] = {"nanoseconds": last - first}
-    text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
-    (dst / "metadata.yaml").write_text(text)
+        bag.close()
 
 
 def convert_container(one: Path, kind: str, dst: Path) -> None:
@@ -1069,7 +981,8 @@ def convert_container(one: Path, kind: str, dst: Path) -> None:
     tmp.unlink(missing_ok=True)
     if kind in ("ros2-mcap", "ros2-mcap-split", "ros2-sqlite"):
         parts = SPLIT_PARTS if kind == "ros2-mcap-split" else 1
-        _write_rosbag2(one, tmp, parts, "sqlite" if kind == "ros2-sqlite" else "mcap")
+        storage = "sqlite" if kind == "ros2-sqlite" else "mcap"
+        _write_rosbag2(one, tmp, parts, storage, dst.name)
     else:  # ROS 1: rosbags' own converter, from the SQLite bag
         from rosbags.convert import convert
 
@@ -1123,10 +1036,10 @@ def container_commands(kind: str, path: Path, topics: list[str]) -> tuple[list[s
     """(floor argv, limit argv) for one container."""
     py = sys.executable
     if kind == "mcap":
-        return [py, "-c", FLOOR_CODE, str(path), *topics], [py, "-c", LIMIT_CODE, str(path)]
+        return [py, "-c", FLOOR_CODE, str(path), *topics], [py, "-c", MCAP_LIMIT, str(path)]
     if kind.startswith("ros2-mcap"):
         files = ",".join(str(p) for p in _storage_files(path, ".mcap"))
-        return [py, "-c", MCAP_FILES_FLOOR, files, *topics], [py, "-c", MCAP_FILES_LIMIT, files]
+        return [py, "-c", FLOOR_CODE, files, *topics], [py, "-c", MCAP_LIMIT, files]
     if kind == "ros2-sqlite":
         (db,) = _storage_files(path, ".db3")
         return [py, "-c", SQLITE_FLOOR, str(db), *topics], [
@@ -1146,68 +1059,243 @@ def _disk_bytes(path: Path) -> int:
 
 
 def _warm_any(path: Path) -> float:
-    """Warm the page cache for a file or every file of a folder; GB/s."""
+    """Warm the page cache for a file or every file of a folder; GB/s over all of them."""
     files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-    speeds = [warm_page_cache(p) for p in files]
-    return min(speeds) if speeds else float("nan")
+    start = time.perf_counter()
+    for p in files:
+        warm_page_cache(p)
+    return _disk_bytes(path) / 1e9 / (time.perf_counter() - start) if files else float("nan")
+
+
+@dataclasses.dataclass(slots=True)
+class Figures:
+    """The median runs of one container at one log size (this run's, or a stored one's)."""
+
+    kind: str
+    size: str
+    """"1x" or "2x"."""
+    disk_bytes: int
+    runs: dict[str, Run]
+    """"audit", "floor", "limit"."""
+    same: str
+    measured: str = "now"
+    """"now", or when and at which load a stored run measured it."""
+
+    def ok(self, name: str) -> bool:
+        run = self.runs.get(name)
+        return run is not None and run.ok
+
+    def wall(self, name: str) -> float:
+        return self.runs[name].wall_s if self.ok(name) else float("nan")
+
+
+RESULTS_FILE = "container-results.json"
+"""Each container's last figures per size, so a long container (bz2) can be measured one
+size per run and still get its per-GB figures."""
+
+
+def _store_figures(cache: Path, figures: list[Figures], load: float) -> None:
+    """Add this run's figures to the cache's results file (atomically)."""
+    path = cache / RESULTS_FILE
+    stored: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    when = dt.datetime.now().astimezone().isoformat(timespec="minutes")
+    for f in figures:
+        stored[f"{f.kind} {f.size}"] = {
+            "disk_bytes": f.disk_bytes,
+            "same": f.same,
+            "measured": f"stored run of {when}, syncaudit {_git_rev()}, load {load:.2f}",
+            "runs": {
+                n: {
+                    k: getattr(r, k)
+                    for k in (
+                        "wall_s",
+                        "cpu_s",
+                        "rss_mb",
+                        "pss_mb",
+                        "returncode",
+                        "other_cpu_s",
+                        "warm_gbps",
+                    )
+                }
+                for n, r in f.runs.items()
+            },
+        }
+    _write_json_atomic(path, stored)
+
+
+def _stored_figures(cache: Path, kind: str, size: str) -> Figures | None:
+    """A container's figures at one size from an earlier run, if any."""
+    path = cache / RESULTS_FILE
+    entry = json.loads(path.read_text()).get(f"{kind} {size}") if path.exists() else None
+    if entry is None:
+        return None
+    runs = {n: Run(f"{kind} {n}", [], **values) for n, values in entry["runs"].items()}
+    return Figures(kind, size, entry["disk_bytes"], runs, entry["same"], entry["measured"])
+
+
+def measure_container(
+    kind: str,
+    size: str,
+    path: Path,
+    facts: LogFacts,
+    scratch: Path,
+    timeout_s: float,
+    repeat: int,
+    baseline: dict[str, str] | None = None,
+) -> Figures:
+    """Audit, floor and limit on one container file/folder, `repeat` interleaved rounds;
+    with `baseline` (an environment), the audit of another syncaudit too ("baseline")."""
+    floor_argv, limit_argv = container_commands(kind, path, facts.audit_topics)
+    json_out = scratch / f"audit-{kind}-{size}.json"
+    contenders: list[tuple[str, list[str], dict[str, str] | None]] = [
+        ("audit", audit_argv(path, json_out), None),
+        ("floor", floor_argv, None),
+        ("limit", limit_argv, None),
+    ]
+    if baseline is not None:
+        base_json = scratch / f"audit-{kind}-{size}-baseline.json"
+        contenders.append(("baseline", audit_argv(path, base_json), baseline))
+    runs: dict[str, list[Run]] = {}
+    for _ in range(repeat):
+        for name, argv, env in contenders:
+            warm_gbps = _warm_any(path)
+            run = measure(f"{kind} {size} {name}", argv, scratch, timeout_s, env=env)
+            run.warm_gbps = warm_gbps
+            runs.setdefault(name, []).append(run)
+    medians = {name: median_run(r) for name, r in runs.items()}
+    same = "-"
+    # The bare MCAP's JSON is kept in the cache: the reference of runs without it.
+    reference = scratch.parent / f"reference-audit-{size}.json"
+    if medians["audit"].ok:
+        if kind == "mcap":
+            shutil.copyfile(json_out, reference)
+        same = _same_result(reference, json_out)
+        if baseline is not None and medians["baseline"].ok:
+            # The JSON of both versions byte for byte (the path is the same file).
+            same += ", baseline's JSON " + (
+                "identical" if json_out.read_bytes() == base_json.read_bytes() else "DIFFERS"
+            )
+    return Figures(kind, size, _disk_bytes(path), medians, same)
 
 
 def bench_containers(
     cache: Path,
-    one: LogFacts,
+    logs: dict[str, LogFacts],
     scratch: Path,
     timeout_s: float,
     repeat: int,
     kinds: Sequence[str] = CONTAINERS,
-) -> list[str]:
-    """Audit, floor and limit on every container (of `kinds`) of the 1x log; the table's
-    lines."""
-    paths = ensure_containers(cache, one.path, scratch, timeout_s, kinds)
-    rows: list[tuple[str, int, Run, Run, Run, str]] = []
-    for kind, path in paths.items():
-        floor_argv, limit_argv = container_commands(kind, path, one.audit_topics)
-        json_out = scratch / f"audit-{kind}.json"
-        runs: dict[str, list[Run]] = {}
-        for _ in range(repeat):
-            for name, argv in (
-                ("audit", audit_argv(path, json_out)),
-                ("floor", floor_argv),
-                ("limit", limit_argv),
-            ):
-                _warm_any(path)
-                runs.setdefault(name, []).append(
-                    measure(f"{kind} {name}", argv, scratch, timeout_s)
+    baseline: dict[str, str] | None = None,
+) -> list[Figures]:
+    """Audit, floor and limit on every container (of `kinds`) of each log in `logs`
+    ("1x", "2x"), the sizes of one container one after the other; stored in the cache."""
+    paths = {
+        size: ensure_containers(cache, facts.path, scratch, timeout_s, kinds)
+        for size, facts in logs.items()
+    }
+    load = os.getloadavg()[0]
+    out: list[Figures] = []
+    for kind in kinds:
+        for size, facts in logs.items():
+            out.append(
+                measure_container(
+                    kind, size, paths[size][kind], facts, scratch, timeout_s, repeat, baseline
                 )
-        audit, floor, limit = (median_run(runs[n]) for n in ("audit", "floor", "limit"))
-        same = "-"
-        if audit.ok:
-            same = _same_result(scratch / "audit-mcap.json", json_out)
-        rows.append((kind, _disk_bytes(path), audit, floor, limit, same))
+            )
+    _store_figures(cache, out, load)
+    return out
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"x{a / b:.2f}" if a == a and b == b and b > 0 else "-"
+
+
+def whole_file_table(figures: list[Figures]) -> list[str]:
+    """Per container and size: wall, ratios, CPU and memory of the median runs."""
     head = (
-        f"{'container':<17}{'on disk':>10}{'audit s':>9}{'floor s':>9}{'limit s':>9}"
+        f"{'container':<17}{'log':>4}{'on disk':>10}{'audit s':>9}{'floor s':>9}{'limit s':>9}"
         f"{'audit/floor':>12}{'audit/limit':>12}{'audit MB':>10}{'CPU s audit/floor/limit':>25}"
-        "  same result as bare mcap"
+        f"  {'others audit/floor/limit':>18}{'warm GB/s':>11}  same result as bare mcap"
     )
     lines = [head, "-" * len(head)]
-    for kind, size, audit, floor, limit, same in rows:
+    for f in figures:
+        # Cores the rest of the machine kept busy during each median run, and the slowest
+        # page-cache warm-up read before them (low: the file was partly read from disk).
+        others = " / ".join(
+            _fmt(f.runs[n].other_cpu_s / f.runs[n].wall_s, 2) if f.ok(n) else "-"
+            for n in ("audit", "floor", "limit")
+        )
+        warm = min(f.runs[n].warm_gbps for n in ("audit", "floor", "limit") if n in f.runs)
 
-        def ratio(a: Run, b: Run) -> str:
-            return f"x{a.wall_s / b.wall_s:.2f}" if a.ok and b.ok else "-"
-
-        def wall(r: Run) -> str:
-            return f"{r.wall_s:.2f}" if r.ok else "FAILED"
+        def wall(name: str, f: Figures = f) -> str:
+            return f"{f.wall(name):.2f}" if f.ok(name) else "FAILED"
 
         # CPU time (user+sys of the tree) holds up better than wall on a shared machine.
-        cpu = " / ".join(f"{r.cpu_s:.2f}" if r.ok else "-" for r in (audit, floor, limit))
-
-        lines.append(
-            f"{kind:<17}{_gb(size):>10}{wall(audit):>9}{wall(floor):>9}{wall(limit):>9}"
-            f"{ratio(audit, floor):>12}{ratio(audit, limit):>12}{_fmt(audit.pss_mb, 0):>10}"
-            f"{cpu:>25}  {same}"
+        cpu = " / ".join(
+            f"{f.runs[n].cpu_s:.2f}" if f.ok(n) else "-" for n in ("audit", "floor", "limit")
         )
-        for run in (audit, floor, limit):
-            if not run.ok:
+        pss = f.runs["audit"].pss_mb if f.ok("audit") else float("nan")
+        lines.append(
+            f"{f.kind:<17}{f.size:>4}{_gb(f.disk_bytes):>10}{wall('audit'):>9}{wall('floor'):>9}"
+            f"{wall('limit'):>9}{_ratio(f.wall('audit'), f.wall('floor')):>12}"
+            f"{_ratio(f.wall('audit'), f.wall('limit')):>12}{_fmt(pss, 0):>10}{cpu:>25}"
+            f"  {others:>18}{_fmt(warm, 1):>11}  {f.same}"
+            + ("" if f.measured == "now" else f"  ({f.measured})")
+        )
+        for run in f.runs.values():
+            if not run.ok and f.measured == "now":
                 lines.append(f"    {run.name} FAILED: {run.error_line()}")
+    return lines
+
+
+def baseline_table(figures: list[Figures]) -> list[str]:
+    """The audit against the baseline syncaudit's, run for run interleaved."""
+    head = f"{'container':<17}{'log':>4}{'baseline s':>11}{'audit s':>9}{'change':>8}{'CPU s base/audit':>19}"
+    lines = [head, "-" * len(head)]
+    for f in figures:
+        if "baseline" not in f.runs or f.measured != "now":
+            continue
+        base, new = f.runs["baseline"], f.runs["audit"]
+        change = f"{new.wall_s / base.wall_s - 1:+.0%}" if base.ok and new.ok else "-"
+        cpu = f"{_fmt(base.cpu_s, 2)} / {_fmt(new.cpu_s, 2)}"
+        lines.append(
+            f"{f.kind:<17}{f.size:>4}{_fmt(base.wall_s, 2):>11}{_fmt(new.wall_s, 2):>9}"
+            f"{change:>8}{cpu:>19}"
+        )
+    return lines
+
+
+def per_gb_table(figures: list[Figures]) -> list[str]:
+    """Per container: marginal seconds per GB (2x minus 1x) of audit, floor and limit,
+    their ratios, and the audit's fixed cost they imply (issue 13 judges these apart)."""
+    head = (
+        f"{'container':<17}{'extra GB':>9}{'audit s/GB':>11}{'floor s/GB':>11}{'limit s/GB':>11}"
+        f"{'audit/floor':>12}{'audit/limit':>12}{'audit fixed s':>14}"
+        f"{'CPU s/GB audit/floor/limit':>29}"
+    )
+    lines = [head, "-" * len(head)]
+    by_kind: dict[str, dict[str, Figures]] = {}
+    for f in figures:
+        by_kind.setdefault(f.kind, {})[f.size] = f
+    for kind, sizes in by_kind.items():
+        one, two = sizes.get("1x"), sizes.get("2x")
+        if one is None or two is None:
+            lines.append(f"{kind:<17}  no per-GB figures: the {'2x' if one else '1x'} log not run")
+            continue
+        extra_gb = (two.disk_bytes - one.disk_bytes) / 1e9
+        rate = {n: (two.wall(n) - one.wall(n)) / extra_gb for n in ("audit", "floor", "limit")}
+        fixed = one.wall("audit") - rate["audit"] * one.disk_bytes / 1e9
+        cpu = " / ".join(
+            f"{(two.runs[n].cpu_s - one.runs[n].cpu_s) / extra_gb:.2f}"
+            if one.ok(n) and two.ok(n)
+            else "-"
+            for n in ("audit", "floor", "limit")
+        )
+        lines.append(
+            f"{kind:<17}{extra_gb:>9.2f}{_fmt(rate['audit'], 3):>11}{_fmt(rate['floor'], 3):>11}"
+            f"{_fmt(rate['limit'], 3):>11}{_ratio(rate['audit'], rate['floor']):>12}"
+            f"{_ratio(rate['audit'], rate['limit']):>12}{_fmt(fixed, 2):>14}{cpu:>29}"
+        )
     return lines
 
 
@@ -1264,6 +1352,23 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="skip the bare-MCAP rounds (audit, floor, limit, peers, 2x log): containers only",
     )
+    parser.add_argument(
+        "--sizes",
+        default="1x,2x",
+        help="container logs to measure: 1x, 2x or 1x,2x (default); a size not run takes the "
+        f"figures stored by the last run that did (in CACHE/{RESULTS_FILE}) for the per-GB table",
+    )
+    parser.add_argument(
+        "--skip-bz2",
+        action="store_true",
+        help="leave out the ROS 1 bz2 bag (minutes per run; its conversion too)",
+    )
+    parser.add_argument(
+        "--baseline-src",
+        type=Path,
+        help="containers: also audit with syncaudit imported from this src folder (e.g. "
+        "`git archive <commit> src | tar -x -C DIR`), interleaved: before/after",
+    )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--convert-to", choices=CONTAINERS, help=argparse.SUPPRESS)
     parser.add_argument("--convert-from", type=Path, help=argparse.SUPPRESS)
@@ -1309,6 +1414,8 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     _log(describe_log("2x", two_meta, two))
 
     kinds = [k.strip() for k in args.containers.split(",") if k.strip()]
+    if args.skip_bz2:
+        kinds = [k for k in kinds if k != "ros1-bz2"]
     unknown = [k for k in kinds if k not in CONTAINERS]
     if unknown:
         raise SystemExit(
@@ -1316,7 +1423,7 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
         )
     if args.only_containers:
         warm_bytecode()
-        return _bench_containers(args, cache, one, scratch, kinds)
+        return _bench_containers(args, cache, {"1x": one, "2x": two}, scratch, kinds)
 
     bin_dir: Path | None = None
     peer_note = "skipped (--skip-peers)"
@@ -1338,7 +1445,7 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     json_1x, json_2x = scratch / "audit-1x.json", scratch / "audit-2x.json"
     floor_argv = [sys.executable, "-c", FLOOR_CODE, str(one.path), *one.audit_topics]
     floor2_argv = [sys.executable, "-c", FLOOR_CODE, str(two.path), *two.audit_topics]
-    limit_argv = [sys.executable, "-c", LIMIT_CODE, str(one.path)]
+    limit_argv = [sys.executable, "-c", MCAP_LIMIT, str(one.path)]
     cores = f"limit: {os.cpu_count()}-core decompress"
     rounds: dict[str, list[Run]] = {}
     for _ in range(repeat):
@@ -1436,25 +1543,58 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     for line in verdicts(audit, floor, limit, audit2, peers, peer_note):
         _log("  " + line)
     if not args.skip_containers:
-        _bench_containers(args, cache, one, scratch, kinds)
+        _bench_containers(args, cache, {"1x": one, "2x": two}, scratch, kinds)
     return 0 if audit.ok else 1
 
 
 def _bench_containers(
-    args: argparse.Namespace, cache: Path, one: LogFacts, scratch: Path, kinds: Sequence[str]
+    args: argparse.Namespace,
+    cache: Path,
+    logs: dict[str, LogFacts],
+    scratch: Path,
+    kinds: Sequence[str],
 ) -> int:
-    """The container table (issue 13); 0."""
+    """The container tables (issue 13): whole-file and per GB; 0."""
     repeat = max(1, args.repeat)
+    sizes = [s.strip() for s in args.sizes.split(",") if s.strip()]
+    if not set(sizes) <= {"1x", "2x"} or not sizes:
+        raise SystemExit(f"--sizes: {args.sizes!r}, expected 1x, 2x or 1x,2x")
     _log()
     _log(
-        "every container (issue 13), the 1x log converted once with rosbags (writer for the "
-        "ROS 2 folders, rosbags-convert for ROS 1); floor: the container's standard library "
+        "every container (issue 13), the 1x and 2x logs converted once with rosbags (writer for "
+        "the ROS 2 folders, rosbags-convert for ROS 1); floor: the container's standard library "
         f"(mcap, sqlite3, rosbags) in one process; limit: {os.cpu_count()} processes reading "
         "(and decompressing) every chunk/row; median of "
         f"{repeat} round(s), load average {os.getloadavg()[0]:.2f} at the start:"
     )
-    for line in bench_containers(cache, one, scratch, args.timeout_s, repeat, kinds):
+    run_logs = {size: logs[size] for size in sizes}
+    baseline = None
+    if args.baseline_src is not None:
+        baseline = dict(os.environ, PYTHONPATH=str(args.baseline_src.resolve()))
+        _log(f"baseline: the audit also run with syncaudit from {args.baseline_src}")
+    figures = bench_containers(
+        cache, run_logs, scratch, args.timeout_s, repeat, kinds, baseline=baseline
+    )
+    # Sizes not run now: the last stored figures, marked with when they were measured.
+    for kind in kinds:
+        for size in ("1x", "2x"):
+            if size not in sizes and (stored := _stored_figures(cache, kind, size)) is not None:
+                figures.append(stored)
+    figures.sort(key=lambda f: (CONTAINERS.index(f.kind), f.size))
+    _log("whole file:")
+    for line in whole_file_table(figures):
         _log(line)
+    _log()
+    _log(
+        "per GB (2x log minus 1x log, each container's own files; fixed = audit 1x - rate x size):"
+    )
+    for line in per_gb_table(figures):
+        _log(line)
+    if baseline is not None:
+        _log()
+        _log("the audit against the baseline (same rounds, interleaved; medians):")
+        for line in baseline_table(figures):
+            _log(line)
     _log(f"load average at the end: {os.getloadavg()[0]:.2f} (1 min)")
     return 0
 

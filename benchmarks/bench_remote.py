@@ -21,8 +21,12 @@ The log: `--quick` (alias `--short`) the bundled sample (seconds; run by the tes
 by default the 2 GB log of `bench_audit.py` from its cache (`--cache-dir`, never written
 to when the log is there); `--log PATH` any MCAP with `PATH.rig.yaml` beside it.
 `--clients` instead measures the HTTP clients the reader could use on the same server.
+`--transfer` adds the transfer alone (the log moved into one buffer by `preadv` and by
+ranged GETs, client and server CPU split into user and system) and the floor ratio that
+CPU puts under the audit on this machine's cores, with and without the server's share.
 
-    flock /work/bench/machine.lock python benchmarks/bench_remote.py --cache-dir /work/bench/cache
+    flock /work/bench/machine.lock python benchmarks/bench_remote.py --cache-dir /work/bench/cache \
+        --repeat 5 --transfer
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -55,6 +60,10 @@ class _Handler(SimpleHTTPRequestHandler):
     """Static files with single-range support, sent with sendfile; keep-alive; quiet."""
 
     protocol_version = "HTTP/1.1"  # persistent connections, as object stores keep them
+    disable_nagle_algorithm = True
+    """TCP_NODELAY, as real servers set it on keep-alive connections (nginx's `tcp_nodelay
+    on`, aiohttp's default): with Nagle, a reply's last partial segment waits for the
+    client's delayed ACK, ~40 ms per range on Linux."""
 
     def log_message(self, format: str, *args: Any) -> None:
         """Quiet."""
@@ -130,8 +139,13 @@ class Server:
 
     def cpu_s(self) -> float:
         """CPU seconds (user + system) the server has used so far."""
+        return sum(self.cpu_split_s())
+
+    def cpu_split_s(self) -> tuple[float, float]:
+        """(user, system) CPU seconds the server has used so far."""
         fields = Path(f"/proc/{self.process.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        tick = os.sysconf("SC_CLK_TCK")
+        return int(fields[11]) / tick, int(fields[12]) / tick
 
     def stop(self) -> None:
         """End the child."""
@@ -229,6 +243,94 @@ def compare(log: Path, args: argparse.Namespace) -> dict[str, Any]:
         "chunks_total": stats["chunks_total"],
         "requests": stats["requests"],
         "loadavg": [round(x, 2) for x in os.getloadavg()],
+    }
+
+
+# -- the transfer alone ----------------------------------------------------------------
+
+
+def _self_cpu_split_s() -> tuple[float, float]:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime, usage.ru_stime
+
+
+def transfer_cost(log: Path, args: argparse.Namespace) -> dict[str, Any]:
+    """CPU of moving the whole log into a 24 MiB buffer, no decoding: `preadv` from the
+    page cache (what the local reader does) against ranged GETs from the loopback server
+    into the same buffer (the remote reader's `RangeStream`), client and server, user and
+    system; median of `--repeat` interleaved rounds. The difference is what HTTP on this
+    machine adds to an audit, whatever the reader does above it."""
+    from syncaudit.remote.ranges import HttpObject, RangeStream
+
+    size = log.stat().st_size
+    ranges = [(a, min(size, a + CLIENT_RANGE_BYTES)) for a in range(0, size, CLIENT_RANGE_BYTES)]
+    buffer = memoryview(bytearray(CLIENT_RANGE_BYTES))
+    rows: dict[str, list[tuple[float, float, float, float, float]]] = {"pread": [], "http": []}
+    with tempfile.TemporaryDirectory(prefix="bench-remote-") as tmp:
+        (Path(tmp) / log.name).symlink_to(log)
+        server = Server(Path(tmp), args.server)
+        obj = HttpObject(f"{server.base}/{log.name}")
+        try:
+            for _ in range(args.repeat):
+                for kind in rows:
+                    served, own, wall = server.cpu_split_s(), _self_cpu_split_s(), 0.0
+                    wall = time.perf_counter()
+                    if kind == "pread":
+                        fd = os.open(log, os.O_RDONLY)
+                        for start, end in ranges:
+                            os.preadv(fd, [buffer[: end - start]], start)
+                        os.close(fd)
+                    else:
+                        for start, end in ranges:
+                            stream = RangeStream(obj, start, end, None)
+                            stream.readinto(buffer[: end - start])
+                            stream.close()
+                    wall = time.perf_counter() - wall
+                    after, served_after = _self_cpu_split_s(), server.cpu_split_s()
+                    rows[kind].append(
+                        (
+                            wall,
+                            after[0] - own[0],
+                            after[1] - own[1],
+                            served_after[0] - served[0],
+                            served_after[1] - served[1],
+                        )
+                    )
+        finally:
+            server.stop()
+    out: dict[str, Any] = {"bytes": size}
+    for kind, values in rows.items():
+        med = [statistics.median(v[i] for v in values) for i in range(5)]
+        out[kind] = {
+            "wall_s": round(med[0], 3),
+            "client_user_s": round(med[1], 3),
+            "client_sys_s": round(med[2], 3),
+            "server_user_s": round(med[3], 3),
+            "server_sys_s": round(med[4], 3),
+        }
+    pread, http = out["pread"], out["http"]
+    out["http_extra_cpu_s"] = round(
+        sum(http[k] for k in http if k != "wall_s") - sum(pread[k] for k in pread if k != "wall_s"),
+        3,
+    )
+    return out
+
+
+def floor_ratio(figures: dict[str, Any], cores: int) -> dict[str, float]:
+    """The least remote/local wall ratio the CPU allows: the local audit's CPU plus what
+    the transfer adds, on `cores` cores used at best fully (`all_cores`) or as well as the
+    local audit uses them (`local_parallelism`); and the same without the server's CPU (a
+    server on another machine, as an object store is)."""
+    local_cpu, local_s = figures["local_cpu_s"], figures["local_s"]
+    extra = figures["transfer"]["http_extra_cpu_s"]
+    http = figures["transfer"]["http"]
+    server = http["server_user_s"] + http["server_sys_s"]
+    used = max(local_cpu, 0.01) / local_s  # (CPU times tick in 10 ms)
+    return {
+        "local_cores_used": round(used, 2),
+        "floor_all_cores": round((local_cpu + extra) / cores / local_s, 3),
+        "floor_local_parallelism": round((local_cpu + extra) / used / local_s, 3),
+        "floor_server_elsewhere": round((local_cpu + extra - server) / used / local_s, 3),
     }
 
 
@@ -344,6 +446,13 @@ def compare_clients(log: Path, args: argparse.Namespace) -> dict[str, Any]:
     return figures
 
 
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--log", type=Path, help="MCAP log with LOG.rig.yaml beside it")
@@ -355,6 +464,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="chunk workers of each audit")
     parser.add_argument("--repeat", type=int, default=3, help="interleaved rounds (median)")
     parser.add_argument("--clients", action="store_true", help="compare HTTP clients instead")
+    parser.add_argument(
+        "--transfer",
+        action="store_true",
+        help="also measure the transfer alone (pread vs HTTP, CPU split) and the floor ratio",
+    )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument("--serve", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -368,6 +482,9 @@ def main(argv: list[str] | None = None) -> int:
     else:
         log = bench_log(args.cache_dir or REPO / "benchmarks" / ".cache")
     figures = compare_clients(log, args) if args.clients else compare(log, args)
+    if args.transfer and not args.clients:
+        figures["transfer"] = transfer_cost(log, args)
+        figures.update(floor_ratio(figures, _cores()))
     if args.json:
         print(json.dumps(figures))
     else:

@@ -15,6 +15,7 @@ from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.routing import CameraRouter
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.columns.table import MISSING
 from syncaudit.errors import NoDataError
 from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
 from syncaudit.lidar.scan import LidarScan, LidarScanner
@@ -225,9 +226,8 @@ def _owner(owners: list[CameraTableBuilder]) -> str:
 
 
 def _import_analysis() -> None:
-    """Import the analysis (and pandas, ~0.2 s) while the extraction workers read their
-    first tasks, rather than before they start or after the last item, when it would add
-    to the wall time."""
+    """Import the analysis while the extraction workers read their first tasks, rather
+    than before they start or after the last item, when it would add to the wall time."""
     importlib.import_module("syncaudit.analysis.sync")
     importlib.import_module("syncaudit.analysis.replay")
 
@@ -292,11 +292,13 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
 
     packet, driver = [], []
     for t in tables:
-        both = t.triggers.dropna(subset=["lidar_packet_ns"])
-        both = both[both["lidar_packet_ns"] > 0]  # 0: the driver left it unset
-        packet.append(both["lidar_packet_ns"].to_numpy(np.int64))
-        if both["lidar_driver_ns"].notna().all():
-            driver.append(both["lidar_driver_ns"].to_numpy(np.int64))
+        pkt = np.asarray(t.triggers["lidar_packet_ns"], dtype=np.int64)
+        drv = np.asarray(t.triggers["lidar_driver_ns"], dtype=np.int64)
+        # Missing (MISSING, the int64 minimum) or 0 (the driver left it unset): no packet.
+        both = pkt > 0
+        packet.append(pkt[both])
+        if (drv[both] != MISSING).all():
+            driver.append(drv[both])
     packet_ns = np.concatenate(packet) if packet else np.empty(0, np.int64)
     driver_ns = np.concatenate(driver) if len(driver) == len(packet) and driver else packet_ns[:0]
     offset, how = host_offset_ns(scan, packet_ns, driver_ns)
@@ -333,7 +335,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
     scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings)
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
-    # Imported only now (pandas, ~0.2 s): `_read` has them imported while workers read.
+    # Imported only now: `_read` has them imported while workers read.
     from syncaudit.analysis.replay import replay_controller
     from syncaudit.analysis.sync import analyze_camera
 
@@ -364,7 +366,7 @@ def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: b
             thresholds=rig.thresholds,
         )
         result_cams.append(
-            CameraAudit(sync, azimuth, source, replay_controller(sync.frames, controller))
+            CameraAudit(sync, azimuth, source, replay_controller(sync.table, controller))
         )
     warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in log.warnings)

@@ -198,6 +198,9 @@ class _Task:
     channels: dict[int, ChannelInfo]
     ranks: dict[str, int]
     plan: ExtractPlan
+    open_as: str = field(default="", repr=False)
+    """What a spawned worker opens instead of `log_path`: a remote log's URL as given (a
+    signed URL's query string, which `log_path` and every message leave out). Not shown."""
 
 
 def _extract_group(task: _Task, units: list[ReadUnit]) -> list[Keyed]:
@@ -208,7 +211,7 @@ def _extract_group(task: _Task, units: list[ReadUnit]) -> list[Keyed]:
         if log is None:  # spawned, not forked: open the log afresh
             from syncaudit.logs import open_log
 
-            log = open_log(task.log_path)
+            log = open_log(task.open_as or task.log_path)
         _WORKER_STATE[key] = (log, _Readers(task.plan.check_crc))
     log, readers = _WORKER_STATE[key]
     return _extract_units(log, readers, units, task.channels, task.ranks, task.plan)
@@ -251,7 +254,8 @@ def _parallel_results(
     """Each group's extracted items, in group order, computed by `jobs` worker processes;
     `meanwhile` runs here once the first tasks are submitted."""
     path = log.summary.path
-    task = _Task(path, channels, _source_ranks([u for g in groups for u in g]), plan)
+    ranks = _source_ranks([u for g in groups for u in g])
+    task = _Task(path, channels, ranks, plan, open_as=getattr(log, "url", ""))
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
     if context.get_start_method() == "fork":

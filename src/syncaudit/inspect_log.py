@@ -6,6 +6,10 @@ fails (damaged packets, unreadable encoding, a rig contradicting the packets) th
 records the error and its exit code. By default `inspect_log` then raises it (so `info`
 exits as `audit` would); with `partial=True` it returns the report with `error` and
 `exit_code` set, for a caller that prints what could be read and then exits non-zero.
+
+The cameras are the rig's, else the ones `audit` guesses (`rig_guess.guess_cameras`): a
+topic several cameras share is counted per camera as the audit routes its messages
+(`camera.census`), so `info` shows each camera's own frames and the frame ids seen.
 """
 
 from __future__ import annotations
@@ -14,12 +18,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from syncaudit.camera.census import SharedCensus, shared_topic_census
+from syncaudit.camera.routing import SharedTopicCount
 from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.errors import NoDataError, SyncauditError
 from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
+from syncaudit.rig_guess import guess_cameras
 from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import json_ready
 
@@ -70,11 +77,36 @@ class CameraRow:
     name: str
     image_topic: str | None
     frames: int
+    """Its images: the image topic's messages, or those naming it on a shared topic."""
     rate_hz: float | None
     exposure_metadata: str | None
     stamp_semantics: str
     trigger_topic: str | None
     checkpoints: tuple[int, ...]
+    frame_id: str | None = None
+    """The header.frame_id its messages carry (rig, or the frame the image topic showed)."""
+    shared_topics: tuple[str, ...] = ()
+    """Its topics that other cameras read too (messages told apart by frame id)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SharedTopicRow:
+    """A topic several cameras share: which camera its messages went to, as `audit` routes them."""
+
+    topic: str
+    kind: str
+    """'image', 'exposure' or 'trigger'."""
+    msgtype: str
+    messages: int
+    cameras: dict[str, int]
+    """Camera name -> messages it gets."""
+    frame_ids: dict[str, int]
+    """header.frame_id seen -> messages carrying it ("" for none)."""
+    unnamed: int
+    """Messages naming no camera (no frame id, no camera field)."""
+    unknown: dict[str, int]
+    """Messages naming a frame or camera of no camera of the topic, by what they name."""
+    damaged: int
 
 
 @dataclass(slots=True)
@@ -90,6 +122,7 @@ class InfoReport:
     topics: list[TopicRow] = field(default_factory=list)
     lidars: list[LidarRow] = field(default_factory=list)
     cameras: list[CameraRow] = field(default_factory=list)
+    shared_topics: list[SharedTopicRow] = field(default_factory=list)
     guessed: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     error: str | None = None
@@ -217,13 +250,16 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
-    cameras = rig.cameras if rig and rig.cameras else detect_cameras(log.topics)
-    if not (rig and rig.cameras) and cameras:
-        report.guessed.append(
-            "cameras by topic type and name: " + ", ".join(c.name for c in cameras)
-        )
+    cameras = _cameras(log, rig, report)
+    try:
+        census = shared_topic_census(log, cameras)
+    except SyncauditError as exc:  # info goes on: the LiDAR decides its exit code
+        report.warnings.append(f"topics cameras share could not be counted: {exc}")
+        census = SharedCensus([], [])
+    report.shared_topics.extend(_shared_row(log, count) for count in census.topics)
+    report.warnings.extend(census.warnings)
     for cam in cameras:
-        report.cameras.append(_camera_row(log, cam, duration))
+        report.cameras.append(_camera_row(log, cam, duration, census.topics))
     report.warnings.extend(w.message for w in log.warnings)
     if failure is not None:
         report.error = str(failure)
@@ -236,11 +272,47 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
     return report, failure
 
 
-def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> CameraRow:
+def _cameras(log: LogReader, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:
+    """The rig's cameras, else those the audit would guess (by topic types alone where the
+    camera topics cannot be read)."""
+    if rig and rig.cameras:
+        return list(rig.cameras)
+    try:
+        cameras, notes = guess_cameras(log)
+    except SyncauditError as exc:
+        cameras = detect_cameras(log.topics)
+        notes = ["cameras by topic type and name: " + ", ".join(c.name for c in cameras)]
+        report.warnings.append(f"camera topics could not be read to guess the cameras: {exc}")
+    report.guessed.extend(notes if cameras else [])
+    return cameras
+
+
+def _shared_row(log: LogReader, count: SharedTopicCount) -> SharedTopicRow:
+    return SharedTopicRow(
+        topic=count.topic,
+        kind=count.kind,
+        msgtype=log.topics[count.topic].msgtype,
+        messages=sum(count.frame_ids.values()) + count.damaged,
+        cameras=count.per_camera,
+        frame_ids=count.frame_ids,
+        unnamed=count.unnamed,
+        unknown=count.unknown,
+        damaged=count.damaged,
+    )
+
+
+def _camera_row(
+    log: LogReader, cam: CameraConfig, duration: float | None, shared: list[SharedTopicCount]
+) -> CameraRow:
     image = log.topics.get(cam.image_topic) if cam.image_topic else None
     exposure = log.topics.get(cam.exposure_topic) if cam.exposure_topic else None
     trigger = log.topics.get(cam.trigger_topic) if cam.trigger_topic else None
-    frames = image.count or 0 if image else 0
+    mine = [s for s in shared if cam.name in s.cameras]
+    shared_image = next((s for s in mine if s.kind == "image"), None)
+    if shared_image is not None:
+        frames = shared_image.per_camera[cam.name]
+    else:
+        frames = image.count or 0 if image else 0
     return CameraRow(
         name=cam.name,
         image_topic=cam.image_topic,
@@ -254,4 +326,6 @@ def _camera_row(log: LogReader, cam: CameraConfig, duration: float | None) -> Ca
         checkpoints=CHECKPOINTS_BY_TYPE.get(trigger.msgtype, ())
         if trigger and trigger.msgtype in TRIGGER_TYPES
         else (),
+        frame_id=cam.frame_id,
+        shared_topics=tuple(s.topic for s in mine),
     )

@@ -26,7 +26,7 @@ from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 
-__all__ = ["guess_rig", "render_starter_rig", "starter_rig_yaml"]
+__all__ = ["guess_cameras", "guess_rig", "render_starter_rig", "starter_rig_yaml"]
 
 
 def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
@@ -38,17 +38,29 @@ def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
         raise NoDataError(
             f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
         )
+    cameras, camera_notes = guess_cameras(log)
+    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes, *camera_notes]
+    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+
+
+def guess_cameras(log: LogReader) -> tuple[list[CameraConfig], list[str]]:
+    """The cameras of a log without a rig, and what was guessed (`audit` and `info` share it).
+
+    Topic types and names give the cameras; the first second of each camera topic gives
+    `camera` fields and frame ids, and an image topic of several frame ids is one camera
+    per frame id.
+    """
     camera_topics = [t for t, info in log.topics.items() if topic_role(info.msgtype)]
     probe = probe_camera_topics(log, camera_topics)
     cameras = detect_cameras(log.topics, probe.camera_fields, probe.frame_ids, probe.shared)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes]
+    guessed = []
     if cameras:
         guessed.append(
             "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
         )
     for topic, names in sorted(probe.shared.items()):
         guessed.append(f"{topic} shared by {len(names)} cameras ({', '.join(names)})")
-    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+    return cameras, guessed
 
 
 def _value(value: object) -> str:

@@ -34,6 +34,15 @@ _CRASH_SIGNALS = {signal.SIGSEGV, signal.SIGBUS, signal.SIGABRT, signal.SIGILL, 
 """Signals a process raises on itself when it crashes: a bug, not a kill from outside."""
 _REAP_S = 1.0
 """How long to wait for a dead worker's exit status (it is dead: the pool saw its end)."""
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+"""glibc `mallopt` parameters."""
+KEEP_HEAP_BYTES = 64 << 20
+"""Allocations below this come from the worker's heap, and this much freed heap is kept.
+
+A worker allocates one decompressed chunk (MBs) after another. glibc serves such sizes
+with a fresh `mmap` each time and unmaps them on free, so every chunk's pages fault in
+anew: on a ROS 1 lz4 bag about 0.1 CPU s per GB, a third of the decompression. Kept on the
+heap, the next chunk reuses the same pages."""
 
 
 def _init_worker(parent_pid: int) -> None:
@@ -44,7 +53,9 @@ def _init_worker(parent_pid: int) -> None:
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-        except (OSError, AttributeError):  # pragma: no cover - no prctl: best effort
+            libc.mallopt(_M_MMAP_THRESHOLD, KEEP_HEAP_BYTES)
+            libc.mallopt(_M_TRIM_THRESHOLD, KEEP_HEAP_BYTES)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl/mallopt: best effort
             pass
     if os.getppid() != parent_pid:  # the parent died before the prctl took hold
         os._exit(1)

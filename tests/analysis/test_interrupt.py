@@ -14,30 +14,13 @@ from pathlib import Path
 import pytest
 import yaml
 
+from slowed_cli import alive, start, wait_for_workers
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
-# The real CLI, with one chunk per task and each task held 1 s in the worker, so that the
-# worker phase lasts seconds on any machine (the signal must arrive while it runs).
-RUN = """
-import sys, time
-import syncaudit.collect as c
-
-c.GROUP_BYTES = 1
-_extract = c._extract_group
-
-
-def slow(*args):
-    time.sleep(1.0)
-    return _extract(*args)
-
-
-c._extract_group = slow
-from syncaudit.cli import main
-
-sys.argv = ["syncaudit", *sys.argv[1:]]
-main()
-"""
+SLEEP_S = 1.0
+"""Each task is held this long in its worker, so that the worker phase lasts seconds on
+any machine (the signal must arrive while it runs)."""
 
 
 @pytest.fixture(scope="module")
@@ -51,38 +34,10 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out, rig
 
 
-def _children(pid: int) -> list[int]:
-    try:
-        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
-    except OSError:
-        return []
-    return [int(p) for p in text.split()]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead, just unreaped
-
-
 def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], float]:
     out, rig = log
-    proc = subprocess.Popen(
-        [sys.executable, "-c", RUN, "audit", str(out), "--rig", str(rig)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        start_new_session=True,  # its own process group, as a shell gives a command
-        text=True,
-    )
-    deadline = time.monotonic() + 60
-    workers: list[int] = []
-    while time.monotonic() < deadline and proc.poll() is None:
-        workers = _children(proc.pid)
-        if len(workers) >= 2:
-            break
-        time.sleep(0.005)
+    proc = start(["audit", str(out), "--rig", str(rig)], sleep_s=SLEEP_S)
+    workers = wait_for_workers(proc, 2, poll_s=0.005)
     if proc.poll() is not None or not workers:
         proc.kill()
         proc.communicate()
@@ -101,7 +56,7 @@ def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], 
         pytest.fail(f"{send}: the audit hung after the signal")
     took = time.monotonic() - began
     time.sleep(0.2)  # workers killed by PDEATHSIG/terminate need a moment to go
-    return proc.returncode, stderr, [w for w in workers if _alive(w)], took
+    return proc.returncode, stderr, [w for w in workers if alive(w)], took
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")

@@ -14,6 +14,7 @@ from syncaudit.analysis.stamps import MISSING_NS, delta_ns, nullable, stamps_ns
 from syncaudit.analysis.sync import _errors, _t_l_ns
 from syncaudit.audit import audit_log
 from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.columns.table import Table, int_column
 from syncaudit.rig import load_rig
 
 T0 = 1_700_000_000_000_000_123
@@ -37,8 +38,8 @@ def _revolutions(count: int = 5) -> RevolutionColumns:
     )
 
 
-def _frames(packet_ns: list[int | None], t_l_ns: list[int]) -> tuple[pd.DataFrame, np.ndarray]:
-    frames = pd.DataFrame({"trig_lidar_packet_ns": pd.array(packet_ns, dtype="Int64")})
+def _frames(packet_ns: list[int | None], t_l_ns: list[int]) -> tuple[Table, np.ndarray]:
+    frames = Table({"trig_lidar_packet_ns": int_column(packet_ns)})
     return frames, np.array(t_l_ns, dtype=np.int64)
 
 
@@ -98,10 +99,10 @@ def test_error_beyond_a_quarter_revolution_stays_unpaired() -> None:
 
 
 def test_t_l_is_exact_integer_mid_exposure() -> None:
-    frames = pd.DataFrame(
+    frames = Table(
         {
-            "exposure_start_ns": pd.array([T0, T0, None], dtype="Int64"),
-            "exposure_duration_ns": pd.array([2_000_001, None, 5], dtype="Int64"),
+            "exposure_start_ns": int_column([T0, T0, None]),
+            "exposure_duration_ns": int_column([2_000_001, None, 5]),
         }
     )
     assert _t_l_ns(frames).tolist() == [T0 + 1_000_000, MISSING_NS, MISSING_NS]

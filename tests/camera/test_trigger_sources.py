@@ -30,3 +30,20 @@ def test_time_and_time_reference_give_checkpoint_246() -> None:
         assert row[6] == 1_700_000_000_123_456_789
         assert row[3:6] == (None, None, None) and row[7:9] == (None, None)
         assert row[9] == raw.msgtype
+
+
+def test_ros1_sequence_of_a_time_reference_but_not_of_a_bare_time() -> None:
+    """ROS 1 header.seq leads a TimeReference; a bare Time has no header: its first four
+    bytes are the seconds, not a sequence number."""
+    registry = TypeRegistry(ros1=True)
+    stamp = TIME(sec=1_700_000_000, nanosec=5)
+    header = STORE.types["std_msgs/msg/Header"](stamp=stamp, frame_id="cam")
+    ref = STORE.types["sensor_msgs/msg/TimeReference"](header=header, time_ref=stamp, source="")
+    for msg, msgtype, seq in (
+        (stamp, "builtin_interfaces/msg/Time", None),
+        (ref, "sensor_msgs/msg/TimeReference", 0),
+    ):
+        data = STORE.cdr_to_ros1(STORE.serialize_cdr(msg, msgtype), msgtype)  # seq 0 in ROS 1
+        raw = RawMessage("/t", msgtype, 5, data, "ros1")
+        row = trigger_row(raw, registry.deserialize(raw.data, msgtype, "ros1"), "front")
+        assert row[1] == seq and row[6] == 1_700_000_000_000_000_005

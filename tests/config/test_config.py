@@ -125,7 +125,11 @@ def test_many_camera_rig_validates_in_linear_time(tmp_path: Path) -> None:
     small, large = rig(500), rig(5_000)
     timings = []
     for path in (small, large):
-        started = time.perf_counter()
-        assert len(load_rig(path).cameras) in (500, 5_000)
-        timings.append(time.perf_counter() - started)
+        # CPU time, best of three: other processes on a loaded machine cannot inflate it.
+        runs = []
+        for _ in range(3):
+            started = time.process_time()
+            assert len(load_rig(path).cameras) in (500, 5_000)
+            runs.append(time.process_time() - started)
+        timings.append(min(runs))
     assert timings[1] < 30 * timings[0] + 0.5  # 10x the cameras: about 10x the time

@@ -4,12 +4,9 @@ rosbags' rosbag2 writer from a simulated log, audit exactly like the bare `.mcap
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
-import yaml
-from rosbags.rosbag2 import StoragePlugin, Writer
 
 from syncaudit import collect
 from syncaudit.audit import audit_log
@@ -20,6 +17,7 @@ from syncaudit.logs.typesys import TypeRegistry
 from syncaudit.logs.units import group_units
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+from syncaudit.writers.rosbag2_split import SplitBagWriter
 
 
 @pytest.fixture(scope="module")
@@ -47,44 +45,17 @@ def _to_bag(bare: Path, folder: Path, parts: int, *, reorder: bool = False) -> l
             defs[channel.topic] = (log.topics[channel.topic].msgtype, schema.data.decode())
         messages = list(log.messages())
         registry = TypeRegistry(ros1=False, log_types=log.log_types("cdr"), eager=True)
-    folder.mkdir()
-    files, metas = [], []
+    bag = SplitBagWriter(folder, registry.store)
     for part in range(parts):
         lo = log.summary.start_ns + span * part // parts
         hi = log.summary.start_ns + span * (part + 1) // parts
-        scratch = folder.parent / f"{folder.name}-part{part}"
-        writer = Writer(scratch, version=8, storage_plugin=StoragePlugin.MCAP)
-        writer.open()
         order = topics[::-1] if reorder and part % 2 else topics
-        conns = {t: writer.add_connection(t, defs[t][0], typestore=registry.store) for t in order}
+        bag.start_part([(t, defs[t][0]) for t in order])
         for m in messages:
             if lo <= m.log_time_ns < hi:
-                writer.write(conns[m.topic], m.log_time_ns, bytes(m.data))
-        writer.close()
-        meta = yaml.safe_load((scratch / "metadata.yaml").read_text())
-        info = meta["rosbag2_bagfile_information"]
-        (entry,) = info["files"]
-        target = folder / f"{folder.name}_{part}.mcap"
-        shutil.move(scratch / entry["path"], target)
-        entry["path"] = target.name
-        shutil.rmtree(scratch)
-        files.append(target)
-        metas.append(info)
-    # One metadata.yaml listing every part, as rosbag2 writes it after a split.
-    info = metas[0]
-    info["files"] = [m["files"][0] for m in metas]
-    info["relative_file_paths"] = [f.name for f in files]
-    info["message_count"] = sum(m["message_count"] for m in metas)
-    counts: dict[str, int] = {}
-    for m in metas:
-        for t in m["topics_with_message_count"]:
-            name = t["topic_metadata"]["name"]
-            counts[name] = counts.get(name, 0) + t["message_count"]
-    for t in info["topics_with_message_count"]:
-        t["message_count"] = counts[t["topic_metadata"]["name"]]
-    meta_text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
-    (folder / "metadata.yaml").write_text(meta_text)
-    return files
+                bag.write(m.topic, m.log_time_ns, bytes(m.data))
+    bag.close()  # one metadata.yaml listing every part, as rosbag2 writes it after a split
+    return bag.files
 
 
 def _json(result: object) -> str:

@@ -11,13 +11,12 @@ import faulthandler
 import multiprocessing
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from slowed_cli import alive, start, wait_for_workers
 from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
 from syncaudit.workers import death_cause
 
@@ -25,78 +24,19 @@ REPO = Path(__file__).resolve().parents[2]
 LOG = REPO / "sample_logs" / "pandar40p_adaptive.mcap"
 """Seven zstd chunks: seven tasks with one chunk per task."""
 
-# The real CLI, one chunk per task and each task held 0.5 s in its worker, so that the
-# read lasts seconds and a worker can be killed while it runs.
-RUN = """
-import sys, time
-import syncaudit.collect as c
-
-c.GROUP_BYTES = 1
-c.TASKS_PER_WORKER = 1
-_extract = c._extract_group
-
-
-def slow(*args):
-    time.sleep(0.5)
-    return _extract(*args)
-
-
-c._extract_group = slow
-from syncaudit.cli import main
-
-sys.argv = ["syncaudit", *sys.argv[1:]]
-main()
-"""
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
-    except OSError:
-        return []
-    return [int(p) for p in text.split()]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead, just unreaped
-
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
 def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None:
     """SIGKILL to a worker (what the OOM killer sends) mid-read: exit 130, one line naming
     the log and the signal, no traceback, no output file, no worker left alive."""
     json_out = tmp_path / "audit.json"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            RUN,
-            "audit",
-            str(LOG),
-            "--rig",
-            f"{LOG}.rig.yaml",
-            "--jobs",
-            "2",
-            "--json-out",
-            str(json_out),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        start_new_session=True,
-        text=True,
+    proc = start(
+        ["audit", str(LOG), "--rig", f"{LOG}.rig.yaml", "--jobs", "2", "--json-out", str(json_out)],
+        sleep_s=0.5,  # the read lasts seconds: a worker can be killed while it runs
+        tasks_per_worker=1,
     )
     try:
-        deadline = time.monotonic() + 60
-        workers: list[int] = []
-        while time.monotonic() < deadline and proc.poll() is None:
-            workers = _children(proc.pid)
-            if len(workers) == 2:
-                break
-            time.sleep(0.02)
+        workers = wait_for_workers(proc, 2, poll_s=0.02)
         assert len(workers) == 2, "the pool's two workers never started"
         time.sleep(0.3)  # both are now inside their first task
         os.kill(workers[0], signal.SIGKILL)
@@ -113,7 +53,7 @@ def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None
     ]
     assert not json_out.exists()
     assert not list(tmp_path.iterdir())  # no temporary left either
-    assert not [pid for pid in workers if _alive(pid)]
+    assert not [pid for pid in workers if alive(pid)]
 
 
 def _die(how: str) -> None:

@@ -30,6 +30,12 @@ class ServerState:
     ignore_range: bool = False
     """Answer every GET with the whole file (200), as a server without Range support."""
     delay_s: float = 0.0
+    redirects: dict[str, tuple[int, str]] = field(default_factory=dict)
+    """Request path (query string included) -> (status, Location) answered instead."""
+    authorizations: list[tuple[str, str | None]] = field(default_factory=list)
+    """(path, Authorization header) of every GET."""
+    required_query: str | None = None
+    """Refuse (403) a GET of a file whose query string is not this (a signed URL's)."""
     served_bytes: int = 0
     requests: list[str] = field(default_factory=list)
     ranged_bytes: int = 0
@@ -41,6 +47,7 @@ class RangeHandler(SimpleHTTPRequestHandler):
     """Static files with single-range `Range: bytes=a-b` support (RFC 9110 206 replies)."""
 
     state: ServerState
+    disable_nagle_algorithm = True  # TCP_NODELAY, as real servers (nginx, aiohttp) set it
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, directory=str(self.state.root), **kwargs)
@@ -52,11 +59,23 @@ class RangeHandler(SimpleHTTPRequestHandler):
         state = self.state
         with state.lock:
             state.requests.append(f"{self.path} {self.headers.get('Range')}")
+            state.authorizations.append((self.path, self.headers.get("Authorization")))
+        redirect = state.redirects.get(self.path)
+        if redirect is not None:
+            self.send_response(redirect[0])
+            self.send_header("Location", redirect[1])
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
         if state.delay_s:
             time.sleep(state.delay_s)
         path = Path(self.translate_path(self.path))
         if path.is_dir() or not path.is_file():
             super().do_GET()
+            return
+        query = self.path.partition("?")[2]
+        if state.required_query is not None and query != state.required_query:
+            self.send_error(403, "signature does not match")
             return
         size = path.stat().st_size
         match = RANGE.match(self.headers.get("Range", "") or "")
@@ -123,7 +142,16 @@ class RangeHandler(SimpleHTTPRequestHandler):
 @pytest.fixture()
 def http_root(tmp_path: Path) -> Iterator[tuple[str, ServerState]]:
     """(base URL, state) of a threaded Range server over a fresh folder, on 127.0.0.1."""
-    root = tmp_path / "www"
+    yield from _server(tmp_path / "www")
+
+
+@pytest.fixture()
+def other_http_root(tmp_path: Path) -> Iterator[tuple[str, ServerState]]:
+    """A second server (another port: another origin), for redirects across hosts."""
+    yield from _server(tmp_path / "www-other")
+
+
+def _server(root: Path) -> Iterator[tuple[str, ServerState]]:
     root.mkdir()
     state = ServerState(root)
     handler = type("Handler", (RangeHandler,), {"state": state})

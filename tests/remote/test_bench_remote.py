@@ -19,6 +19,7 @@ def test_bench_remote_short_mode() -> None:
             "--repeat",
             "1",
             "--json",
+            "--transfer",
         ],
         capture_output=True,
         text=True,
@@ -32,3 +33,8 @@ def test_bench_remote_short_mode() -> None:
     assert figures["fetched_bytes"] <= figures["size_bytes"]
     assert figures["fetched_over_needed"] <= 1.05
     assert figures["server"] == "threaded" and figures["time_ratio"] > 0
+    # The transfer alone moved the whole file both ways; the floors are ratios.
+    transfer = figures["transfer"]
+    assert transfer["bytes"] == figures["size_bytes"]
+    assert set(transfer["http"]) == set(transfer["pread"]) >= {"client_sys_s", "server_sys_s"}
+    assert 0 < figures["floor_server_elsewhere"] <= figures["floor_local_parallelism"]

@@ -34,6 +34,11 @@ def s3_endpoint(monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", SECRET)
     monkeypatch.setenv("AWS_DEFAULT_REGION", "us-east-1")
     monkeypatch.setenv("AWS_ENDPOINT_URL", endpoint)
+    # fsspec caches filesystems by their arguments: one made for an earlier test's server
+    # (same environment-given arguments, another port) must not be reused.
+    import s3fs
+
+    s3fs.S3FileSystem.clear_instance_cache()
     try:
         client = boto3.client("s3", endpoint_url=endpoint)
         client.create_bucket(Bucket="fleet")
@@ -70,3 +75,33 @@ def test_gate_on_an_s3_prefix(s3_endpoint: str, tmp_path: Path) -> None:
     # Unchanged objects (same ETag and size) are skipped on the next run.
     again = run_gate(["s3://fleet/uploads/"], policy, GateOptions(db=db, jobs=2))
     assert all(log.skipped for log in again.logs)
+
+
+def test_a_ros2_mcap_bag_prefix_on_s3_is_read_by_ranges(s3_endpoint: str, tmp_path: Path) -> None:
+    from logs.test_mcap_bag import _to_bag
+    from syncaudit.audit import audit_log
+    from syncaudit.logs import open_log
+    from syncaudit.logs.rosbag2_remote import RemoteMcapBag
+    from syncaudit.remote.ranges import tracking
+    from syncaudit.simulate.rig_file import rig_from_truth
+    from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
+
+    bare = tmp_path / "log.mcap"
+    truth = simulate_sync_log(bare, SyncSimConfig(seed=5, duration_s=2.0, lidar_model="VLP-16"))
+    folder = tmp_path / "bag"
+    _to_bag(bare, folder, 2)
+    client = boto3.client("s3", endpoint_url=s3_endpoint)
+    for file in folder.iterdir():
+        client.upload_file(str(file), "fleet", f"bags/car3/bag/{file.name}")
+    rig = rig_from_truth(truth)
+    url = "s3://fleet/bags/car3/bag"
+    with open_log(url) as log:
+        assert isinstance(log, RemoteMcapBag) and len(log._logs) == 2
+    with tracking(url) as tracker:
+        remote = audit_log(url, rig, jobs=2).to_dict()
+        stats = tracker.stats()
+    local = audit_log(folder, rig, jobs=2).to_dict()
+    remote.pop("path"), local.pop("path")
+    assert remote == local
+    assert stats["ranged"] and stats["fetched_bytes"] <= stats["size_bytes"] + (64 << 10)
+    assert stats["size_bytes"] == sum(f.stat().st_size for f in folder.glob("*.mcap"))

@@ -1,7 +1,7 @@
 """Which trigger and which LiDAR revolution each camera frame belongs to.
 
-Frames pair with triggers by sequence number when the numbers can be trusted, else by
-time. Frames pair with revolutions through the packet their trigger names: that packet
+Frames pair with triggers by sequence number when the numbers can be trusted (both count
+the same messages, see `camera.sequences`, and agree in time), else by time. Frames pair with revolutions through the packet their trigger names: that packet
 lies a few packets before or after the zero crossing that started the revolution
 (drivers differ in which packet they trigger from), so it pairs with the nearest zero
 *crossing* time; frames whose trigger names no packet pair with the nearest crossing of
@@ -13,11 +13,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 
 from syncaudit.analysis.stamps import MISSING_NS, delta_ns, present, stamps_ns
+from syncaudit.camera.sequences import SequenceCounter, incomparable
 from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.columns.table import Table
 
 PAIR_TOLERANCE_NS = 50_000_000
 """A trigger belongs to a frame when it precedes the exposure by less than this."""
@@ -27,6 +28,10 @@ and a rounded exposure (ImageMetaData holds whole microseconds: `exposure_end` s
 start up to 0.5 us early) may fall just before the trigger's own record of it (248)."""
 SEQUENCE_AGREEMENT = 0.9
 """Sequence pairing is trusted when this share of its pairs also agree in time."""
+BY_SEQUENCE = "sequence number"
+BY_TIME = "time"
+NO_TRIGGERS = "none"
+"""How frames were paired with their triggers (`TriggerPairing.method`)."""
 PHASE_FROM_TRIGGER = "trigger packet"
 PHASE_FROM_TRACKER = "tracker zero packet"
 
@@ -41,14 +46,14 @@ def nearest_index(sorted_values: NDArray[np.int64], query: NDArray[np.int64]) ->
     return np.where(choose_left, idx - 1, idx).astype(np.int64)
 
 
-def _frame_time_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
+def _frame_time_ns(frames: Table) -> NDArray[np.int64]:
     """When a frame was exposed: its exposure start, else its header stamp."""
     start = stamps_ns(frames, "exposure_start_ns")
     header = stamps_ns(frames, "header_stamp_ns")
     return np.where(present(start), start, header)
 
 
-def _trigger_time_ns(triggers: pd.DataFrame, *, at_trigger: bool = False) -> NDArray[np.int64]:
+def _trigger_time_ns(triggers: Table, *, at_trigger: bool = False) -> NDArray[np.int64]:
     """When a trigger started its exposure: checkpoint 248, else 246.
 
     `at_trigger`: checkpoint 246 wherever recorded, to pair with frames whose time is the
@@ -61,33 +66,38 @@ def _trigger_time_ns(triggers: pd.DataFrame, *, at_trigger: bool = False) -> NDA
     return start if present(start).any() else sensor
 
 
-def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None:
+def sequence_problem(
+    frames: Table,
+    triggers: Table,
+    counters: tuple[SequenceCounter, SequenceCounter] | None = None,
+) -> str | None:
     """Why sequence numbers cannot pair these frames and triggers (None: they can).
 
-    Usable numbers are present everywhere, unique, increasing with log time on both sides,
-    and the frames they pair agree in time with their triggers (ROS 1 bags converted from
-    ROS 2, or drivers that leave `seq` alone, have 0 everywhere).
+    Usable numbers are present everywhere, count the same messages on both sides
+    (`counters`: what the frames' and the triggers' numbers count; a ROS 1 header.seq of a
+    topic several cameras share counts all their messages), are unique, increase with log
+    time on both sides, and the frames they pair agree in time with their triggers (ROS 1
+    bags converted from ROS 2, or drivers that leave `seq` alone, have 0 everywhere).
     """
     for what, table in (("frame", frames), ("trigger", triggers)):
         seq = table["frame_sequence"]
-        if seq.isna().any():
-            return f"{int(seq.isna().sum())} of {len(seq)} {what}s have no sequence number"
-        if not seq.is_unique:
-            return f"{what} sequence numbers repeat ({seq.nunique()} distinct in {len(seq)})"
-        ordered = table.sort_values("log_time_ns", kind="stable")["frame_sequence"]
-        if len(ordered) > 1 and not bool((np.diff(ordered.to_numpy(np.int64)) > 0).all()):
+        missing = int(np.sum(~present(seq)))
+        if missing:
+            return f"{missing} of {len(seq)} {what}s have no sequence number"
+        distinct = np.unique(seq).size
+        if distinct != len(seq):
+            return f"{what} sequence numbers repeat ({distinct} distinct in {len(seq)})"
+    if counters is not None and (mismatch := incomparable(*counters)) is not None:
+        return mismatch
+    for what, table in (("frame", frames), ("trigger", triggers)):
+        seq = table["frame_sequence"]
+        ordered = seq[np.argsort(table["log_time_ns"], kind="stable")]
+        if len(ordered) > 1 and not bool((np.diff(ordered) > 0).all()):
             return f"{what} sequence numbers do not increase with log time"
-    both = pd.DataFrame(
-        {"frame_sequence": frames["frame_sequence"], "_f": _frame_time_ns(frames)}
-    ).merge(
-        pd.DataFrame(
-            {"frame_sequence": triggers["frame_sequence"], "_t": _trigger_time_ns(triggers)}
-        ),
-        on="frame_sequence",
-    )
-    if both.empty:
+    frame_rows, trigger_rows = _same_sequence(frames["frame_sequence"], triggers["frame_sequence"])
+    if not frame_rows.size:
         return "no frame sequence number matches a trigger's"
-    gap = delta_ns(both["_f"].to_numpy(np.int64), both["_t"].to_numpy(np.int64))
+    gap = delta_ns(_frame_time_ns(frames)[frame_rows], _trigger_time_ns(triggers)[trigger_rows])
     timed = np.isfinite(gap)
     if timed.any():
         agree = float(np.mean(np.abs(gap[timed]) < PAIR_TOLERANCE_NS))
@@ -99,68 +109,117 @@ def sequence_problem(frames: pd.DataFrame, triggers: pd.DataFrame) -> str | None
     return None
 
 
-def _unset_as_missing(triggers: pd.DataFrame) -> pd.DataFrame:
-    """Checkpoint stamps of 0 (a `builtin_interfaces/Time` the driver never set) as <NA>."""
+def _same_sequence(
+    frame_seq: NDArray[np.int64], trigger_seq: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(frame rows, trigger rows) with equal sequence numbers, in frame order; each side's
+    numbers are unique (`sequence_problem` checked)."""
+    order = np.argsort(trigger_seq, kind="stable")
+    ranked = trigger_seq[order]
+    at = np.minimum(np.searchsorted(ranked, frame_seq), max(ranked.size - 1, 0))
+    hit = ranked[at] == frame_seq if ranked.size else np.zeros(frame_seq.size, dtype=bool)
+    return np.flatnonzero(hit).astype(np.int64), order[at[hit]].astype(np.int64)
+
+
+def _unset_as_missing(triggers: Table) -> Table:
+    """Checkpoint stamps of 0 (a `builtin_interfaces/Time` the driver never set) as missing."""
     stamps = [
         c
         for c in triggers.columns
         if c.endswith("_ns") and c not in ("log_time_ns", "applied_delay_ns")
     ]
-    unset = {c: triggers[c].eq(0).fillna(False) for c in stamps}
+    unset = {c: triggers[c] == 0 for c in stamps}
     if not any(bool(m.any()) for m in unset.values()):
         return triggers
-    out = triggers.copy()
-    for c, mask in unset.items():
-        out[c] = out[c].mask(mask)
-    return out
+    return triggers.with_columns(
+        {c: np.where(mask, MISSING_NS, triggers[c]) for c, mask in unset.items()}
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class TriggerPairing:
+    """Frames with their trigger's checkpoints (`trig_*`), and how they were paired."""
+
+    frames: Table
+    method: str
+    """`BY_SEQUENCE`, `BY_TIME` or `NO_TRIGGERS`."""
+    reason: str | None
+    """Why not by sequence number, where by time (None otherwise)."""
+    warning: str | None
+    """The reason as a warning, where both sides had numbers that could not be used."""
 
 
 def pair_triggers(
-    frames: pd.DataFrame, triggers: pd.DataFrame, *, trigger_stamped: bool = False
-) -> tuple[pd.DataFrame, str | None]:
-    """Frames with their trigger's checkpoints (`trig_*`), and a warning if any.
+    frames: Table, triggers: Table, *, trigger_stamped: bool = False
+) -> tuple[Table, str | None]:
+    """Frames with their trigger's checkpoints, and a warning if any (see `pair_frames`)."""
+    pairing = pair_frames(frames, triggers, trigger_stamped=trigger_stamped)
+    return pairing.frames, pairing.warning
 
-    By sequence number where `sequence_problem` finds none, else by time: the latest
-    trigger at most `PAIR_TOLERANCE_NS` before the frame's exposure (its header stamp
-    where it has no exposure metadata), or at most `PAIR_LEAD_NS` after it.
-    `trigger_stamped`: the frames' times are their triggers (checkpoint 246, the rig's
-    `stamp: trigger`), so they pair with the triggers' 246 rather than their 248, which
-    lies t4 after.
+
+def pair_frames(
+    frames: Table,
+    triggers: Table,
+    *,
+    trigger_stamped: bool = False,
+    counters: tuple[SequenceCounter, SequenceCounter] | None = None,
+) -> TriggerPairing:
+    """Frames with their trigger's checkpoints (`trig_*`), and the method used.
+
+    By sequence number where `sequence_problem` finds none (`counters`: what each side's
+    numbers count), else by time: the latest trigger at most `PAIR_TOLERANCE_NS` before
+    the frame's exposure (its header stamp where it has no exposure metadata), or at most
+    `PAIR_LEAD_NS` after it. `trigger_stamped`: the frames' times are their triggers
+    (checkpoint 246, the rig's `stamp: trigger`), so they pair with the triggers' 246
+    rather than their 248, which lies t4 after.
     """
     checkpoint_cols = [c for c in triggers.columns if c.endswith("_ns") and c != "log_time_ns"]
     triggers = _unset_as_missing(triggers)
+    # Per frame, the row of its trigger (-1: none).
+    match = np.full(len(frames), -1, dtype=np.int64)
+    method, problem, warning = NO_TRIGGERS, None, None
     if triggers.empty:
-        out = frames.copy()
-        for col in checkpoint_cols:
-            out[f"trig_{col}"] = pd.array([pd.NA] * len(out), dtype="Int64")
-        return out, None
-    trig = triggers[["frame_sequence", *checkpoint_cols]].add_prefix("trig_")
-    problem = sequence_problem(frames, triggers)
-    if problem is None:
-        merged = frames.merge(
-            trig, left_on="frame_sequence", right_on="trig_frame_sequence", how="left"
-        )
-        return merged.drop(columns="trig_frame_sequence"), None
-    warning = None
-    if frames["frame_sequence"].notna().any() and triggers["frame_sequence"].notna().any():
-        warning = f"frames paired with triggers by time, not sequence number: {problem}"
+        pass
+    elif (problem := sequence_problem(frames, triggers, counters)) is None:
+        method = BY_SEQUENCE
+        rows, trig_rows = _same_sequence(frames["frame_sequence"], triggers["frame_sequence"])
+        match[rows] = trig_rows
+    else:
+        method = BY_TIME
+        if present(frames["frame_sequence"]).any() and present(triggers["frame_sequence"]).any():
+            warning = f"frames paired with triggers by time, not sequence number: {problem}"
+        match = _match_by_time(frames, triggers, trigger_stamped=trigger_stamped)
+    has = match >= 0
+    safe = np.maximum(match, 0)
+    trig = {
+        f"trig_{c}": np.where(has, triggers[c][safe], MISSING_NS)
+        if len(triggers)
+        else np.full(len(frames), MISSING_NS, dtype=np.int64)
+        for c in checkpoint_cols
+    }
+    return TriggerPairing(frames.with_columns(trig), method, problem, warning)
+
+
+def _match_by_time(frames: Table, triggers: Table, *, trigger_stamped: bool) -> NDArray[np.int64]:
+    """Per frame, the latest trigger (row) at most the pairing window before its exposure
+    shifted by `PAIR_LEAD_NS`; -1 where none (or the frame has no time). Among triggers of
+    equal time, the last in the log's order."""
     when = _frame_time_ns(frames)
-    lead = np.where(present(when), when + PAIR_LEAD_NS, when)
-    left = frames.assign(_t=lead, _row=np.arange(len(frames)))
-    timed = left[present(when)].sort_values("_t", kind="stable")
+    timed = present(when)
+    lead = when + PAIR_LEAD_NS
     trig_when = _trigger_time_ns(triggers, at_trigger=trigger_stamped)
-    right = (
-        trig.drop(columns="trig_frame_sequence")
-        .assign(_t=trig_when)[present(trig_when)]
-        .sort_values("_t", kind="stable")
-    )
+    usable = np.flatnonzero(present(trig_when))
+    usable = usable[np.argsort(trig_when[usable], kind="stable")]
+    ranked = trig_when[usable]
+    match = np.full(len(frames), -1, dtype=np.int64)
+    if not ranked.size:
+        return match
+    at = np.searchsorted(ranked, lead, side="right") - 1
     window = PAIR_TOLERANCE_NS + PAIR_LEAD_NS
-    merged = pd.merge_asof(timed, right, on="_t", direction="backward", tolerance=window)
-    untimed = left[~present(when)]
-    if not untimed.empty:
-        merged = pd.concat([merged, untimed], ignore_index=True)
-    merged = merged.sort_values("_row", kind="stable")
-    return merged.drop(columns=["_t", "_row"]).reset_index(drop=True), warning
+    ok = timed & (at >= 0)
+    ok[ok] &= lead[ok] - ranked[at[ok]] <= window
+    match[ok] = usable[at[ok]]
+    return match
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,7 +262,7 @@ class RevolutionPairing:
 
 
 def pair_revolutions(
-    frames: pd.DataFrame,
+    frames: Table,
     revs: RevolutionColumns,
     t_l_ns: NDArray[np.int64],
     *,

@@ -11,11 +11,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.analysis.stamps import values_ns
 from syncaudit.analysis.stats import error_mean, error_variance
+from syncaudit.columns.table import Table
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,10 +52,13 @@ class ReplayResult:
         return errors, delays
 
 
-def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayResult | None:
-    """Run the controller over the paired frames of one camera (None without applied delays)."""
-    paired = frames["paired"].to_numpy(dtype=bool)
-    rows = frames[paired]
+def replay_controller(frames: Table, config: ControllerConfig) -> ReplayResult | None:
+    """Run the controller over the paired frames of one camera (None without applied delays).
+
+    `frames`: the camera's per-frame table (`CameraSync.table`).
+    """
+    paired = np.asarray(frames["paired"], dtype=bool)
+    rows = frames.take(np.flatnonzero(paired))
     cols = [
         "t1_ns",
         "t2_ns",
@@ -65,10 +69,9 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
         "applied_delay_ns",
         "t_estimated_ns",
     ]
-    values = rows[cols].astype("float64").to_numpy()
-    rotate = (
-        rows["t_rotate_ns"].astype("float64") + rows["packet_phase_ns"].astype("float64")
-    ).to_numpy()
+    # Stamps (int64, MISSING where missing) as float64 with NaN, like the other columns.
+    values = np.column_stack([_floats(rows, c) for c in cols]) if len(rows) else np.empty((0, 8))
+    rotate = _floats(rows, "t_rotate_ns") + _floats(rows, "packet_phase_ns")
     ok = np.isfinite(values).all(axis=1) & np.isfinite(rotate)
     values, rotate = values[ok], rotate[ok]
     frame_rows = np.flatnonzero(paired)[ok].astype(np.int64)
@@ -115,3 +118,11 @@ def replay_controller(frames: pd.DataFrame, config: ControllerConfig) -> ReplayR
             [a.new_delay_ns for a in controller.adjustments], dtype=np.int64
         ),
     )
+
+
+def _floats(rows: Table, name: str) -> NDArray[np.float64]:
+    """A column as float64: int64 stamps with NaN where missing, floats as they are."""
+    column = rows[name]
+    if column.dtype == np.int64:
+        return values_ns(rows, name)
+    return np.asarray(column, dtype=np.float64)

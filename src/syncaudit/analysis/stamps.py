@@ -3,26 +3,31 @@
 Epoch nanoseconds (~1.7e18) do not fit a float64 mantissa: as floats they move in 256 ns
 steps. Stamps therefore stay int64 (`MISSING_NS` where a log does not have one) and only
 differences between two stamps, which are small, become float64 (NaN where either is
-missing). Tables hand stamps out as pandas nullable `Int64`.
+missing). Tables (`syncaudit.columns.table.Table`) hold them so; DataFrames handed out
+have them as pandas nullable `Int64`.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 
-MISSING_NS = np.iinfo(np.int64).min
+from syncaudit.columns.table import MISSING, Table
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+MISSING_NS = MISSING
 """Marker of a stamp the log does not hold (never a real epoch time)."""
 
 
-def stamps_ns(df: pd.DataFrame, name: str) -> NDArray[np.int64]:
+def stamps_ns(table: Table, name: str) -> NDArray[np.int64]:
     """A stamp column as int64 with `MISSING_NS` for missing values (or an absent column)."""
-    if name not in df:
-        return np.full(len(df), MISSING_NS, dtype=np.int64)
-    values: NDArray[np.int64] = np.asarray(
-        df[name].astype("Int64").to_numpy(dtype=np.int64, na_value=MISSING_NS), dtype=np.int64
-    )
+    if name not in table:
+        return np.full(len(table), MISSING_NS, dtype=np.int64)
+    values: NDArray[np.int64] = np.asarray(table[name], dtype=np.int64)
     return values
 
 
@@ -40,15 +45,17 @@ def delta_ns(later: NDArray[np.int64], earlier: NDArray[np.int64]) -> NDArray[np
     return out
 
 
-def values_ns(df: pd.DataFrame, name: str) -> NDArray[np.float64]:
+def values_ns(table: Table, name: str) -> NDArray[np.float64]:
     """A small nanosecond quantity (a duration, a delay) as float64, NaN where missing."""
-    stamps = stamps_ns(df, name)
+    stamps = stamps_ns(table, name)
     out = stamps.astype(np.float64)
     out[~present(stamps)] = np.nan
     return out
 
 
 def nullable(stamps: NDArray[np.int64]) -> pd.api.extensions.ExtensionArray:
-    """Stamps as a pandas `Int64` array (<NA> where missing)."""
+    """Stamps as a pandas `Int64` array (<NA> where missing); imports pandas."""
+    import pandas as pd
+
     values = np.asarray(stamps, dtype=np.int64)
     return pd.arrays.IntegerArray(values.copy(), ~present(values))

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
+
+from syncaudit.analysis.rolling import rolling_mean, rolling_variance
+
+__all__ = ["error_mean", "error_variance", "rolling_mean", "rolling_variance"]
 
 
 def error_mean(t_error: NDArray[np.float64]) -> float:
@@ -19,19 +22,3 @@ def error_variance(t_error: NDArray[np.float64]) -> float:
         return float("nan")
     mean = float(np.mean(t_error))
     return (float(np.mean(np.square(t_error))) - mean**2) * n / (n - 1)
-
-
-def rolling_mean(values: NDArray[np.float64], window: int) -> NDArray[np.float64]:
-    """Running average of the last `window` values (fewer at the start); Eq. 3 and Eq. 5."""
-    out: NDArray[np.float64] = (
-        pd.Series(values).rolling(window, min_periods=1).mean().to_numpy(np.float64)
-    )
-    return out
-
-
-def rolling_variance(values: NDArray[np.float64], window: int) -> NDArray[np.float64]:
-    """Eq. 6 over the last `window` values (NaN until two are there)."""
-    out: NDArray[np.float64] = (
-        pd.Series(values).rolling(window, min_periods=2).var(ddof=1).to_numpy(np.float64)
-    )
-    return out

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 
 from syncaudit.analysis.pairing import (
@@ -22,23 +21,27 @@ from syncaudit.analysis.pairing import (
     PHASE_FROM_TRACKER,
     PHASE_FROM_TRIGGER,
     RevolutionPairing,
+    pair_frames,
     pair_revolutions,
     pair_triggers,
 )
 from syncaudit.analysis.stamps import (
     MISSING_NS,
     delta_ns,
-    nullable,
     present,
     stamps_ns,
     values_ns,
 )
 from syncaudit.analysis.stats import error_mean, error_variance, rolling_mean, rolling_variance
 from syncaudit.camera.extract import CAMERA_EXPOSURE, CameraTables
+from syncaudit.columns.table import Table, str_column
 from syncaudit.lidar.clock import ClockReport
 from syncaudit.lidar.scan import LidarScan
 from syncaudit.rig import AnalysisConfig, CameraConfig, LidarConfig, Thresholds
 from syncaudit.units import finite_or_none, ns_to_us
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["CameraSync", "LatencyStats", "analyze_camera", "pair_triggers", "theta_deg"]
 
@@ -101,13 +104,28 @@ class CameraSync:
     rolling_var_max_ns2: float
     mean_exceeded: bool
     var_exceeded: bool
-    frames: pd.DataFrame = field(repr=False)
+    table: Table = field(repr=False)
+    """The per-frame table (FRAME_TABLE_DTYPES); `frames` hands it out as a DataFrame."""
     judged: bool = True
     """Whether enough frames paired for Eq. 5/6 to be a verdict (rig thresholds)."""
     not_judged_reason: str | None = None
     optional: bool = False
     """The rig marks the camera optional: not judged does not fail the audit."""
     warnings: list[str] = field(default_factory=list)
+    trigger_pairing: str = "none"
+    """How frames were paired with their triggers: 'sequence number', 'time' or 'none' (no
+    triggers); where by time although numbers were recorded, a warning says why."""
+    _frames: pd.DataFrame | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def frames(self) -> pd.DataFrame:
+        """The per-frame table (what --csv writes): stamps Int64, differences float64.
+
+        Built on first use (imports pandas): an audit writing only JSON never needs it.
+        """
+        if self._frames is None:
+            self._frames = self.table.to_pandas(FRAME_TABLE_DTYPES)
+        return self._frames
 
     @property
     def needs_correction(self) -> bool:
@@ -130,6 +148,7 @@ class CameraSync:
             "t_rotate_us": ns_to_us(self.t_rotate_ns),
             "packet_phase_us": ns_to_us(self.packet_phase_ns),
             "packet_phase_source": self.packet_phase_source,
+            "trigger_pairing": self.trigger_pairing,
             "latencies": {k: v.to_dict() for k, v in self.latencies.items()},
             "t5_mean_us": ns_to_us(self.t5_mean_ns),
             "delay_applied_us": ns_to_us(self.delay_applied_ns),
@@ -187,8 +206,8 @@ def _rotation(scan: LidarScan, camera_azimuth_deg: float, lidar: LidarConfig) ->
 
 
 def _start_after_trigger(
-    frames: pd.DataFrame, camera: CameraConfig, analysis: AnalysisConfig
-) -> tuple[pd.DataFrame, str | None]:
+    frames: Table, camera: CameraConfig, analysis: AnalysisConfig
+) -> tuple[Table, str | None]:
     """Exposure starts of frames stamped at their trigger (246), moved on by t4 to 248.
 
     With `stamp: trigger` the header stamp is when the trigger reached the camera; the
@@ -199,7 +218,7 @@ def _start_after_trigger(
     """
     if camera.stamp != "trigger" or frames.empty:
         return frames, None
-    derived = frames["source"].ne(CAMERA_EXPOSURE).fillna(True).to_numpy(bool)
+    derived = frames["source"] != CAMERA_EXPOSURE  # None (no type) counts as derived
     start = stamps_ns(frames, "exposure_start_ns")
     derived &= present(start)
     if not derived.any():
@@ -211,8 +230,7 @@ def _start_after_trigger(
         t4 = np.where(np.isfinite(t4), t4, analysis.assumed_t4_us * 1e3)
     known = derived & np.isfinite(t4)
     moved = np.where(known, start + np.rint(np.nan_to_num(t4)).astype(np.int64), start)
-    out = frames.copy()
-    out["exposure_start_ns"] = nullable(moved)
+    out = frames.with_columns({"exposure_start_ns": moved})
     unknown = int(np.sum(derived & ~known))
     if not unknown:
         return out, None
@@ -222,7 +240,7 @@ def _start_after_trigger(
     )
 
 
-def _t_l_ns(frames: pd.DataFrame) -> NDArray[np.int64]:
+def _t_l_ns(frames: Table) -> NDArray[np.int64]:
     """Mid-exposure per frame, exposure start + t5_i // 2, int64 (`MISSING_NS` if unknown)."""
     start = stamps_ns(frames, "exposure_start_ns")
     duration = stamps_ns(frames, "exposure_duration_ns")
@@ -278,7 +296,7 @@ def _latency(
 
 
 def _latencies(
-    frames: pd.DataFrame, clock: ClockReport | None, analysis: AnalysisConfig
+    frames: Table, clock: ClockReport | None, analysis: AnalysisConfig
 ) -> tuple[dict[str, NDArray[np.float64]], dict[str, LatencyStats]]:
     """t1..t4 per frame from the trigger checkpoints (t3 without the applied delay).
 
@@ -363,9 +381,38 @@ def _judgement(paired: int, total: int, thresholds: Thresholds) -> str | None:
     )
 
 
+FRAME_TABLE_DTYPES: dict[str, str] = {
+    "camera": "string",
+    "frame_sequence": "Int64",
+    "exposure_start_ns": "Int64",
+    "exposure_duration_ns": "Int64",
+    "t_l_ns": "Int64",
+    "t_estimated_ns": "Int64",
+    "error_signed_ns": "float64",
+    "t_error_ns": "float64",
+    "paired": "bool",
+    "revolution": "int64",
+    "revolution_start_ns": "Int64",
+    "header_stamp_ns": "Int64",
+    "t1_ns": "float64",
+    "t2_ns": "float64",
+    "t3_ns": "float64",
+    "t4_ns": "float64",
+    "t5_avg_ns": "float64",
+    "t_rotate_ns": "float64",
+    "packet_phase_ns": "float64",
+    "packet_phase_source": "string",
+    "t_sleep_ns": "float64",
+    "applied_delay_ns": "float64",
+    "rolling_error_mean_ns": "float64",
+    "rolling_error_var_ns2": "float64",
+}
+"""The per-frame table's columns and their DataFrame dtypes (stamps Int64 ns)."""
+
+
 def _frame_table(
     camera: str,
-    frames: pd.DataFrame,
+    frames: Table,
     t_l_ns: NDArray[np.int64],
     revolutions: RevolutionPairing,
     errors: _Errors,
@@ -374,8 +421,8 @@ def _frame_table(
     applied_ns: NDArray[np.float64],
     *,
     window_frames: int,
-) -> pd.DataFrame:
-    """The per-frame table (what --csv writes): stamps Int64, differences float64."""
+) -> Table:
+    """The per-frame table (what --csv writes), columns as FRAME_TABLE_DTYPES."""
     t_error = np.abs(errors.signed_ns)
     masked = np.where(errors.paired, t_error, np.nan)
     source = [
@@ -384,34 +431,33 @@ def _frame_table(
             revolutions.revolution.tolist(), revolutions.phase_from_trigger.tolist(), strict=True
         )
     ]
-    return pd.DataFrame(
-        {
-            "camera": pd.array([camera] * len(frames), dtype="string"),
-            "frame_sequence": frames["frame_sequence"].array,
-            "exposure_start_ns": frames["exposure_start_ns"].astype("Int64").array,
-            "exposure_duration_ns": frames["exposure_duration_ns"].astype("Int64").array,
-            "t_l_ns": nullable(t_l_ns),
-            "t_estimated_ns": nullable(revolutions.t_estimated_ns),
-            "error_signed_ns": errors.signed_ns,
-            "t_error_ns": t_error,
-            "paired": errors.paired,
-            "revolution": revolutions.revolution,
-            "revolution_start_ns": nullable(revolutions.revolution_start_ns),
-            "header_stamp_ns": frames["header_stamp_ns"].astype("Int64").array,
-            "t1_ns": lat["t1"],
-            "t2_ns": lat["t2"],
-            "t3_ns": lat["t3"],
-            "t4_ns": lat["t4"],
-            "t5_avg_ns": delay.t5_avg_ns,
-            "t_rotate_ns": revolutions.t_rotate_ns,
-            "packet_phase_ns": revolutions.packet_phase_ns,
-            "packet_phase_source": pd.array(source, dtype="string"),
-            "t_sleep_ns": delay.t_sleep_ns,
-            "applied_delay_ns": applied_ns,
-            "rolling_error_mean_ns": rolling_mean(masked, window_frames),
-            "rolling_error_var_ns2": rolling_variance(masked, window_frames),
-        }
-    )
+    columns = {
+        "camera": str_column([camera] * len(frames)),
+        "frame_sequence": frames["frame_sequence"],
+        "exposure_start_ns": frames["exposure_start_ns"],
+        "exposure_duration_ns": frames["exposure_duration_ns"],
+        "t_l_ns": t_l_ns,
+        "t_estimated_ns": revolutions.t_estimated_ns,
+        "error_signed_ns": errors.signed_ns,
+        "t_error_ns": t_error,
+        "paired": errors.paired,
+        "revolution": revolutions.revolution,
+        "revolution_start_ns": revolutions.revolution_start_ns,
+        "header_stamp_ns": frames["header_stamp_ns"],
+        "t1_ns": lat["t1"],
+        "t2_ns": lat["t2"],
+        "t3_ns": lat["t3"],
+        "t4_ns": lat["t4"],
+        "t5_avg_ns": delay.t5_avg_ns,
+        "t_rotate_ns": revolutions.t_rotate_ns,
+        "packet_phase_ns": revolutions.packet_phase_ns,
+        "packet_phase_source": str_column(source),
+        "t_sleep_ns": delay.t_sleep_ns,
+        "applied_delay_ns": applied_ns,
+        "rolling_error_mean_ns": rolling_mean(masked, window_frames),
+        "rolling_error_var_ns2": rolling_variance(masked, window_frames),
+    }
+    return Table(columns, len(frames))
 
 
 ZERO_MISMATCH_TURNS = 0.125
@@ -440,12 +486,12 @@ def _zero_warnings(revolutions: RevolutionPairing, lidar: LidarConfig) -> list[s
     ]
 
 
-def _camera_warnings(frames: pd.DataFrame, stats: dict[str, LatencyStats]) -> list[str]:
+def _camera_warnings(frames: Table, stats: dict[str, LatencyStats]) -> list[str]:
     """What the log lacks for this camera, as warnings."""
     warnings: list[str] = []
     if frames.empty:
         warnings.append("no frames: nothing to pair with the LiDAR")
-    elif frames["exposure_duration_ns"].isna().all():
+    elif not present(stamps_ns(frames, "exposure_duration_ns")).any():
         warnings.append("no exposure metadata: t5 and t_l unknown (set assumed_exposure_us)")
     for name in LATENCIES:
         if stats[name].status == "not observed":
@@ -474,9 +520,15 @@ def analyze_camera(
     `target_index` is the camera's column in the revolutions' target crossings.
     """
     rotation = _rotation(scan, camera_azimuth_deg, lidar)
-    frames, pairing_warning = pair_triggers(
-        tables.frames, tables.triggers, trigger_stamped=camera.stamp == "trigger"
+    trigger_pairing = pair_frames(
+        tables.frames,
+        tables.triggers,
+        trigger_stamped=camera.stamp == "trigger",
+        counters=None
+        if tables.frame_counter is None or tables.trigger_counter is None
+        else (tables.frame_counter, tables.trigger_counter),
     )
+    frames, pairing_warning = trigger_pairing.frames, trigger_pairing.warning
     frames, t4_warning = _start_after_trigger(frames, camera, analysis)
     t_l = _t_l_ns(frames)
     period = rotation.period_ns
@@ -524,6 +576,7 @@ def analyze_camera(
         warnings,
         thresholds,
         shared_topic_notes=tables.shared_topic_notes,
+        trigger_pairing=trigger_pairing.method,
     )
 
 
@@ -534,11 +587,12 @@ def _camera_sync(
     errors: _Errors,
     stats: dict[str, LatencyStats],
     delay: _DelayTerms,
-    table: pd.DataFrame,
+    table: Table,
     warnings: list[str],
     thresholds: Thresholds,
     *,
     shared_topic_notes: tuple[str, ...] = (),
+    trigger_pairing: str = "none",
 ) -> CameraSync:
     """Eq. 5/6 over the paired frames, the thresholds and the judgement, as a CameraSync.
 
@@ -572,13 +626,14 @@ def _camera_sync(
         error_var_ns2=var_e,
         error_p99_ns=float(np.percentile(e, 99)) if e.size else math.nan,
         error_max_ns=float(e.max()) if e.size else math.nan,
-        rolling_mean_max_ns=_nanmax(table["rolling_error_mean_ns"].to_numpy(np.float64)),
-        rolling_var_max_ns2=_nanmax(table["rolling_error_var_ns2"].to_numpy(np.float64)),
+        rolling_mean_max_ns=_nanmax(table["rolling_error_mean_ns"]),
+        rolling_var_max_ns2=_nanmax(table["rolling_error_var_ns2"]),
         mean_exceeded=bool(mean_e > thresholds.error_mean_us * 1e3),
         var_exceeded=bool(var_e > thresholds.error_var_us2 * 1e6),
-        frames=table,
+        table=table,
         judged=reason is None,
         not_judged_reason=reason,
         optional=camera.optional,
         warnings=warnings,
+        trigger_pairing=trigger_pairing,
     )

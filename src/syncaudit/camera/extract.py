@@ -20,13 +20,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from syncaudit.camera.sequences import SequenceCounter, field_counter, header_seq_counter
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage
 from syncaudit.rig import CameraConfig
 
 if TYPE_CHECKING:
-    import pandas as pd
+    from syncaudit.columns.table import Table
 
 _STAMP = struct.Struct("<iI")
 _STAMP_BE = struct.Struct(">iI")
@@ -237,13 +238,17 @@ def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
             msg.msgtype,
             _frame_id(m),
         )
+    seq: int | None = None
     if msg.msgtype == "builtin_interfaces/msg/Time":
-        sent, frame_id = _time_ns(m), ""  # a bare time: nothing names the camera
+        # A bare time: nothing names the camera, and no header holds a seq (its first
+        # four bytes are the seconds, in ROS 1 too).
+        sent, frame_id = _time_ns(m), ""
     else:  # sensor_msgs/TimeReference: frame_id "not used" by the message's docs; source
         sent, frame_id = _time_ns(m.time_ref), _frame_id(m) or str(getattr(m, "source", ""))
+        seq = _ros1_seq(msg)
     return (
         camera,
-        _ros1_seq(msg),
+        seq,
         msg.log_time_ns,
         None,
         None,
@@ -261,12 +266,13 @@ class CameraTables:
     """Everything one camera's topics say, as tables."""
 
     name: str
-    images: pd.DataFrame
+    images: Table
     """header_stamp_ns, log_time_ns, frame_sequence (ROS 1 seq), frame_id of every image."""
-    frames: pd.DataFrame
-    """FRAME_COLUMNS: one row per exposure record (or per image where there are none)."""
-    triggers: pd.DataFrame
-    """TRIGGER_COLUMNS."""
+    frames: Table
+    """FRAME_COLUMNS: one row per exposure record (or per image where there are none), in
+    log-time order."""
+    triggers: Table
+    """TRIGGER_COLUMNS, in the order the log gave them."""
     exposure_source: str | None
     trigger_source: str | None
     warnings: tuple[str, ...] = ()
@@ -274,6 +280,10 @@ class CameraTables:
     shared_topic_notes: tuple[str, ...] = ()
     """Why messages of a topic this camera shares with others could not be given to it
     (nothing in them tells the cameras apart): the reason it is not judged, if it is not."""
+    frame_counter: SequenceCounter | None = None
+    """What the frames' `frame_sequence` numbers count (None: unknown, as one camera's)."""
+    trigger_counter: SequenceCounter | None = None
+    """What the triggers' `frame_sequence` numbers count."""
 
 
 CAMERA_EXPOSURE = "syncaudit_msgs/msg/CameraExposure"
@@ -289,86 +299,114 @@ class CameraTableBuilder:
     exposures: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
     triggers: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
     shared_topic_notes: list[str] = field(default_factory=list)
+    topic_readers: dict[str, tuple[str, tuple[str, ...]]] = field(default_factory=dict)
+    """Kind ('image', 'exposure', 'trigger') -> (topic it reads, the cameras reading it)."""
+
+    def sequence_counter(self, kind: str, source: str | None) -> SequenceCounter:
+        """What the `frame_sequence` of its `kind` rows count, given their message type."""
+        if source in CAMERA_FIELD_TYPES:  # the frame counter of the camera it names
+            return field_counter(source, self.camera.name)
+        topic, cameras = self.topic_readers.get(kind, (None, (self.camera.name,)))
+        return header_seq_counter(topic, cameras)
 
     def build(self) -> CameraTables:
         """The camera's frame, image and trigger tables, damaged messages left out.
 
         Raises LogReadError where every message of one of its topics is damaged.
         """
-        import pandas as pd  # deferred: worker processes extract rows without pandas
+        import numpy as np  # deferred: worker processes extract rows without numpy
+
+        from syncaudit.columns.table import Table, int_column, str_column
 
         cam = self.camera
         image_rows, image_warning = _readable(cam.name, self.images)
         exposure_rows, exposure_warning = _readable(cam.name, self.exposures)
         trigger_rows, trigger_warning = _readable(cam.name, self.triggers)
         warnings = tuple(w for w in (image_warning, exposure_warning, trigger_warning) if w)
-        images = pd.DataFrame(
+        images = Table(
             {
-                "header_stamp_ns": pd.array([r[0] for r in image_rows], dtype="int64"),
-                "log_time_ns": pd.array([r[1] for r in image_rows], dtype="int64"),
-                "frame_sequence": pd.array([r[2] for r in image_rows], dtype="Int64"),
-                "frame_id": pd.array([r[3] for r in image_rows], dtype="string"),
-            }
+                "header_stamp_ns": np.array([r[0] for r in image_rows], dtype=np.int64),
+                "log_time_ns": np.array([r[1] for r in image_rows], dtype=np.int64),
+                "frame_sequence": int_column(r[2] for r in image_rows),
+                "frame_id": str_column([r[3] for r in image_rows]),
+            },
+            len(image_rows),
         )
         if exposure_rows:
             frames = _restamped(_table(exposure_rows, FRAME_COLUMNS), cam.stamp)
         else:
-            assumed = (
-                None if cam.assumed_exposure_us is None else round(cam.assumed_exposure_us * 1e3)
-            )
-            frames = pd.DataFrame(
-                {
-                    "camera": cam.name,
-                    "frame_sequence": images["frame_sequence"],
-                    "header_stamp_ns": images["header_stamp_ns"],
-                    "log_time_ns": images["log_time_ns"],
-                    "exposure_start_ns": [
-                        exposure_start_ns(int(s), assumed, cam.stamp) if assumed else None
-                        for s in images["header_stamp_ns"]
-                    ],
-                    "exposure_duration_ns": assumed,
-                    "source": "image" if assumed is None else "image+assumed_exposure",
-                    "frame_id": images["frame_id"],
-                },
-                columns=list(FRAME_COLUMNS),
-            )
+            frames = _frames_from_images(images, cam)
         # Rows from a shared topic carry what the message names; the table is this camera's.
-        frames = frames.assign(camera=cam.name).astype(FRAME_COLUMNS)
-        frames = frames.sort_values("log_time_ns", kind="stable")
-        triggers = _table(trigger_rows, TRIGGER_COLUMNS).assign(camera=cam.name)
+        frames = frames.with_columns({"camera": str_column([cam.name] * len(frames))})
+        frames = frames.take(np.argsort(frames["log_time_ns"], kind="stable"))
+        triggers = _table(trigger_rows, TRIGGER_COLUMNS)
+        triggers = triggers.with_columns({"camera": str_column([cam.name] * len(triggers))})
         return CameraTables(
             cam.name,
             images,
-            frames.reset_index(drop=True),
-            triggers.astype(TRIGGER_COLUMNS),
+            frames,
+            triggers,
             exposure_rows[0][_SOURCE] if exposure_rows else None,
             trigger_rows[0][_SOURCE] if trigger_rows else None,
             warnings,
             tuple(self.shared_topic_notes),
+            self.sequence_counter(
+                "exposure" if exposure_rows else "image",
+                exposure_rows[0][_SOURCE] if exposure_rows else None,
+            ),
+            self.sequence_counter("trigger", trigger_rows[0][_SOURCE] if trigger_rows else None),
         )
 
 
-def _restamped(frames: pd.DataFrame, semantics: str) -> pd.DataFrame:
+def _frames_from_images(images: Table, cam: CameraConfig) -> Table:
+    """One frame per image where the log has no exposure records (the rig's assumed
+    exposure, if it states one, gives each its start and duration)."""
+    from syncaudit.columns.table import Table, int_column, str_column
+
+    assumed = None if cam.assumed_exposure_us is None else round(cam.assumed_exposure_us * 1e3)
+    stamps = images["header_stamp_ns"].tolist()
+    n = len(stamps)
+    return Table(
+        {
+            "camera": str_column([cam.name] * n),
+            "frame_sequence": images["frame_sequence"],
+            "header_stamp_ns": images["header_stamp_ns"],
+            "log_time_ns": images["log_time_ns"],
+            "exposure_start_ns": int_column(
+                exposure_start_ns(s, assumed, cam.stamp) if assumed else None for s in stamps
+            ),
+            "exposure_duration_ns": int_column([assumed] * n),
+            "source": str_column(["image" if assumed is None else "image+assumed_exposure"] * n),
+            "frame_id": images["frame_id"],
+        },
+        n,
+    )
+
+
+def _restamped(frames: Table, semantics: str) -> Table:
     """Exposure starts derived from header stamps again, with this camera's `stamp`.
 
     The workers derive them with the semantics of the topic's (first) camera; a topic
     shared by cameras whose drivers stamp differently needs each camera's own.
     """
-    derived = frames["source"].ne(CAMERA_EXPOSURE).fillna(True).to_numpy(bool)
+    import numpy as np
+
+    from syncaudit.columns.table import MISSING
+
+    derived = frames["source"] != CAMERA_EXPOSURE  # None (no type) counts as derived
     if not derived.any():
         return frames
-    stamp = frames["header_stamp_ns"].astype("Int64")
-    duration = frames["exposure_duration_ns"].astype("Int64")
+    stamp, duration = frames["header_stamp_ns"], frames["exposure_duration_ns"]
+    known = (stamp != MISSING) & (duration != MISSING)
     if semantics == "exposure_middle":
-        start = stamp - duration // 2
+        start = np.where(known, stamp - duration // 2, stamp)
     elif semantics == "exposure_end":
-        start = stamp - duration
+        start = np.where(known, stamp - duration, stamp)
     else:
         start = stamp
-    start = start.fillna(stamp) if semantics in ("exposure_middle", "exposure_end") else start
-    out = frames.copy()
-    out["exposure_start_ns"] = out["exposure_start_ns"].astype("Int64").where(~derived, start)
-    return out
+    return frames.with_columns(
+        {"exposure_start_ns": np.where(derived, start, frames["exposure_start_ns"])}
+    )
 
 
 _Row = TypeVar("_Row", bound=tuple[Any, ...])
@@ -393,14 +431,19 @@ def _readable(camera: str, rows: list[_Row | DamagedRow]) -> tuple[list[_Row], s
     return good, f"camera {camera}: {len(bad)} damaged {noun} skipped on {first.topic} ({where})"
 
 
-def _table(rows: list[tuple[Any, ...]], columns: dict[str, Any]) -> pd.DataFrame:
-    """A typed table from row tuples, built column by column (3x faster than astype)."""
-    import pandas as pd
+def _table(rows: list[tuple[Any, ...]], columns: dict[str, str]) -> Table:
+    """A typed table from row tuples, built column by column (see columns.table)."""
+    import numpy as np
+
+    from syncaudit.columns.table import Table, int_column, str_column
 
     values = list(zip(*rows, strict=True)) if rows else [()] * len(columns)
-    return pd.DataFrame(
-        {
-            name: pd.array(list(column), dtype=dtype)
-            for (name, dtype), column in zip(columns.items(), values, strict=True)
-        }
-    )
+    out: dict[str, Any] = {}
+    for (name, dtype), column in zip(columns.items(), values, strict=True):
+        if dtype == "string":
+            out[name] = str_column(list(column))
+        elif dtype == "Int64":
+            out[name] = int_column(column)
+        else:
+            out[name] = np.array(column, dtype=dtype)
+    return Table(out, len(rows))

@@ -19,14 +19,49 @@ the FSYNC of a GMSL deserializer), and pairing by time picks each frame's own tr
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Container
 from dataclasses import dataclass, field
 from typing import Any
 
 from syncaudit.camera.extract import CameraTableBuilder, DamagedRow
 from syncaudit.errors import LogReadError
+from syncaudit.rig import CameraConfig
 
 KINDS = ("image", "exposure", "trigger")
 """What a camera topic holds, as `collect.extract` labels its items."""
+
+
+def camera_topics(cam: CameraConfig, recorded: Container[str]) -> list[tuple[str, str]]:
+    """(kind, topic) of each recorded topic a camera reads, as the audit reads them.
+
+    Frames come from the image headers, or from CameraInfo where no image was recorded.
+    """
+    frame_topic = cam.image_topic if cam.image_topic in recorded else cam.info_topic
+    wanted = (
+        ("image", frame_topic),
+        ("exposure", cam.exposure_topic),
+        ("trigger", cam.trigger_topic),
+    )
+    return [(kind, topic) for kind, topic in wanted if topic is not None and topic in recorded]
+
+
+@dataclass(frozen=True, slots=True)
+class SharedTopicCount:
+    """What became of the messages of one topic several cameras share."""
+
+    kind: str
+    topic: str
+    cameras: tuple[str, ...]
+    """The cameras reading the topic (rig order)."""
+    per_camera: dict[str, int]
+    """Messages given to each camera."""
+    frame_ids: dict[str, int]
+    """Readable messages by their header.frame_id ("" for none)."""
+    unnamed: int
+    """Messages naming no camera (triggers among them went to every camera)."""
+    unknown: dict[str, int]
+    """Messages naming a frame or camera no camera of the topic has, by what they name."""
+    damaged: int
 
 
 def _rows_of(builder: CameraTableBuilder, kind: str) -> list[Any]:
@@ -45,6 +80,20 @@ def _identity(kind: str, row: tuple[Any, ...]) -> tuple[str, str]:
     return str(row[0] or ""), str(row[-1] or "")
 
 
+def _named_camera(
+    builders: list[CameraTableBuilder], name: str, frame: str
+) -> CameraTableBuilder | None:
+    """The builder of the camera a message names: by `camera` field, else by frame_id."""
+    if name:
+        target = next((b for b in builders if b.camera.name == name), None)
+        if target is not None:
+            return target
+    if not frame:
+        return None
+    bare = frame.lstrip("/")
+    return next((b for b in builders if (b.camera.frame_id or "").lstrip("/") == bare), None)
+
+
 @dataclass(slots=True)
 class _SharedTopic:
     """One topic several cameras read, and what became of its rows."""
@@ -58,20 +107,16 @@ class _SharedTopic:
     unknown: Counter[str] = field(default_factory=Counter)
     """Rows naming a frame or camera the rig does not have there, by what they name."""
     damaged: list[DamagedRow] = field(default_factory=list)
+    frame_ids: Counter[str] = field(default_factory=Counter)
+    """Readable rows by the header.frame_id they carry ("" for none)."""
 
     def route(self, row: tuple[Any, ...] | DamagedRow) -> None:
         if isinstance(row, DamagedRow):
             self.damaged.append(row)
             return
         name, frame = _identity(self.kind, row)
-        target = None
-        if name:
-            target = next((b for b in self.builders if b.camera.name == name), None)
-        if target is None and frame:
-            bare = frame.lstrip("/")
-            target = next(
-                (b for b in self.builders if (b.camera.frame_id or "").lstrip("/") == bare), None
-            )
+        self.frame_ids[frame] += 1
+        target = _named_camera(self.builders, name, frame)
         if target is not None:
             _rows_of(target, self.kind).append(row)
             self.routed[target.camera.name] += 1
@@ -152,6 +197,9 @@ class CameraRouter:
         owners = self._owners.setdefault((kind, topic), [])
         if builder not in owners:
             owners.append(builder)
+        readers = tuple(o.camera.name for o in owners)
+        for owner in owners:
+            owner.topic_readers[kind] = (topic, readers)
         key = (kind, topic)
         if len(owners) == 1:
             self._single[key] = _rows_of(builder, kind)
@@ -170,6 +218,24 @@ class CameraRouter:
             rows.append(payload)
         else:
             self._shared[(kind, topic)].route(payload)
+
+    def shared_counts(self) -> list[SharedTopicCount]:
+        """Per topic several cameras read, where its messages went (by kind, then topic)."""
+        return [
+            SharedTopicCount(
+                kind=s.kind,
+                topic=s.topic,
+                cameras=tuple(b.camera.name for b in s.builders),
+                per_camera={b.camera.name: s.routed[b.camera.name] for b in s.builders},
+                frame_ids=dict(sorted(s.frame_ids.items())),
+                unnamed=s.unnamed,
+                unknown=dict(sorted(s.unknown.items())),
+                damaged=len(s.damaged),
+            )
+            for _, s in sorted(
+                self._shared.items(), key=lambda kv: (KINDS.index(kv[0][0]), kv[0][1])
+            )
+        ]
 
     def finish(self) -> list[str]:
         """Warnings about shared topics (rows no camera could be given), once the pass ended.

@@ -54,6 +54,7 @@ _OPTION_OF_FIELD: dict[str, str] = {
     "trigger_packet": "--trigger-packet",
     "ros1_header_seq": "--ros1-seq",
     "shared_topics": "--shared-topics",
+    "trigger_message": "--trigger-message",
     "exposure_messages": "--exposure-messages",
     "header_frame_ids": "--frame-ids",
     "camera_field": "--camera-field",
@@ -176,6 +177,14 @@ def simulate_sync(
             "exposure, meta, trigger), told apart by header.frame_id.",
         ),
     ] = "",
+    trigger_message: Annotated[
+        str,
+        typer.Option(
+            "--trigger-message",
+            help="The trigger record: trigger_event (TriggerEvent, five checkpoints) or "
+            "time_reference (sensor_msgs/TimeReference: 246 only, numbered by header seq).",
+        ),
+    ] = "trigger_event",
     frame_ids: Annotated[
         bool,
         typer.Option(
@@ -223,6 +232,7 @@ def simulate_sync(
                 stamp=stamp,
                 exposure_messages=_names(exposure_messages),
                 shared_topics=_names(shared_topics),
+                trigger_message=trigger_message,
                 header_frame_ids=frame_ids,
                 camera_field=camera_field,
             )

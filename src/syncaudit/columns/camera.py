@@ -1,4 +1,5 @@
-"""Camera columns as pandas frames: one row per image frame, one row per trigger."""
+"""Camera columns: one row per image frame, one row per trigger (`columns.table.Table`s; these
+are their pandas dtypes, see the table there for how each is held in numpy)."""
 
 from __future__ import annotations
 

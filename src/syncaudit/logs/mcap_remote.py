@@ -53,6 +53,7 @@ from syncaudit.remote.ranges import (
     read_head,
     read_range,
     release_tracker,
+    signed_url,
 )
 
 KIND = "mcap-remote-chunks"
@@ -259,11 +260,10 @@ class RemoteMcapLog(McapLog):
             self._reader = SeekingReader(self._file, validate_crcs=True)
             self._check_header()
             if self._load_index() is None:
+                reason = "MCAP without a usable chunk index (cut off or no summary)"
                 self._tracker.ranged = False
-                raise RemoteUnindexedError(
-                    f"{self.path}: MCAP without a usable chunk index (cut off or no summary): "
-                    "it cannot be read by ranges"
-                )
+                self._tracker.whole_reason = f"{reason}: downloaded whole and scanned"
+                raise RemoteUnindexedError(f"{self.path}: {reason}: it cannot be read by ranges")
             self._indexed = True
         except SyncauditError:
             release_tracker(self._tracker)
@@ -326,7 +326,7 @@ class RemoteMcapLog(McapLog):
         self._tracker.chunks_total = len(summary.chunk_indexes) if summary else 0
         self._tracker.chunks_fetched = len(chunks)
         self._tracker.needed_chunk_bytes = sum(unit.length for unit in chunks)
-        return coalesce_units(chunks, self.url)
+        return coalesce_units(chunks, str(self.path))
 
     def fetch_stats(self) -> Tracker:
         """What this log's reading has fetched so far (shared with its workers)."""
@@ -373,7 +373,7 @@ class RemoteChunksUnitReader:
 
     def __init__(self, source: str, *, check_crc: bool = False) -> None:
         self.source = source
-        self._object = open_object(source)
+        self._object = open_object(signed_url(source))
         # The parent's tracker, inherited by fork: its counter, and the bytes it holds.
         self._tracker = find_tracker(source)
         self._counter = self._tracker.counter if self._tracker is not None else None
@@ -499,8 +499,10 @@ def _skip(stream: RunStream, length: int) -> None:
 
 
 def open_remote_log(url: str) -> LogReader:
-    """A log behind a URL: an indexed MCAP or ROS 1 bag, read by ranges (anything else is
-    refused with a LogOpenError: the fleet gate downloads ROS 2 bag folders whole)."""
+    """A log behind a URL, read by ranges: an indexed MCAP file, a ROS 1 bag, or a ROS 2 bag
+    prefix with MCAP storage (any other URL: the prefix of a bag, its metadata.yaml read
+    first). What cannot be read by ranges raises `RemoteUnindexedError`, for the caller
+    (the fleet gate) to download the log whole."""
     path = urlsplit(url).path.lower()
     if path.endswith(".mcap"):
         return RemoteMcapLog(url)
@@ -508,7 +510,13 @@ def open_remote_log(url: str) -> LogReader:
         from syncaudit.logs.rosbag1_remote import RemoteRosbag1Log
 
         return RemoteRosbag1Log(url)
-    raise LogOpenError(
-        f"{public_url(url)}: only MCAP files and ROS 1 bags are read straight from a URL "
-        "(syncaudit gate downloads ROS 2 bag folders)"
-    )
+    if path.endswith(".db3"):
+        from syncaudit.logs.rosbag2_remote import SQLITE_REASON
+
+        tracker = acquire_tracker(url)  # (the caller's, if it tracks this URL)
+        tracker.ranged, tracker.whole_reason = False, SQLITE_REASON
+        release_tracker(tracker)
+        raise RemoteUnindexedError(f"{public_url(url)}: not read by ranges: {SQLITE_REASON}")
+    from syncaudit.logs.rosbag2_remote import open_remote_bag
+
+    return open_remote_bag(url)

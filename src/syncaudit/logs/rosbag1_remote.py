@@ -47,6 +47,7 @@ from syncaudit.remote.ranges import (
     read_head,
     read_range,
     release_tracker,
+    signed_url,
 )
 
 KIND = "rosbag1-remote-chunk"
@@ -138,6 +139,7 @@ class RemoteRosbag1Log(Rosbag1Log):
     def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
         """No scan over ranged reads (it would read every record): refused, to be fetched."""
         self._tracker.ranged = False
+        self._tracker.whole_reason = f"ROS 1 bag {reason}: downloaded whole and scanned"
         raise RemoteUnindexedError(
             f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}"
         )
@@ -167,7 +169,9 @@ class RemoteRosbag1Log(Rosbag1Log):
                     cost=end - last.offset,
                 )
                 continue
-            runs.append(dataclasses.replace(span, source=self.url, kind=KIND, cost=span.length))
+            runs.append(
+                dataclasses.replace(span, source=str(self.path), kind=KIND, cost=span.length)
+            )
         return runs
 
     def fetch_stats(self) -> Tracker:
@@ -214,7 +218,7 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
         self._tracker: Tracker | None = None
         if source is None:
             return
-        self._object = open_object(source)
+        self._object = open_object(signed_url(source))
         self._tracker = find_tracker(source)  # the parent's, inherited by fork
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:

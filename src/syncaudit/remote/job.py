@@ -1,9 +1,10 @@
-"""The gate's task for a log that may be a URL: an MCAP read by ranges, else fetched first.
+"""The gate's task for a log that may be a URL: read by ranges where it can be, else fetched.
 
-An MCAP URL is opened as a `logs.mcap_remote.RemoteMcapLog` (its index fetched by the
-parent, its chunk runs by each chunk worker into memory): nothing is written to disk.
-Other logs are copied to $SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows),
-else the system temp folder, and the copy is removed when the audit ends. Runs in the
+An MCAP file, a ROS 1 bag or a ROS 2 bag prefix with MCAP storage is opened by
+`logs.open_log(URL)` (its index fetched by the parent, its chunk runs by each chunk worker
+into memory): nothing is written to disk. Other logs are copied to
+$SYNCAUDIT_REMOTE_TMPDIR (e.g. /dev/shm when memory allows), else the system temp
+folder, and the copy is removed when the audit ends. Runs in the
 gate's worker (a local process or a cluster worker), so the bytes travel from the object
 store to where the audit runs, never through the driver.
 """
@@ -14,7 +15,6 @@ import os
 import tempfile
 from dataclasses import replace
 from pathlib import Path
-from urllib.parse import urlsplit
 
 from syncaudit.errors import SyncauditError
 from syncaudit.fleet.inputs import LogJob
@@ -41,17 +41,20 @@ def rig_topics(rig_path: str | None) -> frozenset[str] | None:
 
 
 def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
-    """`run_log_job` for local paths and for MCAP and ROS 1 bag URLs (read by ranges,
-    straight into each chunk worker's memory); other URLs (ROS 2 bag folders, a log
-    without index, a log to calibrate) are fetched into a temporary folder first."""
+    """`run_log_job` for local paths and for URLs read by ranges (MCAP files, ROS 1 bags,
+    ROS 2 bag prefixes with MCAP storage: straight into each chunk worker's memory); the
+    rest (SQLite storage, a log without index, a log to calibrate) is fetched into a
+    temporary folder first, `remote_read.whole_reason` saying why."""
     if not is_url(job.path):
         return run_log_job(job, options)
-    if urlsplit(job.path).path.lower().endswith((".mcap", ".bag")) and not options.calibrate:
+    reason = "--calibrate reads point clouds through a local path"
+    if not options.calibrate:
         with tracking(job.path) as tracker:
             outcome = run_log_job(job, options)
-            if tracker.ranged:  # else: no chunk index, read from a whole copy below
+            if tracker.ranged:  # else: not readable by ranges, read from a copy below
                 outcome.remote_read = tracker.stats()
                 return outcome
+            reason = tracker.whole_reason
     try:
         topics = None if options.calibrate else rig_topics(job.rig_path)
     except SyncauditError as exc:
@@ -60,6 +63,8 @@ def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
     if topics is not None and outcome.remote_read is not None and outcome.error_code in (3, 7):
         # The rig's topics missed something the audit reads (a chunk hole): every chunk.
         outcome = _fetch_and_audit(job, options, None)
+    if outcome.remote_read is not None:
+        outcome.remote_read["whole_reason"] = reason  # why it was downloaded, said once
     return outcome
 
 

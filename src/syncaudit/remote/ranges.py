@@ -4,8 +4,13 @@ HTTP(S) URLs are read with the standard library's `http.client` over one persist
 connection per process and thread (so a forked chunk worker never shares its parent's
 socket): each range is one `GET` with `Range: bytes=a-b`, read with `readinto` straight
 into the caller's buffer (no intermediate copy; `benchmarks/bench_remote.py --clients`
-measured it against urllib3, requests and fsspec). Other stores (s3://, gs://, az://)
-go through fsspec: each range is one `cat_file(path, start, end)`.
+measured it against urllib3, requests and fsspec). Redirects (301, 302, 303, 307, 308)
+are followed, at most `MAX_REDIRECTS` per request, keeping the Range header; user info
+in the URL is sent as Basic credentials to its own origin only, never after a redirect
+to another host, port or scheme (as curl and requests do). A permanent redirect (301,
+308) is remembered for the object's later ranges; a temporary one is asked again each
+time. Other stores (s3://, gs://, az://) go through fsspec: each range is one
+`cat_file(path, start, end)`.
 
 A failed or dropped read is retried from the byte where it stopped, `TRIES` attempts in
 all per range, then a LogReadError (exit 3) names the URL (without query string or user
@@ -15,6 +20,7 @@ in shared memory, so the parent can report bytes fetched by its forked workers.
 
 from __future__ import annotations
 
+import base64
 import http.client
 import io
 import multiprocessing
@@ -23,10 +29,10 @@ import re
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
-from urllib.parse import urlsplit
+from urllib.parse import unquote, urljoin, urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError
 
@@ -37,6 +43,11 @@ RETRY_PAUSE_S = 0.2
 TIMEOUT_S = 60.0
 """Socket timeout of one HTTP connect or read."""
 HTTP_SCHEMES = ("http", "https")
+MAX_REDIRECTS = 5
+"""Redirects followed for one request before the read is an error (curl's default is 50,
+browsers ~20: a log behind more than a few is a misconfigured server or a loop)."""
+REDIRECTS = frozenset({301, 302, 303, 307, 308})
+PERMANENT_REDIRECTS = frozenset({301, 308})
 _CONTENT_RANGE = re.compile(r"bytes (\d+)-(\d+)/(\d+|\*)$")
 
 
@@ -93,6 +104,8 @@ class FetchStats:
     chunks_fetched: int = 0
     chunks_total: int = 0
     ranged: bool = True
+    whole_reason: str = ""
+    """Why the log was downloaded whole rather than read by ranges (when `ranged` is false)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -116,6 +129,8 @@ class Tracker:
     chunks_fetched: int = 0
     chunks_total: int = 0
     ranged: bool = True
+    whole_reason: str = ""
+    """Why the log cannot be read by ranges (set with `ranged = False`)."""
     users: int = 0
 
     def stats(self) -> dict[str, Any]:
@@ -129,34 +144,54 @@ class Tracker:
             chunks_fetched=self.chunks_fetched,
             chunks_total=self.chunks_total,
             ranged=self.ranged,
+            whole_reason=self.whole_reason,
         ).to_dict()
 
 
 _TRACKERS: dict[str, Tracker] = {}
+"""Public URL (no query string, no user info) -> the tracker of the log behind it."""
 _TRACKERS_LOCK = threading.Lock()
 
 
 def acquire_tracker(url: str) -> Tracker:
-    """The tracker of `url` in this process (forked workers inherit it), made on first use."""
+    """The tracker of `url` in this process (forked workers inherit it), made on first use.
+
+    Kept under the public URL: read units and messages name the log by it, and the
+    tracker alone holds the URL as given (a signed URL's query string), for the readers
+    of this process and of the workers it forks (`signed_url`)."""
+    key = public_url(url)
     with _TRACKERS_LOCK:
-        tracker = _TRACKERS.get(url)
+        tracker = _TRACKERS.get(key)
         if tracker is None:
-            tracker = _TRACKERS[url] = Tracker(url)
+            tracker = _TRACKERS[key] = Tracker(url)
         tracker.users += 1
         return tracker
 
 
 def release_tracker(tracker: Tracker) -> None:
     """Drop one use of a tracker; the last user removes it."""
+    key = public_url(tracker.url)
     with _TRACKERS_LOCK:
         tracker.users -= 1
-        if tracker.users <= 0 and _TRACKERS.get(tracker.url) is tracker:
-            del _TRACKERS[tracker.url]
+        if tracker.users <= 0 and _TRACKERS.get(key) is tracker:
+            del _TRACKERS[key]
 
 
 def find_tracker(url: str) -> Tracker | None:
-    """The tracker of `url` if this process (or the parent it forked from) holds one."""
-    return _TRACKERS.get(url)
+    """The tracker of `url` (public or as given) if this process, or the parent it forked
+    from, holds one."""
+    return _TRACKERS.get(public_url(url))
+
+
+def signed_url(url: str) -> str:
+    """The URL as the log was opened with (query string, user info) for its public form,
+    where this process holds its tracker; else `url` itself.
+
+    Read units carry the public URL only (they may be shown); a worker turns it back
+    into the URL it must ask with here. A forked worker inherits the tracker; a spawned
+    worker gets the URL in its task (never shown) and opens the log with it first."""
+    tracker = find_tracker(url)
+    return tracker.url if tracker is not None else url
 
 
 @contextmanager
@@ -233,8 +268,8 @@ _POOL = _Pool()
 class _HttpBody:
     """A ranged reply of `http.client`: `readinto` goes straight to the socket."""
 
-    def __init__(self, owner: HttpObject, response: http.client.HTTPResponse) -> None:
-        self._owner = owner
+    def __init__(self, target: _Target, response: http.client.HTTPResponse) -> None:
+        self._target = target
         self._response = response
 
     def readinto(self, buffer: memoryview) -> int:
@@ -243,40 +278,102 @@ class _HttpBody:
     def close(self) -> None:
         if not self._response.isclosed():
             self._response.close()
-            self._owner.drop_connection()
+            _POOL.drop(self._target.scheme, self._target.host, self._target.port)
+
+
+class _Target:
+    """Where an HTTP request goes: scheme, host, port, path with query, and credentials."""
+
+    def __init__(self, url: str, authorization: str | None) -> None:
+        parts = urlsplit(url)
+        self.scheme = parts.scheme.lower()
+        self.host = parts.hostname or ""
+        self.port = parts.port or (443 if self.scheme == "https" else 80)
+        self.path = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
+        self.authorization = authorization
+        self.url = url
+
+    def same_origin(self, other: _Target) -> bool:
+        """Same scheme, host and port (credentials may go along)."""
+        return (self.scheme, self.host, self.port) == (other.scheme, other.host, other.port)
+
+
+def _basic_authorization(url: str) -> str | None:
+    """The Basic Authorization header of a URL's user info, if it has any."""
+    parts = urlsplit(url)
+    if parts.username is None:
+        return None
+    pair = f"{unquote(parts.username)}:{unquote(parts.password or '')}"
+    return "Basic " + base64.b64encode(pair.encode()).decode("ascii")
 
 
 class HttpObject:
     """An object behind an http(s):// URL (signed URLs keep their query string)."""
 
     def __init__(self, url: str) -> None:
-        parts = urlsplit(url)
         self.name = public_url(url)
-        self._scheme = parts.scheme.lower()
-        self._host = parts.hostname or ""
-        self._port = parts.port or (443 if self._scheme == "https" else 80)
-        self._target = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
-
-    def drop_connection(self) -> None:
-        """Close this thread's connection to the server."""
-        _POOL.drop(self._scheme, self._host, self._port)
+        self._target = _Target(url, _basic_authorization(url))
+        self._current = self._target
+        """Where ranges are asked: the URL, or where a permanent redirect moved it."""
 
     def open(self, start: int, end: int) -> tuple[Body, int]:
-        """GET bytes start..end-1: a 206 reply whose Content-Range starts at `start`."""
-        conn = _POOL.get(self._scheme, self._host, self._port)
-        try:
-            conn.request(
-                "GET",
-                self._target,
-                headers={"Range": f"bytes={start}-{end - 1}", "Accept-Encoding": "identity"},
+        """GET bytes start..end-1: a 206 reply whose Content-Range starts at `start`,
+        following redirects."""
+        target = self._current
+        for _ in range(MAX_REDIRECTS + 1):
+            response = self._get(target, start, end)
+            if response.status not in REDIRECTS:
+                break
+            location = response.getheader("Location")
+            self._finish(target, response)
+            if not location:
+                raise _FatalReplyError(f"HTTP {response.status} redirect without a Location")
+            moved = _Target(urljoin(target.url, location), None)
+            if moved.scheme not in HTTP_SCHEMES:
+                raise _FatalReplyError(
+                    f"HTTP {response.status} redirect to a {moved.scheme or 'relative'}: URL"
+                )
+            if moved.same_origin(target):  # credentials stay with their own host
+                moved.authorization = target.authorization
+            if response.status in PERMANENT_REDIRECTS and target is self._current:
+                self._current = moved
+            target = moved
+        else:
+            response.close()
+            raise _FatalReplyError(
+                f"more than {MAX_REDIRECTS} redirects (last to {public_url(target.url)})"
             )
-            response = conn.getresponse()
+        return self._check(target, response, start)
+
+    def _get(self, target: _Target, start: int, end: int) -> http.client.HTTPResponse:
+        """Send one ranged GET on this thread's connection to the target's server."""
+        conn = _POOL.get(target.scheme, target.host, target.port)
+        headers = {"Range": f"bytes={start}-{end - 1}", "Accept-Encoding": "identity"}
+        if target.authorization is not None:
+            headers["Authorization"] = target.authorization
+        try:
+            conn.request("GET", target.path, headers=headers)
+            return conn.getresponse()
         except Exception:
-            self.drop_connection()
+            _POOL.drop(target.scheme, target.host, target.port)
             raise
+
+    def _finish(self, target: _Target, response: http.client.HTTPResponse) -> None:
+        """Read a short reply (a redirect's) to its end, so the connection can be reused."""
+        with suppress(Exception):
+            response.read(1 << 16)
+        if not response.isclosed() or response.will_close:
+            response.close()
+            _POOL.drop(target.scheme, target.host, target.port)
+
+    def _check(
+        self, target: _Target, response: http.client.HTTPResponse, start: int
+    ) -> tuple[Body, int]:
+        """The body of a 206 reply starting at `start`; any other reply raised as an error
+        (no such object, Range not honoured, server errors to retry)."""
         if response.status != 206:
             body = response.read(1 << 16) if response.status < 500 else b""
-            self.drop_connection()
+            _POOL.drop(target.scheme, target.host, target.port)
             status = f"HTTP {response.status} {response.reason}".strip()
             if response.status in (404, 410):
                 raise FileNotFoundError(status)
@@ -290,11 +387,11 @@ class HttpObject:
         match = _CONTENT_RANGE.match(response.getheader("Content-Range") or "")
         if match is None or int(match.group(1)) != start or match.group(3) == "*":
             response.close()
-            self.drop_connection()
+            _POOL.drop(target.scheme, target.host, target.port)
             raise _FatalReplyError(
                 f"unexpected Content-Range {response.getheader('Content-Range')!r}"
             )
-        return _HttpBody(self, response), int(match.group(3))
+        return _HttpBody(target, response), int(match.group(3))
 
 
 # -- fsspec (s3://, gs://, az://) ------------------------------------------------------

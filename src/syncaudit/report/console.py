@@ -59,9 +59,12 @@ def render_info(report: InfoReport, console: Console) -> None:
             )
         console.print(lidars)
     if report.cameras:
+        # Cameras sharing a topic are told apart by frame id: show it where any does.
+        sharing = any(cam.shared_topics for cam in report.cameras)
         cams = Table(title="Cameras", title_justify="left")
         for col in (
             "camera",
+            *(("frame id",) if sharing else ()),
             "frames",
             "rate Hz",
             "exposure metadata",
@@ -72,6 +75,7 @@ def render_info(report: InfoReport, console: Console) -> None:
         for cam in report.cameras:
             cams.add_row(
                 cam.name,
+                *((cam.frame_id or "[yellow]none[/]",) if sharing else ()),
                 str(cam.frames),
                 _num(cam.rate_hz),
                 cam.exposure_metadata or "[yellow]none[/]",
@@ -79,10 +83,35 @@ def render_info(report: InfoReport, console: Console) -> None:
                 " ".join(str(c) for c in cam.checkpoints) or "[yellow]none[/]",
             )
         console.print(cams)
+    if report.shared_topics:
+        console.print(_shared_topics_table(report))
     for guess in report.guessed:
         console.print(f"[cyan]guessed[/] {guess} (pass --rig to set them)")
     for warning in report.warnings:
         console.print(f"[yellow]warning[/] {warning}")
+
+
+def _shared_topics_table(report: InfoReport) -> Table:
+    """Topics several cameras share: the messages each camera gets, the frame ids seen."""
+    table = Table(title="Topics shared by several cameras", title_justify="left")
+    for col in ("topic", "kind", "messages", "per camera", "frame ids seen", "not used"):
+        table.add_column(col)
+    for row in report.shared_topics:
+        left = {
+            # Triggers naming no camera are not lost: each is offered to every camera.
+            "naming no camera": row.unnamed if row.kind != "trigger" else 0,
+            "naming an unknown one": sum(row.unknown.values()),
+            "damaged": row.damaged,
+        }
+        table.add_row(
+            row.topic,
+            row.kind,
+            str(row.messages),
+            ", ".join(f"{name} {count}" for name, count in row.cameras.items()),
+            ", ".join(f"{frame or '(empty)'} {count}" for frame, count in row.frame_ids.items()),
+            ", ".join(f"{count} {why}" for why, count in left.items() if count) or "0",
+        )
+    return table
 
 
 def _us(value: float | None, fmt: str = "{:.1f}") -> str:
@@ -134,6 +163,7 @@ def render_audit(result: AuditResult, console: Console) -> None:
             "packet phase (zero crossing - packet)",
             f"{_us(d['packet_phase_us'])} us  (measured from: {d['packet_phase_source']})",
         )
+        table.add_row("frames paired with triggers by", d["trigger_pairing"])
         table.add_row(
             "t_sleep applied -> recommended (Eq. 2)",
             f"{_us(d['delay_applied_us'])} -> [bold]{_us(d['delay_recommended_us'])}[/] us "

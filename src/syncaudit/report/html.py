@@ -277,6 +277,7 @@ def _camera_table(cam: CameraAudit) -> str:
             "packet phase (µs) / source",
             f"{_fmt(d['packet_phase_us'])} / {_e(d['packet_phase_source'])}",
         ),
+        ("frames paired with triggers by", _e(d["trigger_pairing"])),
     ]
     for name, lat in d["latencies"].items():
         rows.append(

@@ -69,6 +69,11 @@ azimuth block by block sees first. 'first_after': the first packet whose first b
 at or past zero, what a driver that cuts revolutions packet by packet sees first (the next
 packet in most revolutions). `trigger_packet_offset` moves either by whole packets."""
 ExposureMessage = Literal["camera_exposure", "flir_meta"]
+TriggerMessage = Literal["trigger_event", "time_reference"]
+"""The trigger record of each frame: 'trigger_event' (syncaudit_msgs/TriggerEvent, the five
+checkpoints, the camera's frame counter in `frame_sequence`) or 'time_reference'
+(sensor_msgs/TimeReference, as trigger boards publish: only when the trigger reached the
+camera, 246, in `time_ref`, and in ROS 1 the publisher's header seq as its only number)."""
 CameraTopicKind = Literal["image", "exposure", "meta", "trigger"]
 """The kinds of per-frame camera message the simulator writes (one topic each per camera,
 or one topic shared by every camera: see `SyncSimConfig.shared_topics`)."""
@@ -235,6 +240,8 @@ class SyncSimConfig(_Strict):
     frames (250-400 KB for 1080p). None: a tiny PNG of the simulated scene."""
     exposure_messages: tuple[ExposureMessage, ...] = ("camera_exposure", "flir_meta")
     trigger_messages: bool = True
+    trigger_message: TriggerMessage = "trigger_event"
+    """The trigger record written (see `TriggerMessage`)."""
     ros1_header_seq: bool = True
     """ROS 1 logs: number each camera's header `seq` by frame; False writes 0 everywhere,
     as drivers that leave it alone and bags converted from ROS 2 do."""
@@ -1078,18 +1085,26 @@ class _Simulation:
                 driver = packet + frame["t1_ns"]
                 cam_driver = driver + frame["t2_ns"]
                 cam_sensor = cam_driver + frame["applied_delay_ns"] + frame["t3_ns"]
-                msg = writer.new_msg(
-                    "syncaudit_msgs/msg/TriggerEvent",
-                    header=hdr(cam_sensor, i, "trigger"),
-                    camera=camera_name,
-                    frame_sequence=seq,
-                    lidar_packet_time=writer.time(packet),
-                    lidar_driver_time=writer.time(driver),
-                    camera_driver_time=writer.time(cam_driver),
-                    camera_sensor_time=writer.time(cam_sensor),
-                    exposure_start_time=writer.time(frame["exposure_start_ns"]),
-                    applied_delay=frame["applied_delay_ns"] / NS_PER_S,
-                )
+                if cfg.trigger_message == "time_reference":
+                    msg = writer.new_msg(
+                        "sensor_msgs/msg/TimeReference",
+                        header=hdr(cam_sensor, i, "trigger"),
+                        time_ref=writer.time(cam_sensor),
+                        source="",
+                    )
+                else:
+                    msg = writer.new_msg(
+                        "syncaudit_msgs/msg/TriggerEvent",
+                        header=hdr(cam_sensor, i, "trigger"),
+                        camera=camera_name,
+                        frame_sequence=seq,
+                        lidar_packet_time=writer.time(packet),
+                        lidar_driver_time=writer.time(driver),
+                        camera_driver_time=writer.time(cam_driver),
+                        camera_sensor_time=writer.time(cam_sensor),
+                        exposure_start_time=writer.time(frame["exposure_start_ns"]),
+                        applied_delay=frame["applied_delay_ns"] / NS_PER_S,
+                    )
                 out.add(log_ns + 3_000, topics["trigger"], writer.serialize(msg))
 
     def _write(
@@ -1110,7 +1125,9 @@ class _Simulation:
                 "image": image_type,
                 "exposure": "syncaudit_msgs/msg/CameraExposure",
                 "meta": "flir_camera_msgs/msg/ImageMetaData",
-                "trigger": "syncaudit_msgs/msg/TriggerEvent",
+                "trigger": "sensor_msgs/msg/TimeReference"
+                if cfg.trigger_message == "time_reference"
+                else "syncaudit_msgs/msg/TriggerEvent",
             }
             declared: set[str] = set()
             for cam in cams:

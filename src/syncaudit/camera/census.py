@@ -1,0 +1,75 @@
+"""Which camera each message of a topic several cameras share goes to, counted for `info`.
+
+`info` shows a topic shared by several cameras (one driver node for a multi-camera board)
+as those cameras, with the messages each gets. The count runs the audit's own extraction
+(`collect.extract`) and routing (`camera.routing.CameraRouter`) over the shared topics
+only, so `info` and `audit` cannot disagree on which camera a message belongs to.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from syncaudit.camera.extract import CameraTableBuilder
+from syncaudit.camera.routing import CameraRouter, SharedTopicCount, camera_topics
+from syncaudit.collect import ExtractPlan, extract
+from syncaudit.errors import LogReadError
+from syncaudit.logs import LogReader
+from syncaudit.rig import CameraConfig
+
+__all__ = ["SharedCensus", "shared_topic_census"]
+
+
+@dataclass(frozen=True, slots=True)
+class SharedCensus:
+    """The shared topics of a set of cameras, counted, and what the audit would warn."""
+
+    topics: list[SharedTopicCount]
+    warnings: list[str]
+
+
+def shared_topic_census(log: LogReader, cameras: list[CameraConfig]) -> SharedCensus:
+    """Count, per topic several of `cameras` read, the messages each camera gets.
+
+    Reads only those topics (image payloads are never decoded: the header is enough).
+    A topic whose every message is damaged is reported as a warning, as far as counted.
+    """
+    router = CameraRouter()
+    for cam in cameras:
+        builder = CameraTableBuilder(cam)
+        for kind, topic in camera_topics(cam, log.topics):
+            router.add(kind, topic, builder)
+    shared = {(kind, topic) for kind, topics in _by_kind(router).items() for topic in topics}
+    if not shared:
+        return SharedCensus([], [])
+    # A shared topic's owner is "": the router gives each row to the camera it names.
+    plan = ExtractPlan(
+        lidar_topic="",
+        lidar_family="",
+        images={t: "" for k, t in shared if k == "image"},
+        exposures={t: ("", _stamp(router, t)) for k, t in shared if k == "exposure"},
+        triggers={t: "" for k, t in shared if k == "trigger"},
+    )
+    for msg in log.messages(sorted({t for _, t in shared})):
+        item = extract(plan, msg, log)
+        if item is not None:
+            kind, topic, payload = item
+            router.feed(kind, topic, payload)
+    try:
+        warnings = router.finish()
+    except LogReadError as exc:
+        warnings = [str(exc)]
+    return SharedCensus(router.shared_counts(), warnings)
+
+
+def _by_kind(router: CameraRouter) -> dict[str, list[str]]:
+    """Per kind, the topics more than one camera reads."""
+    return {
+        kind: [t for t, owners in router.topics(kind).items() if len(owners) > 1]
+        for kind in ("image", "exposure", "trigger")
+    }
+
+
+def _stamp(router: CameraRouter, topic: str) -> str:
+    """Stamp semantics of the first camera reading an exposure topic (as the audit's plan)."""
+    return router.topics("exposure")[topic][0].camera.stamp

@@ -1,0 +1,91 @@
+"""The real `syncaudit` CLI with its reader workers slowed down, and its processes watched.
+
+Tests that signal or kill the audit while its worker processes read need that phase to
+last seconds on any machine: `start` runs the CLI in a new process group (as a shell runs
+a command) with one chunk per task and each task held `sleep_s` in its worker.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+_SCRIPT = """
+import sys, time
+import syncaudit.collect as c
+
+c.GROUP_BYTES = 1
+{tasks_per_worker}_extract = c._extract_group
+
+
+def slow(*args):
+    time.sleep({sleep_s!r})
+    return _extract(*args)
+
+
+c._extract_group = slow
+from syncaudit.cli import main
+
+sys.argv = ["syncaudit", *sys.argv[1:]]
+main()
+"""
+
+
+def slowed_cli_script(*, sleep_s: float, tasks_per_worker: int | None = None) -> str:
+    """Python source running the CLI with one chunk per task, each held `sleep_s` in its
+    worker (`tasks_per_worker`: tasks in flight per worker, default the CLI's own)."""
+    in_flight = "" if tasks_per_worker is None else f"c.TASKS_PER_WORKER = {tasks_per_worker}\n"
+    return _SCRIPT.format(sleep_s=float(sleep_s), tasks_per_worker=in_flight)
+
+
+def start(
+    args: list[str], *, sleep_s: float, tasks_per_worker: int | None = None
+) -> subprocess.Popen[str]:
+    """`syncaudit ARGS` slowed (see `slowed_cli_script`), in its own process group."""
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            slowed_cli_script(sleep_s=sleep_s, tasks_per_worker=tasks_per_worker),
+            *args,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,  # its own process group, as a shell gives a command
+        text=True,
+    )
+
+
+def children(pid: int) -> list[int]:
+    """The child processes of `pid` (Linux /proc; none once it is gone)."""
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(p) for p in text.split()]
+
+
+def alive(pid: int) -> bool:
+    """Whether process `pid` runs (a zombie is dead, just unreaped)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def wait_for_workers(
+    proc: subprocess.Popen[str], count: int, *, timeout_s: float = 60.0, poll_s: float = 0.01
+) -> list[int]:
+    """The children of `proc` once there are `count` of them (fewer where it ended first
+    or `timeout_s` passed)."""
+    deadline = time.monotonic() + timeout_s
+    workers: list[int] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = children(proc.pid)
+        if len(workers) >= count:
+            break
+        time.sleep(poll_s)
+    return workers
