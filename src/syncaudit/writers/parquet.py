@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from syncaudit.analysis.sync import FRAME_TABLE_DTYPES
 from syncaudit.errors import OutputError
 
 if TYPE_CHECKING:
@@ -65,32 +66,7 @@ def _metadata(result: AuditResult, table: str) -> dict[bytes, bytes]:
     return {b"syncaudit": json.dumps(meta).encode()}
 
 
-FRAME_DTYPES: dict[str, str] = {
-    "camera": "string",
-    "frame_sequence": "Int64",
-    "exposure_start_ns": "Int64",
-    "exposure_duration_ns": "Int64",
-    "t_l_ns": "Int64",
-    "t_estimated_ns": "Int64",
-    "error_signed_ns": "float64",
-    "t_error_ns": "float64",
-    "paired": "bool",
-    "revolution": "int64",
-    "revolution_start_ns": "Int64",
-    "header_stamp_ns": "Int64",
-    "t1_ns": "float64",
-    "t2_ns": "float64",
-    "t3_ns": "float64",
-    "t4_ns": "float64",
-    "t5_avg_ns": "float64",
-    "t_rotate_ns": "float64",
-    "packet_phase_ns": "float64",
-    "packet_phase_source": "string",
-    "t_sleep_ns": "float64",
-    "applied_delay_ns": "float64",
-    "rolling_error_mean_ns": "float64",
-    "rolling_error_var_ns2": "float64",
-}
+FRAME_DTYPES: dict[str, str] = FRAME_TABLE_DTYPES
 """Every column of `AuditResult.frames()` with its type: an audit without cameras (whose
 `frames()` has no columns) still writes them all, with zero rows (a test keeps this equal
 to a real audit's table)."""
