@@ -123,16 +123,71 @@ def turn_axis(edges: list[Edge], hint: F64, min_angle_deg: float = 5.0) -> F64 |
     about the same axis (the vehicle's vertical, seen from the LiDAR), so the axes of the
     measured rotations estimate it without using the recorded extrinsic; `hint` (the
     recorded up vector) only fixes the sign. Rotation vectors are summed, which weights
-    larger, better-defined turns more. None when no alignment turned enough.
+    larger, better-defined turns more. An alignment whose rotation tilts out of the plane
+    of motion far more than the others' (`tilting_edges`) is no turn of the vehicle and is
+    left out. None when no alignment turned enough.
     """
-    total = np.zeros(3)
+    rotvecs = _turn_vectors(edges, hint, min_angle_deg)
+    if not rotvecs:
+        return None
+    axis = _summed_axis(list(rotvecs.values()))
+    for key in tilting_edges(edges, axis, hint, min_angle_deg):
+        del rotvecs[key]
+    return _summed_axis(list(rotvecs.values())) if rotvecs else axis
+
+
+_MIN_TILT_OUTLIER_DEG = 0.2
+_TILT_OUTLIER_FACTOR = 5.0
+"""An alignment tilts out of the plane of motion when the part of its rotation across the
+turn axis exceeds both `_MIN_TILT_OUTLIER_DEG` and `_TILT_OUTLIER_FACTOR` times the
+median of the others' (their noise). Measured on a bumper 64-beam drive: correct firm
+alignments tilted 0.005-0.06 deg; an accepted 8->10 one at 11 % overlap tilted 0.89 deg
+(0.84 deg / 3.7 cm off) and, summed with its 69 deg turn, moved the axis by 0.08 deg,
+which tilted the planar graph's far stops by 0.16 deg / 1 cm and the calibration by
+1.06 cm."""
+
+
+def _turn_vectors(edges: list[Edge], hint: F64, min_angle_deg: float) -> dict[tuple[int, int], F64]:
+    out = {}
     for edge in edges:
         rotvec = se3.log_so3(edge.first_from_second[:3, :3])
         if math.degrees(float(np.linalg.norm(rotvec))) < min_angle_deg:
             continue
-        total += rotvec if float(rotvec @ hint) >= 0 else -rotvec
-    norm = float(np.linalg.norm(total))
-    return None if norm == 0.0 else total / norm
+        out[(edge.first, edge.second)] = rotvec if float(rotvec @ hint) >= 0 else -rotvec
+    return out
+
+
+def _summed_axis(rotvecs: list[F64]) -> F64:
+    total = np.sum(rotvecs, axis=0)
+    return np.asarray(total / np.linalg.norm(total), dtype=np.float64)
+
+
+def tilting_edges(
+    edges: list[Edge], axis: F64, hint: F64, min_angle_deg: float = 5.0
+) -> list[tuple[int, int]]:
+    """Alignments whose rotation tilts out of the plane of motion about `axis` (a planar
+    vehicle's turns cannot tilt), worst first, each judged against the rest's axis.
+
+    The worst one is removed and the axis re-estimated while the worst tilt exceeds the
+    limits above, so one bad alignment neither hides behind the axis it pulled nor makes
+    correct ones look tilted."""
+    rotvecs = _turn_vectors(edges, hint, min_angle_deg)
+    out: list[tuple[int, int]] = []
+    current = axis
+    while len(rotvecs) > 2:
+        tilts = {
+            key: math.degrees(float(np.linalg.norm(v - (v @ current) * current)))
+            for key, v in rotvecs.items()
+        }
+        worst = max(tilts, key=lambda k: tilts[k])
+        others = [t for k, t in tilts.items() if k != worst]
+        limit = max(_MIN_TILT_OUTLIER_DEG, _TILT_OUTLIER_FACTOR * float(np.median(others)))
+        if tilts[worst] <= limit:
+            break
+        out.append(worst)
+        del rotvecs[worst]
+        current = _summed_axis(list(rotvecs.values()))
+    return out
 
 
 @dataclass(frozen=True)
