@@ -202,8 +202,10 @@ def _pairing_case(tmp_path: Path, case: str) -> tuple[Path, Path]:
     log = tmp_path / "shared.mcap"
     run = CliRunner().invoke(
         app,
-        ["simulate", "sync", str(log), "--shared-topics", "meta"]
-        + ["--exposure-messages", "flir_meta", "--duration", "2", "--seed", "3"],
+        [
+            *("simulate", "sync", str(log), "--shared-topics", "meta"),
+            *("--exposure-messages", "flir_meta", "--duration", "2", "--seed", "3"),
+        ],
     )
     assert run.exit_code == 0, run.output
     return log, Path(f"{log}.rig.yaml")
@@ -216,8 +218,10 @@ def test_trigger_pairing_column_equals_the_json(tmp_path: Path, case: str) -> No
     json_out, parquet_out = tmp_path / "a.json", tmp_path / "a.parquet"
     run = CliRunner().invoke(
         app,
-        ["audit", str(log), "--rig", str(rig), "--json-out", str(json_out)]
-        + ["--parquet", str(parquet_out)],
+        [
+            *("audit", str(log), "--rig", str(rig)),
+            *("--json-out", str(json_out), "--parquet", str(parquet_out)),
+        ],
     )
     assert run.exit_code == 0, run.output
     cameras = json.loads(json_out.read_text())["cameras"]
