@@ -12,7 +12,7 @@ import numpy as np
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.routing import CameraRouter
+from syncaudit.camera.routing import CameraRouter, camera_topics
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.table import MISSING
@@ -200,15 +200,8 @@ def _plan(
     router = CameraRouter()
     for cam in cameras:
         builder = CameraTableBuilder(cam)
-        # Frames come from the image headers, or from CameraInfo where no image was recorded.
-        frame_topic = cam.image_topic if cam.image_topic in log.topics else cam.info_topic
-        for kind, topic in (
-            ("image", frame_topic),
-            ("exposure", cam.exposure_topic),
-            ("trigger", cam.trigger_topic),
-        ):
-            if topic in log.topics:
-                router.add(kind, topic, builder)
+        for kind, topic in camera_topics(cam, log.topics):
+            router.add(kind, topic, builder)
         router.builders.setdefault(cam.name, builder)
     images = {t: _owner(o) for t, o in router.topics("image").items()}
     exposures: dict[str, tuple[str, str]] = {

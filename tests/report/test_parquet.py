@@ -156,6 +156,7 @@ def test_same_typed_schema_without_cameras_or_paired_frames(
             assert con.execute(f"SELECT count(*) FROM '{odd[0]}'").fetchone() == (0,)
         assert len(frames.columns) == len(audit.frames().columns) == 24
         assert json.loads(pq.read_schema(odd[0]).metadata[b"syncaudit"])["verdict"] == "no cameras"
+        assert "trigger_pairing" in pq.read_schema(odd[1]).names
     else:
         assert len(frames) == 297 and not frames["paired"].any()
         assert frames["t_l_ns"].isna().all() and frames["error_signed_ns"].isna().all()
@@ -184,3 +185,51 @@ def test_real_lidar_log_without_cameras(
     page = (tmp_path / "r.html").read_text()
     assert "NO CAMERAS" in page and "less the median +1,531.183 s" in page
     assert 'data-kind="lidar-drops"' in page and "none in 4 revolutions" in page
+
+
+def _pairing_case(tmp_path: Path, case: str) -> tuple[Path, Path]:
+    """A log and its rig whose cameras pair frames with triggers by `case`'s method."""
+    if case == "sequence number":  # the sample: per-camera topics, ROS 2 TriggerEvent counters
+        return THREE_CAMERAS, Path(f"{THREE_CAMERAS}.rig.yaml")
+    if case == "none":  # the sample without its trigger topics
+        rig = yaml.safe_load(Path(f"{THREE_CAMERAS}.rig.yaml").read_text())
+        for camera in rig["cameras"]:
+            del camera["trigger_topic"]
+        path = tmp_path / "rig.yaml"
+        path.write_text(yaml.safe_dump(rig))
+        return THREE_CAMERAS, path
+    # Metadata on one topic the cameras share, in ROS 2 (no header.seq): paired by time.
+    log = tmp_path / "shared.mcap"
+    run = CliRunner().invoke(
+        app,
+        [
+            *("simulate", "sync", str(log), "--shared-topics", "meta"),
+            *("--exposure-messages", "flir_meta", "--duration", "2", "--seed", "3"),
+        ],
+    )
+    assert run.exit_code == 0, run.output
+    return log, Path(f"{log}.rig.yaml")
+
+
+@pytest.mark.parametrize("case", ["sequence number", "time", "none"])
+def test_trigger_pairing_column_equals_the_json(tmp_path: Path, case: str) -> None:
+    """`trigger_pairing` of the per-camera summary: the JSON's, camera by camera."""
+    log, rig = _pairing_case(tmp_path, case)
+    json_out, parquet_out = tmp_path / "a.json", tmp_path / "a.parquet"
+    run = CliRunner().invoke(
+        app,
+        [
+            *("audit", str(log), "--rig", str(rig)),
+            *("--json-out", str(json_out), "--parquet", str(parquet_out)),
+        ],
+    )
+    assert run.exit_code == 0, run.output
+    cameras = json.loads(json_out.read_text())["cameras"]
+    table = pd.read_parquet(cameras_path(parquet_out))
+    assert [c["trigger_pairing"] for c in cameras] == [case] * 3
+    assert list(table["camera"]) == [c["camera"] for c in cameras]
+    assert list(table["trigger_pairing"]) == [c["trigger_pairing"] for c in cameras]
+    assert str(pq.read_schema(cameras_path(parquet_out)).field("trigger_pairing").type) in (
+        "string",
+        "large_string",
+    )

@@ -85,6 +85,7 @@ _SUMMARY_HEAD: dict[str, str] = {
     "t_rotate_us": "Float64",
     "packet_phase_us": "Float64",
     "packet_phase_source": "string",
+    "trigger_pairing": "string",
     "t5_mean_us": "Float64",
     "delay_applied_us": "Float64",
     "delay_recommended_us": "Float64",
