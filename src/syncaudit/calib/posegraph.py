@@ -128,12 +128,8 @@ def turn_axis(edges: list[Edge], hint: F64, min_angle_deg: float = 5.0) -> F64 |
     left out. None when no alignment turned enough.
     """
     rotvecs = _turn_vectors(edges, hint, min_angle_deg)
-    if not rotvecs:
-        return None
     axis = _summed_axis(list(rotvecs.values()))
-    for key in tilting_edges(edges, axis, hint, min_angle_deg):
-        del rotvecs[key]
-    return _summed_axis(list(rotvecs.values())) if rotvecs else axis
+    return None if axis is None else _without_tilting(rotvecs, axis)[1]
 
 
 _MIN_TILT_OUTLIER_DEG = 0.1
@@ -161,9 +157,11 @@ def _turn_vectors(edges: list[Edge], hint: F64, min_angle_deg: float) -> dict[tu
     return out
 
 
-def _summed_axis(rotvecs: list[F64]) -> F64:
-    total = np.sum(rotvecs, axis=0)
-    return np.asarray(total / np.linalg.norm(total), dtype=np.float64)
+def _summed_axis(rotvecs: list[F64]) -> F64 | None:
+    """The unit axis of the summed rotation vectors (None: nothing turned)."""
+    total = np.sum(rotvecs, axis=0) if rotvecs else np.zeros(3)
+    norm = float(np.linalg.norm(total))
+    return None if norm == 0.0 else np.asarray(total / norm, dtype=np.float64)
 
 
 def tilting_edges(
@@ -175,7 +173,13 @@ def tilting_edges(
     The worst one is removed and the axis re-estimated while the worst tilt exceeds the
     limits above, so one bad alignment neither hides behind the axis it pulled nor makes
     correct ones look tilted."""
-    rotvecs = _turn_vectors(edges, hint, min_angle_deg)
+    return _without_tilting(_turn_vectors(edges, hint, min_angle_deg), axis)[0]
+
+
+def _without_tilting(
+    rotvecs: dict[tuple[int, int], F64], axis: F64
+) -> tuple[list[tuple[int, int]], F64]:
+    """(`tilting_edges`, the axis of the turns left), removing the worst tilt at a time."""
     out: list[tuple[int, int]] = []
     current = axis
     while len(rotvecs) > 2:
@@ -188,10 +192,13 @@ def tilting_edges(
         limit = max(_MIN_TILT_OUTLIER_DEG, _TILT_OUTLIER_FACTOR * float(np.median(others)))
         if tilts[worst] <= limit:
             break
+        rest = {k: v for k, v in rotvecs.items() if k != worst}
+        rest_axis = _summed_axis(list(rest.values()))
+        if rest_axis is None:
+            break
         out.append(worst)
-        del rotvecs[worst]
-        current = _summed_axis(list(rotvecs.values()))
-    return out
+        rotvecs, current = rest, rest_axis
+    return out, current
 
 
 @dataclass(frozen=True)
