@@ -12,7 +12,7 @@ import numpy as np
 from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.routing import CameraRouter, camera_topics
+from syncaudit.camera.routing import CameraRouter
 from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.table import MISSING
@@ -197,12 +197,7 @@ def _plan(
         if meta_topic is None:
             raise NoDataError(f"{lidar.topic}: Ouster packets need the sensor metadata topic")
         meta = read_ouster_metadata(log, meta_topic)
-    router = CameraRouter()
-    for cam in cameras:
-        builder = CameraTableBuilder(cam)
-        for kind, topic in camera_topics(cam, log.topics):
-            router.add(kind, topic, builder)
-        router.builders.setdefault(cam.name, builder)
+    router = CameraRouter.for_cameras(cameras, log.topics)
     images = {t: _owner(o) for t, o in router.topics("image").items()}
     exposures: dict[str, tuple[str, str]] = {
         t: (_owner(o), o[0].camera.stamp) for t, o in router.topics("exposure").items()

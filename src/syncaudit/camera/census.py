@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.routing import CameraRouter, SharedTopicCount, camera_topics
+from syncaudit.camera.routing import CameraRouter, SharedTopicCount
 from syncaudit.collect import ExtractPlan, extract
 from syncaudit.errors import LogReadError
 from syncaudit.logs import LogReader
@@ -34,11 +33,7 @@ def shared_topic_census(log: LogReader, cameras: list[CameraConfig]) -> SharedCe
     Reads only those topics (image payloads are never decoded: the header is enough).
     A topic whose every message is damaged is reported as a warning, as far as counted.
     """
-    router = CameraRouter()
-    for cam in cameras:
-        builder = CameraTableBuilder(cam)
-        for kind, topic in camera_topics(cam, log.topics):
-            router.add(kind, topic, builder)
+    router = CameraRouter.for_cameras(cameras, log.topics)
     shared = {(kind, topic) for kind, topics in _by_kind(router).items() for topic in topics}
     if not shared:
         return SharedCensus([], [])

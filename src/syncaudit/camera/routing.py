@@ -191,6 +191,17 @@ class CameraRouter:
     _single: dict[tuple[str, str], list[Any]] = field(default_factory=dict)
     _shared: dict[tuple[str, str], _SharedTopic] = field(default_factory=dict)
 
+    @classmethod
+    def for_cameras(cls, cameras: list[CameraConfig], recorded: Container[str]) -> CameraRouter:
+        """A router with one builder per camera, reading its `camera_topics`."""
+        router = cls()
+        for cam in cameras:
+            builder = CameraTableBuilder(cam)
+            router.builders.setdefault(cam.name, builder)
+            for kind, topic in camera_topics(cam, recorded):
+                router.add(kind, topic, builder)
+        return router
+
     def add(self, kind: str, topic: str, builder: CameraTableBuilder) -> None:
         """Let `builder`'s camera read `topic` for rows of `kind` (image/exposure/trigger)."""
         self.builders.setdefault(builder.camera.name, builder)
