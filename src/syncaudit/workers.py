@@ -19,6 +19,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -34,6 +35,7 @@ _CRASH_SIGNALS = {signal.SIGSEGV, signal.SIGBUS, signal.SIGABRT, signal.SIGILL, 
 """Signals a process raises on itself when it crashes: a bug, not a kill from outside."""
 _REAP_S = 1.0
 """How long to wait for a dead worker's exit status (it is dead: the pool saw its end)."""
+_REAP_POLL_S = 0.01
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 """glibc `mallopt` parameters."""
 KEEP_HEAP_BYTES = 64 << 20
@@ -130,12 +132,7 @@ def death_cause(workers: Iterable[BaseProcess]) -> tuple[str, int]:
     `kill`): the run was interrupted, exit 130. Crashed (SIGSEGV and kin, an exit
     status): a bug, exit 70.
     """
-    codes: list[int] = []
-    for worker in dict.fromkeys(workers):
-        with contextlib.suppress(Exception):
-            worker.join(timeout=_REAP_S)
-            if worker.exitcode is not None:
-                codes.append(worker.exitcode)
+    codes = [code for worker in dict.fromkeys(workers) if (code := _exit_code(worker)) is not None]
     if not codes:
         return "no exit status found", EXIT_INTERNAL
     code = min(codes, key=_telling)
@@ -156,6 +153,23 @@ def death_cause(workers: Iterable[BaseProcess]) -> tuple[str, int]:
             EXIT_INTERRUPTED,
         )
     return f"killed by signal {number}, {name}", EXIT_INTERRUPTED
+
+
+def _exit_code(worker: BaseProcess) -> int | None:
+    """A dead worker's exit status, or None if none came within `_REAP_S`.
+
+    The pool's own thread reaps its dead workers too: when it wins the `waitpid`, our join
+    returns at once with no status until that thread has stored it, so keep asking.
+    """
+    deadline = time.monotonic() + _REAP_S
+    while True:
+        with contextlib.suppress(Exception):
+            worker.join(timeout=max(0.0, deadline - time.monotonic()))
+            if worker.exitcode is not None:
+                return worker.exitcode
+        if time.monotonic() >= deadline:
+            return None
+        time.sleep(_REAP_POLL_S)
 
 
 def _telling(exitcode: int) -> int:

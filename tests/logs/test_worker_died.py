@@ -103,3 +103,30 @@ def test_worker_died_error_keeps_its_exit_code_across_pickling() -> None:
     assert (str(crash), crash.exit_code) == ("x", EXIT_INTERNAL)
     kill = pickle.loads(pickle.dumps(WorkerDiedError("y")))
     assert (str(kill), kill.exit_code) == ("y", EXIT_INTERRUPTED)
+
+
+def test_death_cause_waits_for_a_status_the_pools_thread_reaped_first() -> None:
+    """The pool's own thread reaps a dead worker too; when its `waitpid` wins, the status
+    reaches the Process object only once that thread stores it. The SIGKILL must still be
+    the cause named, not the SIGTERM the pool sent the other worker (a CI failure)."""
+    import threading
+
+    killed = multiprocessing.get_context("fork").Process(target=_die, args=("sleep",))
+    killed.start()
+    os.kill(killed.pid, signal.SIGKILL)
+    _, status = os.waitpid(killed.pid, 0)  # what the pool's thread does first ...
+    popen = killed._popen  # type: ignore[attr-defined]
+    store = threading.Timer(
+        0.2, lambda: setattr(popen, "returncode", os.waitstatus_to_exitcode(status))
+    )
+    store.start()  # ... and stores a moment later
+    terminated = multiprocessing.get_context("fork").Process(target=_die, args=("sleep",))
+    terminated.start()
+    terminated.terminate()
+    terminated.join(10)
+    try:
+        said, exit_code = death_cause([terminated, killed])
+    finally:
+        store.join()
+    assert said.startswith("killed by signal 9 — out of memory?")
+    assert exit_code == EXIT_INTERRUPTED
