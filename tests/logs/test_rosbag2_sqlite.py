@@ -143,6 +143,7 @@ def test_units_serially_and_in_two_processes_equal_rosbags(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     unit_bytes = 40_000 if compression == CompressionMode.NONE else 600  # zstd: ~20 B a row
+    monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", unit_bytes)
     monkeypatch.setattr(sqlite_rows, "UNIT_BYTES", unit_bytes)
     path = write_bag(tmp_path / "bag", ros2_store, compression=compression)
     topics = frozenset({"/a", "/c"})

@@ -7,7 +7,8 @@ from schema 4 `message_definitions(topic_type, encoding, encoded_message_definit
 A file is opened as `file:PATH?mode=ro&immutable=1`: sqlite neither writes nor creates a
 journal, `-wal` or `-shm` beside it (rosbags opens it the same way). The messages of the
 audited topics are split into 'sqlite-rows' units, ranges of rowid holding about
-`UNIT_BYTES` of payload, that workers read on their own; rowid order is the recorder's
+`WORKER_UNIT_BYTES` of payload, that workers read on their own (`UNIT_BYTES` for the serial
+reader); rowid order is the recorder's
 write order, and log-time order within a unit is restored by sorting (timestamp, rowid),
 the order of rosbag2's `ORDER BY timestamp` through its timestamp index.
 
@@ -32,10 +33,13 @@ from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import one_line
 
 UNIT_KIND = "sqlite-rows"
-UNIT_BYTES = 4 << 20
-"""Payload bytes per unit (counted whole, images too): the serial reader holds a unit at a
-time, so its memory stays flat; a unit's query costs ~12 us, 1 MiB units (2,700 for a 2 GB
-bag) spent 30 ms of CPU on them. collect groups units into bigger tasks by their cost."""
+UNIT_BYTES = 1 << 20
+"""Payload bytes per unit of the serial reader (`SqliteLog.messages`), which holds a unit
+at a time: like a ROS 1 chunk (768 KiB), so its memory stays flat."""
+WORKER_UNIT_BYTES = 4 << 20
+"""Payload bytes (images counted whole) per unit of `read_units`, whose reader streams its
+rows: a unit's query costs ~12 us, and 1 MiB units (2,700 for a 2 GB bag) spent 30 ms of
+CPU on them. collect groups units into bigger tasks by their cost."""
 FETCH_ROWS = 64
 INLINE_BYTES = 16 * 1024
 """Wanted payloads up to this size are read with their rows; bigger ones through blob I/O,
@@ -264,8 +268,10 @@ def verify_tail(path: Path, info: SqliteFile, tail: dict[int, int], real_bytes: 
         )
 
 
-def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -> list[ReadUnit]:
-    """Rowid ranges of about UNIT_BYTES of the topics' payload, with their time spans.
+def plan_units(
+    db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int], unit_bytes: int
+) -> list[ReadUnit]:
+    """Rowid ranges of about `unit_bytes` of the topics' payload, with their time spans.
 
     One aggregate query over fixed rowid buckets (sqlite reads a blob's length from its
     record header, not its pages); ranges outside the salvaged part are left out.
@@ -273,7 +279,7 @@ def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -
     if not topic_ids:
         return []
     if info.salvaged_until is not None:
-        return _plan_salvaged(info, set(topic_ids))
+        return _plan_salvaged(info, set(topic_ids), unit_bytes)
     marks = ",".join("?" * len(topic_ids))
     limit = info.salvaged_until
     where = f"topic_id IN ({marks})" + (" AND id < ?" if limit is not None else "")
@@ -285,7 +291,7 @@ def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -
         return []
     first, last, count, total = (int(x or 0) for x in row)
     bytes_per_row = max(total / max(count, 1), 1.0)
-    rows_per_unit = max(1, int(UNIT_BYTES / bytes_per_row))
+    rows_per_unit = max(1, int(unit_bytes / bytes_per_row))
     span_per_row = (last - first + 1) / max(count, 1)  # rowids per wanted row (others between)
     step = max(1, int(rows_per_unit * span_per_row))
     units: list[ReadUnit] = []
@@ -311,7 +317,7 @@ def plan_units(db: sqlite3.Connection, info: SqliteFile, topic_ids: list[int]) -
     return units
 
 
-def _plan_salvaged(info: SqliteFile, topic_ids: set[int]) -> list[ReadUnit]:
+def _plan_salvaged(info: SqliteFile, topic_ids: set[int], unit_bytes: int) -> list[ReadUnit]:
     """Units over the rows a salvage scan reached (sqlite must not step past them)."""
     units: list[ReadUnit] = []
     group: list[tuple[int, int, int, int]] = []
@@ -335,7 +341,7 @@ def _plan_salvaged(info: SqliteFile, topic_ids: set[int]) -> list[ReadUnit]:
             continue
         group.append(row)
         size += row[3]
-        if size >= UNIT_BYTES:
+        if size >= unit_bytes:
             flush()
             group, size = [], 0
     if group:
