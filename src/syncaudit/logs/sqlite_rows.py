@@ -90,6 +90,8 @@ class SqliteFile:
     """The input file where `path` is a temporary copy of it."""
     salvaged_rows: list[tuple[int, int, int, int]] = field(default_factory=list)
     """(rowid, topic id, timestamp, payload bytes) of the rows salvaged, in rowid order."""
+    rowids: dict[int, tuple[int, int, int]] = field(default_factory=dict)
+    """Topic id -> (first rowid, last rowid, payload bytes) of its rows (a whole file)."""
 
 
 class SqliteDamagedError(LogReadError):
@@ -164,12 +166,17 @@ def open_sqlite(
     try:
         if salvage:
             raise sqlite3.DatabaseError("file ends before its declared size")
-        for topic_id, count, lo, hi in db.execute(
-            "SELECT topic_id, COUNT(*), MIN(timestamp), MAX(timestamp) FROM messages "
-            "GROUP BY topic_id"
+        # the inner query (kept apart by LIMIT -1) hands the grouping only the blob's length
+        # (read from the record header): grouped directly, sqlite would copy every whole
+        # payload into its sorter
+        for topic_id, count, lo, hi, first, last, size in db.execute(
+            "SELECT topic_id, COUNT(*), MIN(timestamp), MAX(timestamp), MIN(id), MAX(id), "
+            "SUM(n) FROM (SELECT topic_id, timestamp, id, length(data) AS n FROM messages "
+            "LIMIT -1) GROUP BY topic_id"
         ):
             if isinstance(topic_id, int) and isinstance(lo, int) and isinstance(hi, int):
                 stats[topic_id] = (int(count), lo, hi)
+                info.rowids[topic_id] = (int(first), int(last), int(size or 0))
     except sqlite3.DatabaseError as exc:
         info.damage = one_line(exc)
         stats, info.salvaged_until = _salvage_stats(db, info.salvaged_rows, tail)
@@ -273,23 +280,22 @@ def plan_units(
 ) -> list[ReadUnit]:
     """Rowid ranges of about `unit_bytes` of the topics' payload, with their time spans.
 
-    One aggregate query over fixed rowid buckets (sqlite reads a blob's length from its
-    record header, not its pages); ranges outside the salvaged part are left out.
+    One aggregate query over fixed rowid buckets, sized from the per-topic rowids and bytes
+    `open_sqlite` counted (sqlite reads a blob's length from its record header, not its
+    pages); a salvaged file's units cover only the rows salvaged.
     """
     if not topic_ids:
         return []
     if info.salvaged_until is not None:
         return _plan_salvaged(info, set(topic_ids), unit_bytes)
-    marks = ",".join("?" * len(topic_ids))
-    limit = info.salvaged_until
-    where = f"topic_id IN ({marks})" + (" AND id < ?" if limit is not None else "")
-    args: list[int] = [*topic_ids, *([limit] if limit is not None else [])]
-    row = db.execute(
-        f"SELECT MIN(id), MAX(id), COUNT(*), SUM(length(data)) FROM messages WHERE {where}", args
-    ).fetchone()
-    if row is None or row[0] is None:
+    spans = [info.rowids[i] for i in topic_ids if i in info.rowids]
+    if not spans:
         return []
-    first, last, count, total = (int(x or 0) for x in row)
+    first = min(s[0] for s in spans)
+    last = max(s[1] for s in spans)
+    total = sum(s[2] for s in spans)
+    count = sum(info.topics[i].count for i in topic_ids if i in info.rowids)
+    marks = ",".join("?" * len(topic_ids))
     bytes_per_row = max(total / max(count, 1), 1.0)
     rows_per_unit = max(1, int(unit_bytes / bytes_per_row))
     span_per_row = (last - first + 1) / max(count, 1)  # rowids per wanted row (others between)
@@ -300,8 +306,9 @@ def plan_units(
     for _bucket, lo, hi, t0, t1, size in db.execute(
         "SELECT b, MIN(id), MAX(id), MIN(timestamp), MAX(timestamp), SUM(n) FROM ("
         "SELECT (id - ?) / ? AS b, id, timestamp, length(data) AS n "
-        f"FROM messages WHERE {where} LIMIT -1) GROUP BY b ORDER BY b",
-        [first, step, *args],
+        f"FROM messages WHERE id >= ? AND id <= ? AND topic_id IN ({marks}) LIMIT -1) "
+        "GROUP BY b ORDER BY b",
+        [first, step, first, last, *topic_ids],
     ):
         units.append(
             ReadUnit(
