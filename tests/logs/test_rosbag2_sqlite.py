@@ -510,3 +510,31 @@ def test_damaged_overflow_page_of_a_big_payload_is_one_line(
     text = str(info.value)
     assert text.startswith(f"{db3}: bag database damaged in rows ") and "\n" not in text
     assert info.value.exit_code == 3
+
+
+def test_database_locked_by_a_writer_is_read_without_locking(
+    tmp_path: Path, ros2_store: Typestore
+) -> None:
+    """A writer holding an exclusive lock (a recorder mid-transaction) does not block or fail
+    the read: the file is opened immutable, so sqlite takes no lock; units (blob I/O for the
+    big payloads too) and the serial reader give the committed rows."""
+    path = write_big_bag(tmp_path / "bag", ros2_store, CompressionMode.NONE)
+    expected = reference(path)
+    (db3,) = path.glob("*.db3")
+    writer = sqlite3.connect(db3, isolation_level=None, timeout=0)
+    try:
+        writer.execute("PRAGMA journal_mode=DELETE")
+        writer.execute("BEGIN EXCLUSIVE")
+        with pytest.raises(sqlite3.OperationalError, match="locked"):
+            sqlite3.connect(db3, timeout=0).execute("SELECT COUNT(*) FROM messages").fetchone()
+        topics = frozenset({"/big", "/small"})
+        with open_log(path) as log:
+            units = log.read_units(topics)
+            channels = log.unit_channels(topics)
+            assert ours(path) == expected
+        assert units is not None
+        assert _merged(map(_read_unit, [(u, channels) for u in units])) == expected
+    finally:
+        writer.execute("ROLLBACK")
+        writer.close()
+    assert _siblings(path) == {"metadata.yaml", db3.name}
