@@ -432,9 +432,9 @@ def test_payloads_over_the_inline_size_come_whole_through_blob_io(
     opened: list[int] = []
     blob_bytes = sqlite_rows._blob_bytes
 
-    def counted(db: sqlite3.Connection, rowid: int, size: int) -> bytes | None:
+    def counted(rows: Any, rowid: int, size: int) -> object:
         opened.append(rowid)
-        return blob_bytes(db, rowid, size)
+        return blob_bytes(rows, rowid, size)
 
     monkeypatch.setattr(sqlite_rows, "_blob_bytes", counted)
     monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", 200_000)
