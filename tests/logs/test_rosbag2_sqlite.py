@@ -460,18 +460,22 @@ def test_payloads_over_the_inline_size_come_whole_through_blob_io(
 
 def test_values_that_are_no_blob_read_as_before(bag: Path, tmp_path: Path) -> None:
     """A row whose data is text or a number (no recorder writes one; a tool might): the
-    text's UTF-8, the number's digits, whole or by prefix; blobs empty, above and below the
-    inline size as stored. (rosbag2's schema says `data BLOB NOT NULL`.)"""
+    text's UTF-8 (bytes that are no UTF-8 replaced, as the stdlib reads them; raw by
+    prefix), the number's digits; blobs empty, above and below the inline size as stored.
+    (rosbag2's schema says `data BLOB NOT NULL`.)"""
     (db3,) = bag.glob("*.db3")
     path = tmp_path / "odd.db3"
     shutil.copyfile(db3, path)
     big = b"\x00\x01\x00\x00" + bytes(range(256)) * 100
+    values: list[object] = [b"", "t\u00e9xt", 1234, big, b"\x00\x01small", 0.1 / 3]
     with sqlite3.connect(path) as db:
-        ids = [r[0] for r in db.execute("SELECT id FROM messages WHERE topic_id = 1 LIMIT 5")]
-        for rowid, value in zip(ids, [b"", "t\u00e9xt", 1234, big, b"\x00\x01small"], strict=True):
+        ids = [r[0] for r in db.execute("SELECT id FROM messages WHERE topic_id = 1 LIMIT 7")]
+        for rowid, value in zip(ids, values, strict=False):
             db.execute("UPDATE messages SET data = ? WHERE id = ?", (value, rowid))
+        db.execute("UPDATE messages SET data = CAST(x'ff41' AS TEXT) WHERE id = ?", (ids[6],))
     db.close()
-    want = [b"", "t\u00e9xt".encode(), b"1234", big, b"\x00\x01small"]
+    digits = str(0.1 / 3).encode()
+    want = [b"", "t\u00e9xt".encode(), b"1234", big, b"\x00\x01small", digits, b"\xef\xbf\xbdA"]
     with open_log(path) as log:
         topic = log.unit_channels(frozenset({"/a"}))
         units = log.read_units(frozenset({"/a"}))
@@ -480,9 +484,37 @@ def test_values_that_are_no_blob_read_as_before(bag: Path, tmp_path: Path) -> No
     whole = [row[5] for u in units for row in _read_unit((u, topic))]
     marked = {c: dataclasses.replace(i, prefix_bytes=8) for c, i in topic.items()}
     heads = [row[5] for u in units for row in _read_unit((u, marked))]
-    assert whole[:5] == want and serial[:5] == want
-    assert heads[:5] == [b"", "t\u00e9xt".encode(), b"1234", big[:8], b"\x00\x01small"]
+    assert whole[:7] == want and serial[:7] == want
+    assert heads[:7] == [*want[:3], big[:8], want[4], digits, b"\xffA"]
     assert len(whole) == len(serial) == 200
+
+
+@pytest.mark.parametrize("stamp", ["CAST(x'ff' AS TEXT)", "'soon'"])
+def test_text_timestamp_is_one_line(bag: Path, tmp_path: Path, stamp: str) -> None:
+    """A wanted row whose timestamp is text (UTF-8 or not) fails its unit with one line
+    naming the file and row (exit 3); the same row in a topic not read is stepped over."""
+    (db3,) = bag.glob("*.db3")
+    path = tmp_path / "odd.db3"
+    shutil.copyfile(db3, path)
+    with open_log(path) as log:
+        units = log.read_units(frozenset({"/a", "/b"}))
+        channels = log.unit_channels(frozenset({"/a", "/b"}))
+        only_a = log.unit_channels(frozenset({"/a"}))
+    assert units is not None
+    with sqlite3.connect(path) as db:
+        (rowid,) = db.execute("SELECT id FROM messages WHERE topic_id = 2 LIMIT 1 OFFSET 50")
+        db.execute(f"UPDATE messages SET timestamp = {stamp} WHERE id = ?", rowid)
+    db.close()
+    got = [row for u in units for row in _read_unit((u, only_a))]
+    assert len(got) == 200 and {r[4] for r in got} == {"/a"}
+    with pytest.raises(LogReadError) as info:
+        for unit in units:
+            _read_unit((unit, channels))
+    text = str(info.value)
+    assert (
+        text.startswith(f"{path}: bag database row {rowid[0]} has timestamp ") and "\n" not in text
+    )
+    assert text.endswith("not an integer") and info.value.exit_code == 3
 
 
 def test_damaged_overflow_page_of_a_big_payload_is_one_line(

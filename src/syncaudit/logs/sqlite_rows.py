@@ -356,6 +356,10 @@ def _plan_salvaged(info: SqliteFile, topic_ids: set[int], unit_bytes: int) -> li
     return units
 
 
+_AS_BYTES = "CASE WHEN typeof({0}) = 'text' THEN CAST({0} AS BLOB) ELSE {0} END"
+"""A column as stored, but text as its bytes (apsw refuses text that is no UTF-8)."""
+
+
 class _RowsFile:
     """One .db3 as a worker reads its rows: an apsw connection, the file's topic ids, and a
     blob handle moved from row to row (`sqlite3_blob_reopen`, which the stdlib lacks)."""
@@ -462,16 +466,17 @@ class SqliteRowsReader:
             return
         # Small payloads of the wanted topics come with the rows; bigger ones, and those of
         # which only a prefix is wanted (images: their header), through blob I/O (see
-        # `_blob_bytes`). typeof() and length() read only the record header; text comes as
-        # its bytes (apsw would refuse invalid UTF-8) and is decoded as the stdlib's reader
-        # in the parent does. Every row of the range is stepped over, the payload only of
+        # `_blob_bytes`). typeof() and length() read only the record header; text (in any
+        # column) comes as its bytes, since apsw raises on invalid UTF-8 where the stdlib's
+        # reader in the parent replaces it; a text payload is decoded as the parent does. Every row of the range is stepped over, the payload only of
         # wanted ones; the LIMIT ends the scan on the unit's last row, so sqlite never steps
         # onto the row after it (which a cut-off file may not have).
         prefix = {tid: channels[cid].prefix_bytes for tid, cid in local.items()}
         whole = [tid for tid, n in prefix.items() if n <= 0]
         marks = ",".join("?" * len(whole))
         cursor = rows.db.execute(
-            "SELECT id, topic_id, timestamp, typeof(data), length(data), "
+            f"SELECT id, {_AS_BYTES.format('topic_id')}, {_AS_BYTES.format('timestamp')}, "
+            "typeof(data), length(data), "
             f"CASE WHEN topic_id IN ({marks}) AND (typeof(data) <> 'blob' OR length(data) <= ?) "
             "THEN CASE WHEN typeof(data) = 'text' THEN CAST(data AS BLOB) ELSE data END END "
             "FROM messages WHERE id >= ? AND id < ? ORDER BY id LIMIT ?",
@@ -508,7 +513,7 @@ class SqliteRowsReader:
                         # zstd frame are kept as they are
                 yield t, int(rowid) - unit.offset, local[topic_id], data
         except (apsw.Error, UnicodeDecodeError) as exc:
-            # UnicodeDecodeError: a row whose id, topic id or timestamp is text, and no UTF-8
+            # UnicodeDecodeError: should text that is no UTF-8 reach apsw after all
             raise LogReadError(
                 f"{unit.source}: bag database damaged in rows {unit.offset}..{unit.length - 1}: "
                 f"{one_line(exc)}"
