@@ -1,4 +1,5 @@
-"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`), via sqlite3."""
+"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`), via sqlite3
+(opening, planning) and apsw (rows: `sqlite_rows.SqliteRowsReader`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""rosbag2 SQLite storage (`.db3`) with the stdlib `sqlite3`: read-only, rows by rowid ranges.
+"""rosbag2 SQLite storage (`.db3`): read-only, rows by rowid ranges.
+
+The file is opened, checked and planned with the stdlib `sqlite3`; the rows are read with
+`apsw` (see `SqliteRowsReader`).
 
 Tables (rosbag2_storage_default_plugins, schema versions 1-4): `topics(id, name, type,
 serialization_format, ...)`, `messages(id INTEGER PRIMARY KEY, topic_id, timestamp, data)`,
@@ -8,9 +11,11 @@ A file is opened as `file:PATH?mode=ro&immutable=1`: sqlite neither writes nor c
 journal, `-wal` or `-shm` beside it (rosbags opens it the same way). The messages of the
 audited topics are split into 'sqlite-rows' units, ranges of rowid holding about
 `WORKER_UNIT_BYTES` of payload, that workers read on their own (`UNIT_BYTES` for the serial
-reader); rowid order is the recorder's
-write order, and log-time order within a unit is restored by sorting (timestamp, rowid),
-the order of rosbag2's `ORDER BY timestamp` through its timestamp index.
+reader); rowid order is the recorder's write order, and log-time order within a unit is
+restored by sorting (timestamp, rowid), the order of rosbag2's `ORDER BY timestamp` through
+its timestamp index. A rowid range is one b-tree search and a scan, never a sort; the
+timestamp index (the only one rosbag2 writes) is not used: following it reads the rows in
+time order, all over the file.
 
 A damaged or truncated file raises sqlite's "database disk image is malformed" where the
 damage is reached: the rows are then read in rowid order up to it ("salvage"), and only
