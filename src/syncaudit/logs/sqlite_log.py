@@ -1,5 +1,7 @@
-"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`), via sqlite3
-(opening, planning) and apsw (rows: `sqlite_rows.SqliteRowsReader`)."""
+"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`).
+
+Opened and planned with the stdlib sqlite3; rows read with apsw (`sqlite_rows`).
+"""
 
 from __future__ import annotations
 
