@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -125,7 +126,13 @@ def audit(
 
             raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
 
-    run(job)
+    run(job, imports=_import_audit)
+
+
+def _import_audit() -> None:
+    """The modules every audit needs, imported while the collector is paused (see `run`)."""
+    for name in ("syncaudit.audit", "syncaudit.rig"):
+        importlib.import_module(name)
 
 
 def _parquet_targets(path: Path) -> tuple[Path, Path]:

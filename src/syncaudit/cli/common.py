@@ -27,6 +27,7 @@ except ImportError:  # pragma: no cover - older typer on the click package
 
 
 from syncaudit import __version__
+from syncaudit.cli.startup import pause_gc, resume_gc
 from syncaudit.errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
@@ -192,9 +193,17 @@ def fail(message: str, code: int) -> NoReturn:
     raise typer.Exit(code)
 
 
-def run(job: Callable[[], T]) -> T:
-    """Run a command body: known errors become one line on stderr and their exit code."""
+def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) -> T:
+    """Run a command body: known errors become one line on stderr and their exit code.
+
+    `imports` (the modules the body needs whatever its options) run first, still within
+    the console script's start-up pause of the garbage collector (`cli.startup`), which
+    ends before `job`.
+    """
     try:
+        if imports is not None:
+            imports()
+        resume_gc()
         return job()
     except typer.Exit:  # a job that already said why (`fail`) and chose its code
         raise
@@ -289,7 +298,9 @@ def main() -> None:
 
     Exits without the interpreter's teardown (~60 ms with numpy and pandas loaded): by
     then every output file is committed and closed, and the streams are flushed here.
+    The garbage collector is paused until the command's imports are done (`cli.startup`).
     """
+    pause_gc()
     try:
         app()
         code = 0
