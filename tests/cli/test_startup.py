@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -11,7 +12,13 @@ from pathlib import Path
 import pytest
 
 from syncaudit.cli.common import run
-from syncaudit.cli.startup import PAUSED_THRESHOLD, gc_paused, pause_gc, resume_gc
+from syncaudit.cli.startup import (
+    PAUSED_THRESHOLD,
+    gc_paused,
+    one_blas_thread,
+    pause_gc,
+    resume_gc,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -69,7 +76,8 @@ for module in ("syncaudit.cli.audit", "syncaudit.cli.info"):
     setattr(sys.modules[module], "run", spy)
 real_exit = common.os._exit
 def report(code):
-    sys.stderr.write(f"{gc.get_threshold()[0]} {seen}\\n")
+    blas = common.os.environ.get("OPENBLAS_NUM_THREADS")
+    sys.stderr.write(f"{blas} {gc.get_threshold()[0]} {seen}\\n")
     real_exit(code)
 common.os._exit = report
 sys.argv = ["syncaudit", *sys.argv[1:]]
@@ -78,15 +86,28 @@ main()
 
 
 def test_console_script_audit_works_with_the_collector_on(tmp_path: Path) -> None:
-    """`syncaudit audit`: the command's body (the reading) runs with the usual thresholds."""
+    """`syncaudit audit`: the command's body (the reading) runs with the usual thresholds,
+    numpy with one OpenBLAS thread."""
     log = REPO / "sample_logs" / "vlp16_three_cameras.mcap"
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     done = subprocess.run(
         [sys.executable, "-c", SCRIPT, "audit", str(log), "--rig", f"{log}.rig.yaml", "--json"],
         capture_output=True,
         text=True,
         check=False,
+        env=env,
     )
     assert done.returncode == 0, done.stderr
-    threshold_at_exit, seen = done.stderr.strip().splitlines()[-1].split(" ", 1)
+    blas, threshold_at_exit, seen = done.stderr.strip().splitlines()[-1].split(" ", 2)
+    assert blas == "1"
     assert int(threshold_at_exit) == gc.get_threshold()[0] != PAUSED_THRESHOLD
     assert seen == f"[{threshold_at_exit}]"
+
+
+def test_one_blas_thread_keeps_a_number_the_user_set(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
+    one_blas_thread()
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS")
+    one_blas_thread()
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1"

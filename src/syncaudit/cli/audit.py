@@ -24,6 +24,7 @@ from syncaudit.cli.common import (
     run,
     stdout_console,
 )
+from syncaudit.cli.startup import one_blas_thread
 
 if TYPE_CHECKING:
     from syncaudit.calib.result import CalibrationResult
@@ -130,7 +131,9 @@ def audit(
 
 
 def _import_audit() -> None:
-    """The modules every audit needs, imported while the collector is paused (see `run`)."""
+    """The modules every audit needs, imported while the collector is paused (see `run`),
+    numpy with one OpenBLAS thread (the audit's parallelism is its reader processes)."""
+    one_blas_thread()
     for name in ("syncaudit.audit", "syncaudit.rig"):
         importlib.import_module(name)
 

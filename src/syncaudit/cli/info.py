@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+
 from syncaudit.cli.common import (
     JsonFlag,
     LogArgument,
@@ -12,6 +14,7 @@ from syncaudit.cli.common import (
     print_json,
     run,
 )
+from syncaudit.cli.startup import one_blas_thread
 
 
 @app.command()
@@ -37,4 +40,12 @@ def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> 
         if report.error is not None:
             fail(" ".join(report.error.split()), report.exit_code)
 
-    run(job)
+    run(job, imports=_import_info)
+
+
+def _import_info() -> None:
+    """The modules `info` needs, imported while the collector is paused (see `run`), numpy
+    with one OpenBLAS thread (the reading's parallelism is its worker processes)."""
+    one_blas_thread()
+    for name in ("syncaudit.inspect_log", "syncaudit.rig"):
+        importlib.import_module(name)

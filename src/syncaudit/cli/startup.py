@@ -10,6 +10,11 @@ before the command line is parsed, and the command resumes it once its imports a
 collection looks at it again, and forked workers never copy its pages by collecting it),
 and collection goes on as before for the command's own work.
 
+Commands that read logs in worker processes (one per core) also start numpy's OpenBLAS with
+one thread (`one_blas_thread`): its default pool of a thread per core costs ~30 ms of CPU
+at numpy's import, and their numpy work is elementwise (no BLAS) or would oversubscribe
+the cores the workers use.
+
 The pause is a raised threshold, not `gc.disable()`: a command that forgot to resume still
 collects, just rarely. Library code and tests that call the app directly never pause.
 """
@@ -17,6 +22,7 @@ collects, just rarely. Library code and tests that call the app directly never p
 from __future__ import annotations
 
 import gc
+import os
 
 PAUSED_THRESHOLD = 200_000
 """New objects between two young collections while paused (CPython's default is 700):
@@ -50,3 +56,12 @@ def resume_gc() -> None:
 def gc_paused() -> bool:
     """Whether the start-up pause is on (for tests)."""
     return _saved is not None
+
+
+def one_blas_thread() -> None:
+    """Have OpenBLAS (numpy's BLAS) start one thread, unless the environment sets a number.
+
+    Effective only before numpy is imported (OpenBLAS reads it when loaded); inherited by
+    forked and spawned workers.
+    """
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
