@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-
 from syncaudit.cli.common import (
     JsonFlag,
     LogArgument,
@@ -47,5 +45,5 @@ def _import_info() -> None:
     """The modules `info` needs, imported while the collector is paused (see `run`), numpy
     with one OpenBLAS thread (the reading's parallelism is its worker processes)."""
     one_blas_thread()
-    for name in ("syncaudit.inspect_log", "syncaudit.rig"):
-        importlib.import_module(name)
+    import syncaudit.inspect_log
+    import syncaudit.rig  # noqa: F401
