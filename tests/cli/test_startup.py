@@ -111,3 +111,34 @@ def test_one_blas_thread_keeps_a_number_the_user_set(monkeypatch: pytest.MonkeyP
     monkeypatch.delenv("OPENBLAS_NUM_THREADS")
     one_blas_thread()
     assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+
+
+COMMANDS = ["audit", "calib", "info", "rig", "gate", "simulate", "fleet"]
+
+
+def test_only_command_keeps_just_the_named_command() -> None:
+    import syncaudit.cli  # registers every command on `app`
+    from syncaudit.cli.common import app, only_command
+
+    assert syncaudit.cli.app is app
+    for name in COMMANDS:
+        only = only_command([name, "--help"])
+        names = [c.callback.__name__ for c in only.registered_commands if c.callback]
+        assert names + [g.name for g in only.registered_groups] == [name]
+    for argv in ([], ["--help"], ["--version"], ["aud"], ["LOG.mcap"]):
+        assert only_command(argv) is app  # help, version and errors see every command
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_only_command_prints_what_the_whole_app_prints(name: str) -> None:
+    """Help and usage errors of a command are the same from the trimmed app."""
+    from typer.testing import CliRunner
+
+    import syncaudit.cli
+    from syncaudit.cli.common import only_command
+
+    runner = CliRunner()
+    for argv in ([name, "--help"], [name, "--no-such-option"]):
+        whole = runner.invoke(syncaudit.cli.app, argv)
+        trimmed = runner.invoke(only_command(argv), argv)
+        assert (trimmed.exit_code, trimmed.output) == (whole.exit_code, whole.output)

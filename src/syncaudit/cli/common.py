@@ -7,6 +7,7 @@ Kept free of heavy imports (no numpy, pandas, pydantic, rich, the simulator): `s
 from __future__ import annotations
 
 import contextlib
+import copy
 import json
 import os
 import signal
@@ -19,6 +20,8 @@ from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 import typer
 from typer.core import TyperGroup
+from typer.main import get_command_name
+from typer.models import CommandInfo
 
 try:  # typer >= 0.22 vendors click
     from typer._click import exceptions as click_errors
@@ -293,6 +296,33 @@ def output_set(
     return outputs
 
 
+def only_command(argv: Sequence[str]) -> typer.Typer:
+    """The app with only the command `argv` starts with, when it names one exactly.
+
+    typer builds the click parameters of every command (type hints, defaults) before it
+    parses the command line: ~5 ms for the commands that will not run. A first argument
+    that names no command (an option, a typo, nothing) gets the whole app, for its help
+    and its errors.
+    """
+    if not argv:
+        return app
+    commands = [c for c in app.registered_commands if _command_name(c) == argv[0]]
+    groups = [g for g in app.registered_groups if g.name == argv[0]]
+    if len(commands) + len(groups) != 1:
+        return app
+    only = copy.copy(app)
+    only.registered_commands = commands
+    only.registered_groups = groups
+    return only
+
+
+def _command_name(command: CommandInfo) -> str | None:
+    """The name typer gives a registered command."""
+    if command.name:
+        return command.name
+    return get_command_name(command.callback.__name__) if command.callback else None
+
+
 def main() -> None:
     """Console-script entry point.
 
@@ -302,7 +332,7 @@ def main() -> None:
     """
     pause_gc()
     try:
-        app()
+        only_command(sys.argv[1:])()
         code = 0
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
