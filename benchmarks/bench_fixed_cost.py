@@ -3,8 +3,10 @@
 
 What a user waits for on a small log is start-up, not reading: the interpreter, the
 imports a command needs, opening the log, the analysis and the report. This runs, as
-subprocesses of the installed console script, in `--runs` interleaved rounds after one
-unmeasured warm-up round (bytecode compiled, page cache warm):
+subprocesses of the installed console script, in `--runs` interleaved rounds after
+syncaudit's bytecode is compiled (`compileall`: an environment with PYTHONDONTWRITEBYTECODE
+set would otherwise compile every module from source on every run, ~0.07 CPU s that an
+installed wheel never pays) and one unmeasured warm-up round (page cache warm):
 
 - `python -c pass`: the interpreter alone, the floor under every command;
 - `syncaudit --help` (target <= 0.2 s wall);
@@ -124,6 +126,20 @@ def measure(contenders: list[Contender], runs: int) -> tuple[float, float, float
     return load_before, os.getloadavg()[0], others
 
 
+def compile_bytecode(src_dirs: Sequence[Path]) -> str:
+    """Compile the `syncaudit` packages of these source folders (or of the import path)."""
+    where = [str(d / "syncaudit") for d in src_dirs]
+    if not where:
+        import importlib.util
+
+        spec = importlib.util.find_spec("syncaudit")
+        where = list(spec.submodule_search_locations or []) if spec is not None else []
+    if not where:
+        return "syncaudit not importable"
+    done = subprocess.run([sys.executable, "-m", "compileall", "-q", *where], check=False)
+    return "compiled" if done.returncode == 0 else f"compileall exit {done.returncode}"
+
+
 def import_times(argv: Sequence[str]) -> dict[str, float]:
     """Cumulative import time (s) of each module in IMPORTS that `argv` imports."""
     env = dict(os.environ, PYTHONPROFILEIMPORTTIME="1")
@@ -173,6 +189,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         contenders += [Contender(f"{c.name} [baseline]", c.argv, env) for c in contenders[1:]]
         print(f"baseline: syncaudit from {src}")
     runs = max(1, args.runs)
+    trees = [REPO / "src"] if (REPO / "src" / "syncaudit").is_dir() else []
+    if args.baseline_src is not None:
+        trees.append(args.baseline_src.resolve())
+    print(f"syncaudit bytecode: {compile_bytecode(trees)}")
     load_before, load_after, others = measure(contenders, runs)
     print(
         f"syncaudit fixed cost: {runs} run(s) each, interleaved, after a warm-up; {os.cpu_count()} "
