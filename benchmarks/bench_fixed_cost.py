@@ -14,8 +14,9 @@ installed wheel never pays) and one unmeasured warm-up round (page cache warm):
   wall), its tables to a pipe as in CI.
 
 and prints, per command, the median, lowest and highest wall time, the median CPU time
-(user + sys, from wait4), and the machine's load average and the CPU the rest of the
-machine used meanwhile: a figure taken on a busy machine says so. `--imports` adds where
+(user + sys of the command and its worker processes, from getrusage), and the machine's
+load average and the CPU the rest of the machine used meanwhile: a figure taken on a busy
+machine says so. `--imports` adds where
 the audit's import time goes (`python -X importtime`, cumulative, the heavy packages).
 
 Run `python benchmarks/bench_fixed_cost.py --help`. Standard library only.
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -106,6 +108,13 @@ def run_once(contender: Contender, *, record: bool = True) -> None:
         contender.wall_s.append(wall)
 
 
+def _children_cpu_s() -> float:
+    """User + system CPU seconds of this process's reaped children (getrusage: microsecond
+    resolution, where os.times() counts 10 ms clock ticks)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def measure(contenders: list[Contender], runs: int) -> tuple[float, float, float]:
     """`runs` interleaved rounds after one warm-up; (load before, load after, others' CPU s)."""
     for contender in contenders:
@@ -115,12 +124,9 @@ def measure(contenders: list[Contender], runs: int) -> tuple[float, float, float
     for _ in range(runs):
         for contender in contenders:
             busy = _busy_s()
-            before = os.times()
+            before = _children_cpu_s()
             run_once(contender)
-            after = os.times()
-            cpu = (after.children_user - before.children_user) + (
-                after.children_system - before.children_system
-            )
+            cpu = _children_cpu_s() - before
             contender.cpu_s.append(cpu)
             others += max(0.0, _busy_s() - busy - cpu)
     return load_before, os.getloadavg()[0], others
