@@ -105,12 +105,24 @@ def test_console_script_audit_works_with_the_collector_on(tmp_path: Path) -> Non
 
 
 def test_one_blas_thread_keeps_a_number_the_user_set(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delitem(sys.modules, "numpy", raising=False)  # as before the imports
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
     one_blas_thread()
     assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
     monkeypatch.delenv("OPENBLAS_NUM_THREADS")
     one_blas_thread()
     assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+
+
+def test_one_blas_thread_leaves_the_environment_once_numpy_is_loaded(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Too late to matter for this process: its workers and children are not changed."""
+    import numpy  # noqa: F401
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    one_blas_thread()
+    assert "OPENBLAS_NUM_THREADS" not in os.environ
 
 
 COMMANDS = ["audit", "calib", "info", "rig", "gate", "simulate", "fleet"]

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import gc
 import os
+import sys
 
 PAUSED_THRESHOLD = 200_000
 """New objects between two young collections while paused (CPython's default is 700):
@@ -61,7 +62,8 @@ def gc_paused() -> bool:
 def one_blas_thread() -> None:
     """Have OpenBLAS (numpy's BLAS) start one thread, unless the environment sets a number.
 
-    Effective only before numpy is imported (OpenBLAS reads it when loaded); inherited by
-    forked and spawned workers.
+    OpenBLAS reads it when numpy loads it: with numpy already imported (the app run inside
+    a test or a host program) nothing is changed. Inherited by the workers.
     """
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
