@@ -20,7 +20,9 @@ off: it is then read by scanning the chunks from the start, as `rosbag reindex` 
 
 from __future__ import annotations
 
+import bisect
 import bz2
+import mmap
 import os
 import struct
 from collections.abc import Iterator
@@ -31,6 +33,7 @@ from typing import BinaryIO
 import lz4.frame
 
 from syncaudit.errors import LogReadError
+from syncaudit.logs.lz4_frame import FrameError, Pieces, decode_frame
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
 
@@ -395,12 +398,14 @@ def _scan_chunk(
     return found
 
 
-def chunk_body(
+def chunk_head(
     record: bytes | memoryview, offset: int, *, partial: bool = False
-) -> bytes | memoryview:
-    """The uncompressed records of the chunk record `record` (at `offset` in its file).
+) -> tuple[str, int, memoryview]:
+    """(compression, uncompressed size, data) of the chunk record `record` (at `offset`).
 
-    `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
+    The size is refused where it cannot be honest (over `MAX_CHUNK_BYTES`, or a large one
+    over `MAX_RATIO` times the data). `partial`: the record is cut off, its data may be
+    short. Raises LogReadError.
     """
     where = f"ROS 1 chunk at byte {offset}"
     if len(record) < 8:
@@ -423,6 +428,18 @@ def chunk_body(
             f"{where}: chunk claims {size} uncompressed bytes from {dlen} (refused as a "
             "decompression bomb or a damaged size field)"
         )
+    return compression, size, data
+
+
+def chunk_body(
+    record: bytes | memoryview, offset: int, *, partial: bool = False
+) -> bytes | memoryview:
+    """The uncompressed records of the chunk record `record` (at `offset` in its file).
+
+    `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
+    """
+    where = f"ROS 1 chunk at byte {offset}"
+    compression, size, data = chunk_head(record, offset, partial=partial)
     try:
         body: bytes | memoryview
         if compression == "none":
@@ -502,17 +519,153 @@ def open_bag_file(path: Path) -> BagFile:
     return BagFile(handle, size)
 
 
+_MSG_HEAD_BYTES = 38
+"""Header bytes of a message data record holding just `op`, `conn` and `time`."""
+_MSG_OP_FIRST = struct.Struct("<I3sBI5sII5sII")
+"""That header as rosbags writes it: op, conn, time."""
+_MSG_CONN_FIRST = struct.Struct("<I5sII3sBI5sII")
+"""That header as rosbag (C++) writes it: its fields sorted by name, conn, op, time."""
+
+
+def whole(body: bytes | memoryview) -> Pieces:
+    """Pieces of a body held in one buffer."""
+    return Pieces([0], [body], len(body))
+
+
+class _PieceCursor:
+    """Reads content of `Pieces` at offsets; joins pieces only for a read that spans them."""
+
+    __slots__ = ("base", "buf", "pieces", "top")
+
+    def __init__(self, pieces: Pieces) -> None:
+        self.pieces = pieces
+        self.buf: bytes | memoryview = pieces.buffers[0] if pieces.buffers else b""
+        self.base = 0
+        self.top = len(self.buf)
+
+    def at(self, pos: int, size: int) -> tuple[bytes | memoryview, int]:
+        """(buffer, offset in it) of content bytes `pos` to `pos + size` (within the
+        content: the caller checks)."""
+        if self.base <= pos and pos + size <= self.top:
+            return self.buf, pos - self.base
+        starts, buffers = self.pieces.starts, self.pieces.buffers
+        k = bisect.bisect_right(starts, pos) - 1
+        self.buf, self.base = buffers[k], starts[k]
+        self.top = self.base + len(self.buf)
+        if pos + size <= self.top:
+            return self.buf, pos - self.base
+        parts = [self.buf[pos - self.base :]]
+        got = len(parts[0])
+        for buffer in buffers[k + 1 :]:
+            parts.append(buffer[: size - got])
+            got += len(parts[-1])
+            if got >= size:
+                break
+        return b"".join(parts), 0
+
+
+def wanted_messages(
+    pieces: Pieces, channels: dict[int, ChannelInfo], offset: int, *, partial: bool = False
+) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+    """(log time, message index, connection id, payload) of the messages of `channels` in
+    an uncompressed chunk body, in file order (the index counts every message record).
+
+    A channel with `prefix_bytes` gets that much of its payloads (an image's header), so
+    pixels stored in blocks of their own are never touched. `partial`: the body is the
+    start of a cut-off chunk; stop quietly at the first incomplete record. Otherwise damage
+    raises LogReadError naming the chunk's `offset` and the offset in the chunk.
+    """
+    cursor = _PieceCursor(pieces)
+    size = pieces.size
+    pos = index = 0
+    while pos < size:
+        problem = ""
+        if pos + 4 > size:
+            problem = "record cut off"
+        else:
+            buf, at = cursor.at(pos, 4)
+            (hlen,) = _U32.unpack_from(buf, at)
+            dlen_at = pos + 4 + hlen
+            if dlen_at + 4 > size:
+                problem = "record header overruns the chunk"
+            else:
+                buf, at = cursor.at(pos + 4, hlen + 4)
+                (dlen,) = _U32.unpack_from(buf, at + hlen)
+                end = dlen_at + 4 + dlen
+                if end > size:
+                    problem = "record data overruns the chunk"
+        if problem:
+            if partial:
+                return
+            raise LogReadError(
+                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
+            )
+        conn_id = -1
+        op = 0
+        if hlen == _MSG_HEAD_BYTES:
+            # The usual message header in one unpack (either field order); anything else
+            # (other fields, another order) is parsed field by field below.
+            (n1, k1, op, n2, k2, conn_id, n3, k3, sec, nsec) = _MSG_OP_FIRST.unpack_from(buf, at)
+            if not (n1 == 4 and k1 == b"op=" and n2 == 9 and k2 == b"conn=" and n3 == 13):
+                (n1, k1, conn_id, n2, k2, op, n3, k3, sec, nsec) = _MSG_CONN_FIRST.unpack_from(
+                    buf, at
+                )
+                if not (n1 == 9 and k1 == b"conn=" and n2 == 4 and k2 == b"op=" and n3 == 13):
+                    conn_id = -1
+            if k3 != b"time=":
+                conn_id = -1
+        if conn_id < 0:
+            try:
+                fields = parse_header(buf, at, at + hlen)
+                op = _op(fields)
+            except ValueError as exc:
+                if partial:
+                    return
+                raise LogReadError(
+                    f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the "
+                    f"chunk: {exc})"
+                ) from None
+            if op != OP_MSG_DATA:
+                pos = end
+                continue
+            try:
+                conn_id = _u32(fields, "conn")
+                info = channels.get(conn_id)
+                t = _time(fields, "time") if info is not None else 0
+            except ValueError as exc:
+                raise LogReadError(
+                    f"ROS 1 chunk at byte {offset}: bad message record ({exc})"
+                ) from None
+        elif op != OP_MSG_DATA:
+            pos = end
+            continue
+        else:
+            info = channels.get(conn_id)
+            t = sec * 1_000_000_000 + nsec
+        if info is not None:
+            wanted = dlen if info.prefix_bytes <= 0 else min(dlen, info.prefix_bytes)
+            data, data_at = cursor.at(dlen_at + 4, wanted)
+            yield t, index, conn_id, memoryview(data)[data_at : data_at + wanted]
+        index += 1
+        pos = end
+
+
 class Rosbag1ChunkReader:
     """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused.
 
+    Each chunk record is mapped, not copied: an uncompressed chunk's payloads and an lz4
+    chunk's blocks stored uncompressed (JPEG pixels) are views of the mapping, so pages
+    nobody reads are never touched; the mapping goes when the last view of it does.
     `source` (optional) is the file the worker will read (`logs.units` builds one reader per
-    worker and file); units of other files are read too.
+    worker and file); units of other files are read too. `check_crc`: verify lz4 frames'
+    checksums (by decoding them whole with `lz4.frame`).
     """
 
-    def __init__(self, source: str | None = None) -> None:
+    def __init__(self, source: str | None = None, *, check_crc: bool = False) -> None:
         self._files: dict[str, BagFile] = {}
+        self.check_crc = check_crc
         self._buffer = bytearray()
-        """Chunk records are read into this one buffer (no allocation per chunk)."""
+        """The remote reader's run buffer (payload views of it hand it over)."""
         del source  # files are opened when their first unit is read
 
     def messages(
@@ -538,37 +691,48 @@ class Rosbag1ChunkReader:
             )
         partial = _declared_length(record) > unit.length
         try:
-            body = chunk_body(record, unit.offset, partial=partial)
-            if isinstance(body, memoryview):
-                # An uncompressed chunk's payloads are views of the buffer: callers may hold
-                # them past the next unit (the serial merge does), so it is theirs now.
-                self._buffer = bytearray()
-            index = 0
-            for op, fields, data in walk_records(body, unit.offset, partial=partial):
-                if op != OP_MSG_DATA:
-                    continue
-                conn_id = _u32(fields, "conn")
-                if conn_id in channels:
-                    yield _time(fields, "time"), index, conn_id, data
-                index += 1
+            pieces = self._decode(record, unit.offset, partial=partial)
+            yield from wanted_messages(pieces, channels, unit.offset, partial=partial)
         except LogReadError as exc:
             raise LogReadError(f"{unit.source}: {exc}") from None
-        except ValueError as exc:
-            raise LogReadError(
-                f"{unit.source}: ROS 1 chunk at byte {unit.offset}: bad message record ({exc})"
-            ) from None
+
+    def _decode(self, record: memoryview, offset: int, *, partial: bool) -> Pieces:
+        """The chunk's records: an lz4 frame lazily (stored blocks stay views of `record`),
+        anything else (or a cut or checked lz4 frame) whole."""
+        compression, size, data = chunk_head(record, offset, partial=partial)
+        if compression == "lz4" and not partial and not self.check_crc:
+            self._buffer = bytearray()  # payloads may be views of it
+            try:
+                return decode_frame(data, size)
+            except FrameError as exc:
+                raise LogReadError(
+                    f"ROS 1 chunk at byte {offset}: lz4 data damaged: {exc}"
+                ) from None
+        body = chunk_body(record, offset, partial=partial)
+        if isinstance(body, memoryview):
+            self._buffer = bytearray()  # an uncompressed chunk's payloads are views of it
+        return whole(body)
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
-        """Up to `length` bytes at `offset`, read into the reused buffer (overwritten by
-        the next unit's read unless an uncompressed chunk's payloads took it over)."""
-        length = max(0, min(length, bag.size - offset))
+        """Up to `length` bytes at `offset`, as a view of a mapping of them (unmapped when
+        the last view of it goes)."""
+        try:
+            size = os.fstat(bag.handle.fileno()).st_size  # a mapping past the end faults
+        except OSError as exc:
+            raise LogReadError(f"cannot read the bag: {one_line(exc)}") from exc
+        length = max(0, min(length, size - offset))
         if offset < 0 or length == 0:
             return memoryview(b"")
-        if len(self._buffer) < length:
-            self._buffer = bytearray(length)  # views of the old one keep it alive
-        view = memoryview(self._buffer)[:length]
-        got = os.preadv(bag.handle.fileno(), [view], offset)
-        return view[:got]
+        start = offset - offset % mmap.ALLOCATIONGRANULARITY
+        try:
+            mapped = mmap.mmap(
+                bag.handle.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
+            )
+        except OSError:  # a file system that cannot map: read a copy
+            copy = bytearray(length)
+            got = os.preadv(bag.handle.fileno(), [copy], offset)
+            return memoryview(copy)[:got]
+        return memoryview(mapped)[offset - start :]
 
     def close(self) -> None:
         """Close the files opened so far."""
