@@ -10,7 +10,9 @@ followed by an optional u32 content checksum.
 
 An LZ4 compressor stores a block uncompressed when compressing it does not pay, which is
 what camera JPEGs make of most of a ROS 1 lz4 chunk (98 % of the blocks of the bench
-bag). Copying those blocks only to skip the image pixels in them costs as much as the
+bag). Writers differ: roslz4 (rosbag's C++ and Python writers) writes independent blocks
+of 1 MiB, a content checksum and no content size; rosbags (`lz4.frame.compress`) linked
+blocks of 64 KiB, a content size and no checksum; the LZ4 library may add block checksums. Copying those blocks only to skip the image pixels in them costs as much as the
 read itself, so `decode_frame` returns the content as `Pieces`: stored blocks are views
 of the input, compressed ones are decompressed with `lz4.block` (a linked block with the
 previous 64 KiB of content as its dictionary, as the frame decoder does).
