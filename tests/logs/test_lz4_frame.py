@@ -2,14 +2,24 @@
 
 from __future__ import annotations
 
+import os
 import random
 import struct
 import tracemalloc
+from pathlib import Path
 
 import lz4.frame
 import pytest
 
-from syncaudit.logs.lz4_frame import FrameError, Pieces, decode_frame, xxh32_short
+from syncaudit.logs.lz4_frame import (
+    FileSpan,
+    FrameError,
+    FrameSource,
+    Pieces,
+    decode_frame,
+    piece_bytes,
+    xxh32_short,
+)
 
 FRAMES = {
     # rosbags' writer: lz4.frame.compress defaults
@@ -48,7 +58,7 @@ def content(seed: int, size: int = 3_000_000) -> bytes:
 
 def joined(pieces: Pieces) -> bytes:
     assert pieces.starts == [sum(map(len, pieces.buffers[:i])) for i in range(len(pieces.buffers))]
-    return b"".join(bytes(b) for b in pieces.buffers)
+    return b"".join(bytes(piece_bytes(b, 0, len(b))) for b in pieces.buffers)
 
 
 @pytest.mark.parametrize("name", sorted(FRAMES))
@@ -144,3 +154,25 @@ def test_a_decompression_bomb_stops_at_the_expected_size() -> None:
         tracemalloc.stop()
     assert "decodes past 1048576 bytes" in problem or "more than 1048576" in problem
     assert peak < 6 << 20
+
+
+@pytest.mark.parametrize("name", sorted(FRAMES))
+def test_a_frame_read_from_its_file_leaves_stored_blocks_there(name: str, tmp_path: Path) -> None:
+    """Decoded from a file (after 100 bytes of something else), stored blocks are spans of
+    the file, read only when asked; a file that shrinks under them is a FrameError."""
+    data = content(len(name)) + random.Random(2).randbytes(9 << 20)
+    frame = lz4.frame.compress(data, **FRAMES[name])
+    path = tmp_path / "frame.bin"
+    path.write_bytes(bytes(100) + frame)
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        source = FrameSource(fd=fd, offset=100, length=len(frame), head=frame[:50])
+        pieces = decode_frame(source, len(data))
+        assert joined(pieces) == data
+        spans = [p for p in pieces.buffers if isinstance(p, FileSpan)]
+        assert spans and len(spans) < len(pieces.buffers)
+        os.truncate(path, 100 + len(frame) // 2)
+        with pytest.raises(FrameError, match="file ends inside a block"):
+            joined(pieces)
+    finally:
+        os.close(fd)

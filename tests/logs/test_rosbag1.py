@@ -518,7 +518,8 @@ def test_lz4_chunk_claiming_more_than_it_holds_is_refused(
 def test_bag_cut_after_it_was_opened_is_a_read_error_not_a_crash(
     camera_bags: dict[str, Path], tmp_path: Path
 ) -> None:
-    """Chunks are mapped: a file that shrinks under the reader must not fault (SIGBUS)."""
+    """Chunks are read in place as they are reached: a file that shrinks under the reader
+    is a read error naming the chunk."""
     path = tmp_path / "shrinking.bag"
     path.write_bytes(camera_bags["rosbags"].read_bytes())
     with open_log(path) as log, pytest.raises(LogReadError) as info:

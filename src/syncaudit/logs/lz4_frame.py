@@ -28,6 +28,7 @@ want them verified (`--check-crc`) decode with `lz4.frame` instead, which does.
 
 from __future__ import annotations
 
+import os
 import struct
 from dataclasses import dataclass
 
@@ -63,13 +64,82 @@ class FrameDescriptor:
     """Offset of the first block's size."""
 
 
+class FileSpan:
+    """Bytes of a file not read yet: a stored block of a frame read from the file."""
+
+    __slots__ = ("fd", "length", "offset")
+
+    def __init__(self, fd: int, offset: int, length: int) -> None:
+        self.fd, self.offset, self.length = fd, offset, length
+
+    def __len__(self) -> int:
+        return self.length
+
+    def read(self, start: int, stop: int) -> bytes:
+        """Its bytes `start` to `stop` (a short read is damage: the file shrank)."""
+        data = os.pread(self.fd, stop - start, self.offset + start)
+        if len(data) != stop - start:
+            raise FrameError(f"file ends inside a block (byte {self.offset + start} on)")
+        return data
+
+
+Piece = bytes | memoryview | FileSpan
+
+
 @dataclass(frozen=True, slots=True)
 class Pieces:
-    """Content as consecutive buffers: `buffers[i]` holds bytes `starts[i]` on."""
+    """Content as consecutive pieces: `buffers[i]` holds bytes `starts[i]` on."""
 
     starts: list[int]
-    buffers: list[bytes | memoryview]
+    buffers: list[Piece]
     size: int
+
+
+def piece_bytes(piece: Piece, start: int, stop: int) -> bytes | memoryview:
+    """Bytes `start` to `stop` of a piece (read from the file for a `FileSpan`)."""
+    if isinstance(piece, FileSpan):
+        return piece.read(start, stop)
+    return piece[start:stop]
+
+
+class FrameSource:
+    """The bytes of a frame, by offset in the frame: held in memory, or read from a file
+    (`fd`, `offset`: where the frame starts in it), where stored blocks become `FileSpan`s
+    and are never read here. `head` holds the frame's first bytes if already read."""
+
+    def __init__(
+        self,
+        data: bytes | memoryview | None = None,
+        *,
+        fd: int = -1,
+        offset: int = 0,
+        length: int = 0,
+        head: bytes = b"",
+    ) -> None:
+        self.data = memoryview(data) if data is not None else None
+        self.fd, self.offset = fd, offset
+        self.size = len(self.data) if self.data is not None else length
+        self._cached_at, self._cached = 0, head
+
+    def read(self, start: int, length: int) -> bytes | memoryview:
+        """Bytes `start` to `start + length` (fewer at the end of the frame)."""
+        if self.data is not None:
+            return self.data[start : start + length]
+        at = start - self._cached_at
+        if at >= 0 and start + length <= self._cached_at + len(self._cached):
+            return self._cached[at : at + length]
+        want = max(0, min(length, self.size - start))
+        data = os.pread(self.fd, want, self.offset + start)
+        if len(data) != want:
+            raise FrameError(f"file ends inside the frame (byte {self.offset + start} on)")
+        self._cached_at, self._cached = start, data
+        return data
+
+    def stored(self, start: int, length: int) -> Piece:
+        """A stored block's bytes: a view of the memory, or a `FileSpan` of the file."""
+        if self.data is not None:
+            return self.data[start : start + length]
+        return FileSpan(self.fd, self.offset + start, length)
 
 
 def xxh32_short(data: bytes) -> int:
@@ -127,25 +197,27 @@ def read_descriptor(data: bytes | memoryview) -> FrameDescriptor:
     )
 
 
-def decode_frame(data: memoryview, size: int) -> Pieces:
+def decode_frame(data: memoryview | FrameSource, size: int) -> Pieces:
     """The content of the LZ4 frame at the start of `data`, which must be `size` bytes.
 
-    Stored blocks are views of `data`; bytes after the frame's end are ignored (as the
-    LZ4 frame decoder does). Raises FrameError on any damage.
+    Stored blocks are views of `data` (a `FileSpan` where the frame is read from a file);
+    bytes after the frame's end are ignored (as the LZ4 frame decoder does). Raises
+    FrameError on any damage.
     """
-    info = read_descriptor(data)
+    source = data if isinstance(data, FrameSource) else FrameSource(data)
+    info = read_descriptor(source.read(0, 19))
     if info.content_size is not None and info.content_size != size:
         raise FrameError(f"frame header says {info.content_size} bytes of content, not {size}")
     tail = 4 if info.block_checksum else 0
-    total = len(data)
+    total = source.size
     pos = info.blocks_at
     starts: list[int] = []
-    buffers: list[bytes | memoryview] = []
+    buffers: list[Piece] = []
     produced = 0
     while True:
         if pos + 4 > total:
             raise FrameError(f"frame cut off at byte {pos} (no end mark)")
-        (word,) = _U32.unpack_from(data, pos)
+        (word,) = _U32.unpack_from(source.read(pos, 4), 0)
         pos += 4
         if word == 0:
             break
@@ -157,14 +229,15 @@ def decode_frame(data: memoryview, size: int) -> Pieces:
             )
         if pos + length + tail > total:
             raise FrameError(f"block at byte {pos - 4} cut off")
-        block = data[pos : pos + length]
         left = size - produced
-        out: bytes | memoryview
+        out: Piece
         if word & _STORED:
-            out = block
+            out = source.stored(pos, length)
         elif left <= 0:
             raise FrameError(f"frame holds more than {size} bytes")
         else:
+            # read the next block's size with this block (one read, not two, from a file)
+            block = source.read(pos, length + tail + 4)[:length]
             window = _window(buffers) if info.linked and buffers else b""
             try:
                 out = lz4.block.decompress(
@@ -176,7 +249,7 @@ def decode_frame(data: memoryview, size: int) -> Pieces:
                 ) from None
         if len(out) > left:
             raise FrameError(f"frame holds more than {size} bytes")
-        if out:
+        if len(out):
             starts.append(produced)
             buffers.append(out)
             produced += len(out)
@@ -188,15 +261,15 @@ def decode_frame(data: memoryview, size: int) -> Pieces:
     return Pieces(starts, buffers, size)
 
 
-def _window(buffers: list[bytes | memoryview]) -> bytes | memoryview:
+def _window(buffers: list[Piece]) -> bytes | memoryview:
     """The last `WINDOW_BYTES` of the content decoded so far (a linked block's dictionary)."""
     last = buffers[-1]
     if len(last) >= WINDOW_BYTES:
-        return last[len(last) - WINDOW_BYTES :]
+        return piece_bytes(last, len(last) - WINDOW_BYTES, len(last))
     parts: list[bytes | memoryview] = []
     need = WINDOW_BYTES
     for buffer in reversed(buffers):
-        parts.append(buffer[max(0, len(buffer) - need) :])
+        parts.append(piece_bytes(buffer, max(0, len(buffer) - need), len(buffer)))
         need -= len(parts[-1])
         if need <= 0:
             break

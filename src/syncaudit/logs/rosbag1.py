@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import bisect
 import bz2
-import mmap
 import os
 import struct
 from collections.abc import Iterator
@@ -33,7 +32,14 @@ from typing import BinaryIO
 import lz4.frame
 
 from syncaudit.errors import LogReadError
-from syncaudit.logs.lz4_frame import FrameError, Pieces, decode_frame
+from syncaudit.logs.lz4_frame import (
+    FileSpan,
+    FrameError,
+    FrameSource,
+    Pieces,
+    decode_frame,
+    piece_bytes,
+)
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
 
@@ -532,16 +538,24 @@ def whole(body: bytes | memoryview) -> Pieces:
     return Pieces([0], [body], len(body))
 
 
+READ_AHEAD_BYTES = 1024
+"""Bytes read at once from a stored block left in the file: a record header and an image's
+header prefix, or a few small records, in one `pread`."""
+
+
 class _PieceCursor:
-    """Reads content of `Pieces` at offsets; joins pieces only for a read that spans them."""
+    """Reads content of `Pieces` at offsets; joins pieces only for a read that spans them.
+
+    A piece left in the file (`FileSpan`) is read `READ_AHEAD_BYTES` at a time (or what a
+    read asks, if more), never whole.
+    """
 
     __slots__ = ("base", "buf", "pieces", "top")
 
     def __init__(self, pieces: Pieces) -> None:
         self.pieces = pieces
-        self.buf: bytes | memoryview = pieces.buffers[0] if pieces.buffers else b""
-        self.base = 0
-        self.top = len(self.buf)
+        self.buf: bytes | memoryview = b""
+        self.base = self.top = 0
 
     def at(self, pos: int, size: int) -> tuple[bytes | memoryview, int]:
         """(buffer, offset in it) of content bytes `pos` to `pos + size` (within the
@@ -550,14 +564,19 @@ class _PieceCursor:
             return self.buf, pos - self.base
         starts, buffers = self.pieces.starts, self.pieces.buffers
         k = bisect.bisect_right(starts, pos) - 1
-        self.buf, self.base = buffers[k], starts[k]
-        self.top = self.base + len(self.buf)
-        if pos + size <= self.top:
+        piece, start = buffers[k], starts[k]
+        end = start + len(piece)
+        if pos + size <= end:
+            if isinstance(piece, FileSpan):
+                stop = min(end, pos + max(size, READ_AHEAD_BYTES))
+                self.buf, self.base, self.top = piece.read(pos - start, stop - start), pos, stop
+            else:
+                self.buf, self.base, self.top = piece, start, end
             return self.buf, pos - self.base
-        parts = [self.buf[pos - self.base :]]
+        parts = [piece_bytes(piece, pos - start, len(piece))]
         got = len(parts[0])
-        for buffer in buffers[k + 1 :]:
-            parts.append(buffer[: size - got])
+        for piece in buffers[k + 1 :]:
+            parts.append(piece_bytes(piece, 0, min(len(piece), size - got)))
             got += len(parts[-1])
             if got >= size:
                 break
@@ -650,22 +669,29 @@ def wanted_messages(
         pos = end
 
 
+HEAD_BYTES = 4096
+"""Bytes read first of an lz4 chunk record: its header, the frame's descriptor and first
+block size (a chunk header holds two short fields)."""
+
+
 class Rosbag1ChunkReader:
     """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused.
 
-    Each chunk record is mapped, not copied: an uncompressed chunk's payloads and an lz4
-    chunk's blocks stored uncompressed (JPEG pixels) are views of the mapping, so pages
-    nobody reads are never touched; the mapping goes when the last view of it does.
+    An lz4 chunk of a local file is read block by block (`lz4_frame`): blocks stored
+    uncompressed (JPEG pixels: most of a camera bag) stay in the file, and only the record
+    headers and wanted payloads in them are read (`pread`), so the bytes of images nobody
+    looks at are neither copied nor mapped. Other chunks are read whole into one reused
+    buffer (`preadv`) and decompressed from there.
     `source` (optional) is the file the worker will read (`logs.units` builds one reader per
     worker and file); units of other files are read too. `check_crc`: verify lz4 frames'
-    checksums (by decoding them whole with `lz4.frame`).
+    block and content checksums (by decoding them whole with `lz4.frame`, which does).
     """
 
     def __init__(self, source: str | None = None, *, check_crc: bool = False) -> None:
         self._files: dict[str, BagFile] = {}
         self.check_crc = check_crc
         self._buffer = bytearray()
-        """The remote reader's run buffer (payload views of it hand it over)."""
+        """Chunk records are read into this one buffer (no allocation per chunk)."""
         del source  # files are opened when their first unit is read
 
     def messages(
@@ -683,56 +709,71 @@ class Rosbag1ChunkReader:
             except OSError as exc:
                 raise LogReadError(f"{unit.source}: cannot read: {one_line(exc)}") from exc
             self._files[unit.source] = bag
-        record = self._read(bag, unit.offset, unit.length)
-        if len(record) < unit.length:
-            raise LogReadError(
-                f"{unit.source}: ROS 1 chunk at byte {unit.offset} cut off "
-                f"({len(record)} of {unit.length} bytes; file changed since it was opened?)"
-            )
-        partial = _declared_length(record) > unit.length
         try:
-            pieces = self._decode(record, unit.offset, partial=partial)
+            pieces = self._lz4_in_place(bag, unit)
+            partial = False
+            if pieces is None:
+                record = self._read(bag, unit.offset, unit.length)
+                if len(record) < unit.length:
+                    raise LogReadError(
+                        f"ROS 1 chunk at byte {unit.offset} cut off ({len(record)} of "
+                        f"{unit.length} bytes; file changed since it was opened?)"
+                    )
+                partial = _declared_length(record) > unit.length
+                body = chunk_body(record, unit.offset, partial=partial)
+                if isinstance(body, memoryview):
+                    # An uncompressed chunk's payloads are views of the buffer: callers may
+                    # hold them past the next unit (the serial merge does), so it is theirs.
+                    self._buffer = bytearray()
+                pieces = whole(body)
             yield from wanted_messages(pieces, channels, unit.offset, partial=partial)
         except LogReadError as exc:
             raise LogReadError(f"{unit.source}: {exc}") from None
+        except (FrameError, OSError) as exc:  # the file shrank or failed under the reader
+            raise LogReadError(
+                f"{unit.source}: ROS 1 chunk at byte {unit.offset}: {one_line(exc)}"
+            ) from None
 
-    def _decode(self, record: memoryview, offset: int, *, partial: bool) -> Pieces:
-        """The chunk's records: an lz4 frame lazily (stored blocks stay views of `record`),
-        anything else (or a cut or checked lz4 frame) whole."""
-        compression, size, data = chunk_head(record, offset, partial=partial)
-        if compression == "lz4" and not partial and not self.check_crc:
-            self._buffer = bytearray()  # payloads may be views of it
-            try:
-                return decode_frame(data, size)
-            except FrameError as exc:
-                raise LogReadError(
-                    f"ROS 1 chunk at byte {offset}: lz4 data damaged: {exc}"
-                ) from None
-        body = chunk_body(record, offset, partial=partial)
-        if isinstance(body, memoryview):
-            self._buffer = bytearray()  # an uncompressed chunk's payloads are views of it
-        return whole(body)
+    def _lz4_in_place(self, bag: BagFile, unit: ReadUnit) -> Pieces | None:
+        """The records of a whole lz4 chunk of a local file, its stored blocks left in the
+        file; None where the chunk is read whole instead (another compression, a chunk cut
+        off or unreadable: the whole read reports it, `check_crc`, a file in memory)."""
+        fileno = getattr(bag.handle, "fileno", None)
+        if self.check_crc or fileno is None:
+            return None
+        fd = fileno()
+        head = os.pread(fd, min(unit.length, HEAD_BYTES), unit.offset)
+        if len(head) < 8:
+            return None
+        (hlen,) = _U32.unpack_from(head, 0)
+        if 8 + hlen > len(head):
+            return None
+        (dlen,) = _U32.unpack_from(head, 4 + hlen)
+        if 8 + hlen + dlen != unit.length or unit.offset + unit.length > os.fstat(fd).st_size:
+            return None
+        compression, size, _data = chunk_head(head, unit.offset, partial=True)
+        if compression != "lz4":
+            return None
+        start = 8 + hlen
+        source = FrameSource(fd=fd, offset=unit.offset + start, length=dlen, head=head[start:])
+        try:
+            return decode_frame(source, size)
+        except FrameError as exc:
+            raise LogReadError(
+                f"ROS 1 chunk at byte {unit.offset}: lz4 data damaged: {exc}"
+            ) from None
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
-        """Up to `length` bytes at `offset`, as a view of a mapping of them (unmapped when
-        the last view of it goes)."""
-        try:
-            size = os.fstat(bag.handle.fileno()).st_size  # a mapping past the end faults
-        except OSError as exc:
-            raise LogReadError(f"cannot read the bag: {one_line(exc)}") from exc
-        length = max(0, min(length, size - offset))
+        """Up to `length` bytes at `offset`, read into the reused buffer (overwritten by
+        the next unit's read unless an uncompressed chunk's payloads took it over)."""
+        length = max(0, min(length, bag.size - offset))
         if offset < 0 or length == 0:
             return memoryview(b"")
-        start = offset - offset % mmap.ALLOCATIONGRANULARITY
-        try:
-            mapped = mmap.mmap(
-                bag.handle.fileno(), offset + length - start, offset=start, access=mmap.ACCESS_READ
-            )
-        except OSError:  # a file system that cannot map: read a copy
-            copy = bytearray(length)
-            got = os.preadv(bag.handle.fileno(), [copy], offset)
-            return memoryview(copy)[:got]
-        return memoryview(mapped)[offset - start :]
+        if len(self._buffer) < length:
+            self._buffer = bytearray(length)  # views of the old one keep it alive
+        view = memoryview(self._buffer)[:length]
+        got = os.preadv(bag.handle.fileno(), [view], offset)
+        return view[:got]
 
     def close(self) -> None:
         """Close the files opened so far."""
