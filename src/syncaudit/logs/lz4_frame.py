@@ -119,20 +119,18 @@ class FrameSource:
         self.data = memoryview(data) if data is not None else None
         self.fd, self.offset = fd, offset
         self.size = len(self.data) if self.data is not None else length
-        self._cached_at, self._cached = 0, head
+        self._head = head
 
     def read(self, start: int, length: int) -> bytes | memoryview:
         """Bytes `start` to `start + length` (fewer at the end of the frame)."""
         if self.data is not None:
             return self.data[start : start + length]
-        at = start - self._cached_at
-        if at >= 0 and start + length <= self._cached_at + len(self._cached):
-            return self._cached[at : at + length]
         want = max(0, min(length, self.size - start))
+        if start + want <= len(self._head):
+            return self._head[start : start + want]
         data = os.pread(self.fd, want, self.offset + start)
         if len(data) != want:
             raise FrameError(f"file ends inside the frame (byte {self.offset + start} on)")
-        self._cached_at, self._cached = start, data
         return data
 
     def stored(self, start: int, length: int) -> Piece:
@@ -205,7 +203,9 @@ def decode_frame(data: memoryview | FrameSource, size: int) -> Pieces:
     FrameError on any damage.
     """
     source = data if isinstance(data, FrameSource) else FrameSource(data)
-    info = read_descriptor(source.read(0, 19))
+    read, stored = source.read, source.stored
+    head = read(0, 23)  # the longest descriptor and the first block's size
+    info = read_descriptor(head)
     if info.content_size is not None and info.content_size != size:
         raise FrameError(f"frame header says {info.content_size} bytes of content, not {size}")
     tail = 4 if info.block_checksum else 0
@@ -214,10 +214,13 @@ def decode_frame(data: memoryview | FrameSource, size: int) -> Pieces:
     starts: list[int] = []
     buffers: list[Piece] = []
     produced = 0
+    # A block's size is read with what precedes it where that was read anyway (the
+    # descriptor, a compressed block): from a file, a stored block costs one 4-byte read.
+    ahead_at, ahead = pos, head[pos : pos + 4]
     while True:
         if pos + 4 > total:
             raise FrameError(f"frame cut off at byte {pos} (no end mark)")
-        (word,) = _U32.unpack_from(source.read(pos, 4), 0)
+        (word,) = _U32.unpack_from(ahead if ahead_at == pos else read(pos, 4), 0)
         pos += 4
         if word == 0:
             break
@@ -232,16 +235,16 @@ def decode_frame(data: memoryview | FrameSource, size: int) -> Pieces:
         left = size - produced
         out: Piece
         if word & _STORED:
-            out = source.stored(pos, length)
+            out = stored(pos, length)
         elif left <= 0:
             raise FrameError(f"frame holds more than {size} bytes")
         else:
-            # read the next block's size with this block (one read, not two, from a file)
-            block = source.read(pos, length + tail + 4)[:length]
+            raw = read(pos, length + tail + 4)
+            ahead_at, ahead = pos + length + tail, raw[length + tail :]
             window = _window(buffers) if info.linked and buffers else b""
             try:
                 out = lz4.block.decompress(
-                    block, uncompressed_size=min(info.block_max_bytes, left), dict=window
+                    raw[:length], uncompressed_size=min(info.block_max_bytes, left), dict=window
                 )
             except lz4.block.LZ4BlockError:
                 raise FrameError(
