@@ -174,5 +174,7 @@ def test_a_frame_read_from_its_file_leaves_stored_blocks_there(name: str, tmp_pa
         os.truncate(path, 100 + len(frame) // 2)
         with pytest.raises(FrameError, match="file ends inside a block"):
             joined(pieces)
+        with pytest.raises(FrameError, match="file ends inside a block"):
+            spans[-1].read_into(memoryview(bytearray(len(spans[-1]))), 0)
     finally:
         os.close(fd)

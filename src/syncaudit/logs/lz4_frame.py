@@ -82,6 +82,11 @@ class FileSpan:
             raise FrameError(f"file ends inside a block (byte {self.offset + start} on)")
         return data
 
+    def read_into(self, out: memoryview, start: int) -> None:
+        """Fill `out` with its bytes from `start` on (a short read is damage)."""
+        if os.preadv(self.fd, [out], self.offset + start) != len(out):
+            raise FrameError(f"file ends inside a block (byte {self.offset + start} on)")
+
 
 Piece = bytes | memoryview | FileSpan
 

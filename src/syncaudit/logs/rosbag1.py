@@ -38,7 +38,6 @@ from syncaudit.logs.lz4_frame import (
     FrameSource,
     Pieces,
     decode_frame,
-    piece_bytes,
 )
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
@@ -573,14 +572,22 @@ class _PieceCursor:
             else:
                 self.buf, self.base, self.top = piece, start, end
             return self.buf, pos - self.base
-        parts = [piece_bytes(piece, pos - start, len(piece))]
-        got = len(parts[0])
-        for piece in buffers[k + 1 :]:
-            parts.append(piece_bytes(piece, 0, min(len(piece), size - got)))
-            got += len(parts[-1])
+        # Spanning pieces (a LiDAR scan over many blocks): gathered into one new buffer,
+        # each piece copied once (read straight into it from the file).
+        out = bytearray(size)
+        view = memoryview(out)
+        got, first = 0, pos - start
+        for piece in buffers[k:]:
+            n = min(len(piece) - first, size - got)
+            if isinstance(piece, FileSpan):
+                piece.read_into(view[got : got + n], first)
+            else:
+                view[got : got + n] = piece[first : first + n]
+            got += n
+            first = 0
             if got >= size:
                 break
-        return b"".join(parts), 0
+        return view, 0
 
 
 def wanted_messages(
