@@ -563,3 +563,51 @@ def test_message_header_fields_in_any_order(
     expected = reference(bags["none"])
     assert reference(path) == expected  # rosbags reads fields by name, in any order
     assert ours(path) == expected
+
+
+def _frame_targets(raw: bytes, spans: list[tuple[int, int]]) -> list[int]:
+    """Offsets of what a damaged lz4 chunk gets wrong: chunk headers, frame descriptors,
+    block sizes and the first bytes of each block."""
+    out: list[int] = []
+    for offset, length in spans:
+        (hlen,) = struct.unpack_from("<I", raw, offset)
+        frame = offset + 8 + hlen
+        out += range(offset, frame + 20)
+        pos = frame + 7 + (8 if raw[frame + 4] & 0x08 else 0)
+        while pos < offset + length - 4:
+            (word,) = struct.unpack_from("<I", raw, pos)
+            if word == 0:
+                break
+            out += (pos, pos + 1, pos + 3, pos + 4, pos + 40)
+            pos += 4 + (word & 0x7FFFFFFF) + (4 if raw[frame + 4] & 0x10 else 0)
+    return out
+
+
+def test_mutated_lz4_frames_end_in_a_read_error_or_a_read(
+    camera_bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """Hostile values in chunk headers, frame descriptors and block sizes: read, or one
+    LogReadError line naming the file, with and without --check-crc; never a traceback."""
+    rng = random.Random(7)
+    path = tmp_path / "mutant.bag"
+    outcomes: dict[str, int] = {}
+    for name in ("roslz4", "rosbags"):
+        raw = camera_bags[name].read_bytes()
+        targets = _frame_targets(raw, _chunk_spans(camera_bags[name]))
+        for _ in range(30):
+            bad = bytearray(raw)
+            at = rng.choice(targets)
+            bad[at : at + 4] = rng.choice(
+                [bytes(4), b"\xff\xff\xff\x7f", b"\xff\xff\xff\xff", b"\x00\x00\x01\x80"]
+            )
+            path.write_bytes(bytes(bad))
+            for check_crc in (False, True):
+                try:
+                    _unit_messages(path, check_crc=check_crc)
+                    outcome = "read"
+                except SyncauditError as exc:
+                    text = str(exc)
+                    assert text.startswith(str(path)) and "\n" not in text, text
+                    outcome = type(exc).__name__
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    assert outcomes.get("LogReadError", 0) > 40, outcomes
