@@ -14,7 +14,8 @@ Format (wiki.ros.org/Bags/Format/2.0): after the line `#ROSBAG V2.0\\n` come rec
   section at `index_pos`, written when the recording closes.
 
 `lz4` chunks are LZ4 *frames* (roslz4 writes the frame format; rosbags and Embag read them
-with the LZ4F frame decoder). A bag whose recorder died has `index_pos` 0 or an index cut
+with the LZ4F frame decoder); `lz4_frame` walks them block by block, leaving blocks
+stored uncompressed in the file (see `Rosbag1ChunkReader`). A bag whose recorder died has `index_pos` 0 or an index cut
 off: it is then read by scanning the chunks from the start, as `rosbag reindex` does.
 """
 
@@ -527,9 +528,10 @@ def open_bag_file(path: Path) -> BagFile:
 _MSG_HEAD_BYTES = 38
 """Header bytes of a message data record holding just `op`, `conn` and `time`."""
 _MSG_OP_FIRST = struct.Struct("<I3sBI5sII5sII")
-"""That header as rosbags writes it: op, conn, time."""
+"""That header as rosbags and rosbag's Python writer write it: op, conn, time."""
 _MSG_CONN_FIRST = struct.Struct("<I5sII3sBI5sII")
-"""That header as rosbag (C++) writes it: its fields sorted by name, conn, op, time."""
+"""That header with its fields sorted by name (rosbag's C++ writer keeps them in a
+std::map): conn, op, time. Any other layout is parsed field by field."""
 
 
 def whole(body: bytes | memoryview) -> Pieces:
