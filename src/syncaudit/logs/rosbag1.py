@@ -15,8 +15,9 @@ Format (wiki.ros.org/Bags/Format/2.0): after the line `#ROSBAG V2.0\\n` come rec
 
 `lz4` chunks are LZ4 *frames* (roslz4 writes the frame format; rosbags and Embag read them
 with the LZ4F frame decoder); `lz4_frame` walks them block by block, leaving blocks
-stored uncompressed in the file (see `Rosbag1ChunkReader`). A bag whose recorder died has `index_pos` 0 or an index cut
-off: it is then read by scanning the chunks from the start, as `rosbag reindex` does.
+stored uncompressed in the file (see `Rosbag1ChunkReader`). A bag whose recorder died has
+`index_pos` 0 or an index cut off: it is then read by scanning the chunks from the start,
+as `rosbag reindex` does.
 """
 
 from __future__ import annotations
