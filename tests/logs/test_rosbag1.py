@@ -611,3 +611,16 @@ def test_mutated_lz4_frames_end_in_a_read_error_or_a_read(
                     outcome = type(exc).__name__
                 outcomes[outcome] = outcomes.get(outcome, 0) + 1
     assert outcomes.get("LogReadError", 0) > 40, outcomes
+
+
+def test_check_crc_reaches_the_chunk_reader_of_the_workers(bags: dict[str, Path]) -> None:
+    """`--check-crc` (the workers' `open_unit_reader(..., check_crc=True)`) switches the
+    ROS 1 chunk reader to the checksum-verifying frame decoder."""
+    from syncaudit.logs.units import open_unit_reader
+
+    for check_crc in (False, True):
+        reader = open_unit_reader("rosbag1-chunk", str(bags["lz4"]), check_crc=check_crc)
+        try:
+            assert isinstance(reader, Rosbag1ChunkReader) and reader.check_crc is check_crc
+        finally:
+            reader.close()
