@@ -18,7 +18,6 @@ from syncaudit.logs.lz4_frame import (
     Pieces,
     decode_frame,
     piece_bytes,
-    xxh32_short,
 )
 
 FRAMES = {
@@ -78,14 +77,6 @@ def test_bytes_after_the_frame_are_ignored_as_the_frame_decoder_does() -> None:
     frame = lz4.frame.compress(data)
     assert joined(decode_frame(memoryview(frame + b"trailing"), len(data))) == data
     assert lz4.frame.decompress(frame + b"trailing") == data
-
-
-def test_xxh32_of_short_input_matches_the_reference_vectors() -> None:
-    assert xxh32_short(b"") == 0x02CC5D05
-    assert xxh32_short(b"a") == 0x550D7456
-    assert xxh32_short(b"abc") == 0x32D153FF
-    with pytest.raises(ValueError):
-        xxh32_short(bytes(16))
 
 
 def _refused(frame: bytes | bytearray, size: int) -> str:

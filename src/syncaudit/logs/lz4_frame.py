@@ -18,7 +18,7 @@ of the input, compressed ones are decompressed with `lz4.block` (a linked block 
 previous 64 KiB of content as its dictionary, as the frame decoder does).
 
 What is checked: the magic, the descriptor's reserved bits and version, its header
-checksum (XXH32 of at most 14 bytes, computed here), every block size against the
+checksum (XXH32 of at most 14 bytes, by the xxhash library), every block size against the
 frame's maximum, that every block decodes, that the blocks hold exactly the size the
 caller expects (a frame's own content size must agree) and never more: decompression
 is bounded by what is left of that size, so a decompression bomb stops there. What is
@@ -33,6 +33,7 @@ import struct
 from dataclasses import dataclass
 
 import lz4.block
+import xxhash
 
 MAGIC = 0x184D2204
 WINDOW_BYTES = 64 * 1024
@@ -42,8 +43,6 @@ BLOCK_MAX_BYTES = {4: 64 * 1024, 5: 256 * 1024, 6: 1024 * 1024, 7: 4 * 1024 * 10
 _STORED = 0x80000000
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
-_MASK32 = 0xFFFFFFFF
-_P1, _P2, _P3, _P4, _P5 = 2654435761, 2246822519, 3266489917, 668265263, 374761393
 
 
 class FrameError(ValueError):
@@ -145,28 +144,6 @@ class FrameSource:
         return FileSpan(self.fd, self.offset + start, length)
 
 
-def xxh32_short(data: bytes) -> int:
-    """XXH32 (seed 0) of fewer than 16 bytes (a frame descriptor), per the xxHash spec."""
-    if len(data) >= 16:
-        raise ValueError("xxh32_short takes fewer than 16 bytes")
-    h = (_P5 + len(data)) & _MASK32
-    pos = 0
-    while pos + 4 <= len(data):
-        (word,) = _U32.unpack_from(data, pos)
-        h = (h + word * _P3) & _MASK32
-        h = (((h << 17) | (h >> 15)) & _MASK32) * _P4 & _MASK32
-        pos += 4
-    for byte in data[pos:]:
-        h = (h + byte * _P5) & _MASK32
-        h = (((h << 11) | (h >> 21)) & _MASK32) * _P1 & _MASK32
-    h ^= h >> 15
-    h = h * _P2 & _MASK32
-    h ^= h >> 13
-    h = h * _P3 & _MASK32
-    h ^= h >> 16
-    return h
-
-
 def read_descriptor(data: bytes | memoryview) -> FrameDescriptor:
     """The descriptor of the frame starting at `data[0]` (raises FrameError)."""
     if len(data) < 7:
@@ -188,7 +165,7 @@ def read_descriptor(data: bytes | memoryview) -> FrameDescriptor:
     if len(data) < end + 1:
         raise FrameError("frame header cut off")
     content_size = int(_U64.unpack_from(data, 6)[0]) if flg & 0x08 else None
-    if (xxh32_short(bytes(data[4:end])) >> 8) & 0xFF != data[end]:
+    if (xxhash.xxh32_intdigest(bytes(data[4:end])) >> 8) & 0xFF != data[end]:
         raise FrameError("frame header checksum does not match")
     return FrameDescriptor(
         linked=not flg & 0x20,
