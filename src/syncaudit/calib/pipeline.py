@@ -41,7 +41,6 @@ import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -80,45 +79,12 @@ from syncaudit.calib.result import (
     TransformOut,
     VehicleStopOut,
 )
+from syncaudit.calib.state import LidarState, SampledScan, vehicle_points
 from syncaudit.errors import NoDataError
 
 F64 = NDArray[np.float64]
 _MIN_POINTS = 100
 """Scans with fewer points after downsampling are skipped (blinded or empty sensor)."""
-
-
-@dataclass
-class _Scan:
-    """A scan kept in memory: points at the finest voxel used (float32)."""
-
-    stamp_ns: int
-    points_m: NDArray[np.float32]
-
-
-@dataclass
-class _Lidar:
-    """Working state of one LiDAR through the pipeline."""
-
-    topic: str
-    frame_id: str
-    scans: list[_Scan]
-    up: F64
-    stop_scan: dict[int, int] = field(default_factory=dict)
-    angles: dict[int, float | None] = field(default_factory=dict)
-    chain: dict[int, F64] = field(default_factory=dict)
-    dropped: dict[int, str] = field(default_factory=dict)
-    kept: list[int] = field(default_factory=list)
-    fine: dict[int, Cloud] = field(default_factory=dict)
-    hfov_deg: float | None = None
-    pairs: list[PairOut] = field(default_factory=list)
-    graph: PoseGraphOut | None = None
-    graphs: dict[frozenset[int], posegraph.PoseGraphSolution] = field(default_factory=dict)
-    used: set[int] = field(default_factory=set)
-    map_points: int = 0
-    candidates: list[tuple[int, int, float, float]] = field(default_factory=list)
-    results: dict[tuple[int, int], Alignment] = field(default_factory=dict)
-    turn_axis: F64 | None = None
-    reason: str | None = None
 
 
 class _Timer:
@@ -172,12 +138,12 @@ def _choose_topics(path: Path, config: CalibConfig) -> list[str]:
 
 def _read(
     path: Path, topics: list[str], config: CalibConfig, notes: list[str]
-) -> dict[str, tuple[str, list[_Scan]]]:
+) -> dict[str, tuple[str, list[SampledScan]]]:
     """Scans per topic, downsampled on arrival (only voxel centroids are ever used)."""
     sg = backend()
     reg = config.registration
     frames: dict[str, str] = {}
-    scans: dict[str, list[_Scan]] = {t: [] for t in topics}
+    scans: dict[str, list[SampledScan]] = {t: [] for t in topics}
     skipped = 0
     for scan in io.iter_scans(path, topics):
         frames.setdefault(scan.topic, scan.frame_id)
@@ -194,7 +160,7 @@ def _read(
         if points.shape[0] < _MIN_POINTS:
             skipped += 1
             continue
-        scans[scan.topic].append(_Scan(scan.stamp_ns, points))
+        scans[scan.topic].append(SampledScan(scan.stamp_ns, points))
     if skipped:
         notes.append(f"{skipped} scan(s) with fewer than {_MIN_POINTS} points skipped")
     for topic in topics:
@@ -216,7 +182,7 @@ def _recorded(path: Path, config: CalibConfig, frames: list[str]) -> extr.Record
     return extr.from_static_transforms(edges, frames, f"{path.name}:{config.tf_topic}")
 
 
-def _scan_changes(lidar: _Lidar, config: CalibConfig) -> list[tuple[float, float] | None]:
+def _scan_changes(lidar: LidarState, config: CalibConfig) -> list[tuple[float, float] | None]:
     """Scan-to-scan change of each scan against the one before (None for the first)."""
     sg = backend()
     threads = config.registration.num_threads
@@ -232,7 +198,7 @@ def _scan_changes(lidar: _Lidar, config: CalibConfig) -> list[tuple[float, float
 
 
 def _find_stops(
-    lidars: list[_Lidar], config: CalibConfig, notes: list[str]
+    lidars: list[LidarState], config: CalibConfig, notes: list[str]
 ) -> list[selection.VehicleStop]:
     """Still runs per LiDAR (scan-to-scan change, no registration), merged across LiDARs
     into vehicle stops."""
@@ -274,7 +240,7 @@ def _find_stops(
 
 
 def _provisional_reference(
-    stops: list[selection.VehicleStop], lidars: list[_Lidar], config: CalibConfig
+    stops: list[selection.VehicleStop], lidars: list[LidarState], config: CalibConfig
 ) -> int:
     """The configured reference stop, else the first stop every LiDAR has a static scan of."""
     topics = {lidar.topic for lidar in lidars}
@@ -291,19 +257,6 @@ def _provisional_reference(
     raise NoDataError(
         "no stop where every LiDAR has a static scan (needed as the common reference)"
     )
-
-
-def _vehicle_points(lidars: list[_Lidar], stop: int, recorded: extr.RecordedExtrinsics) -> F64:
-    """All LiDARs' points at one stop in the base frame (recorded extrinsics)."""
-    parts = [
-        se3.apply(
-            recorded.base_from_frame[lidar.frame_id],
-            lidar.scans[lidar.stop_scan[stop]].points_m,
-        )
-        for lidar in lidars
-        if stop in lidar.stop_scan
-    ]
-    return np.concatenate(parts)
 
 
 _MIN_STRUCTURE_OVERLAP = 0.3
@@ -383,7 +336,7 @@ def _find_turn(
 
 
 def _angular_chain(
-    lidars: list[_Lidar],
+    lidars: list[LidarState],
     recorded: extr.RecordedExtrinsics,
     reference: int,
     config: CalibConfig,
@@ -406,7 +359,7 @@ def _angular_chain(
     full: dict[int, Cloud] = {}
     structure: dict[int, Cloud] = {}
     for k in order:
-        points = _vehicle_points(lidars, k, recorded)
+        points = vehicle_points(lidars, k, recorded)
         full[k] = prepare(points, reg.coarse_voxel_m, 20, reg.num_threads)
         structure[k] = prepare(
             remove_ground(full[k].points_m), reg.coarse_voxel_m, 20, reg.num_threads
@@ -519,7 +472,7 @@ def _unless_slid(result: Alignment, seed: F64, seed_name: str) -> Alignment:
     )
 
 
-def _align_pair(lidar: _Lidar, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
+def _align_pair(lidar: LidarState, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
     """GICP of stop `b` onto stop `a` from `initial`, judged on its own quality and then on
     how far, and along how well constrained a direction, it moved from the vehicle's coarse
     motion (a seed independent of this LiDAR's other pairs, so a slid result cannot vouch
@@ -553,7 +506,7 @@ def _edge(a: int, b: int, alignment: Alignment) -> posegraph.Edge:
 
 
 def _turn_axis(
-    lidar: _Lidar, edges: list[posegraph.Edge], outliers: set[tuple[int, int]]
+    lidar: LidarState, edges: list[posegraph.Edge], outliers: set[tuple[int, int]]
 ) -> F64 | None:
     """The LiDAR's turn axis from the firm accepted alignments of all its stops (outliers
     left out), else from `edges`.
@@ -570,7 +523,7 @@ def _turn_axis(
 
 
 def _solve(
-    lidar: _Lidar,
+    lidar: LidarState,
     reference: int,
     nodes: list[int],
     edges: list[posegraph.Edge],
@@ -609,7 +562,7 @@ _REALIGN_TRANSLATION_M = 0.002
 disagree by more than this: GICP may have stopped early along a weak direction."""
 
 
-def _align_pairs(lidar: _Lidar, provisional: int, config: CalibConfig) -> None:
+def _align_pairs(lidar: LidarState, provisional: int, config: CalibConfig) -> None:
     """Steps 2-3 for one LiDAR: choose stops and pairs, align the pairs.
 
     `provisional` is a stop common to all LiDARs; it only anchors the seeds (relative
@@ -659,7 +612,7 @@ from the coarse motion get that pose as their seed and their pairs are aligned a
 
 
 def _vehicle_motions(
-    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics
+    lidars: list[LidarState], recorded: extr.RecordedExtrinsics
 ) -> list[consensus.Motion]:
     """Every accepted pair alignment as the vehicle's motion in the base frame."""
     out = []
@@ -673,7 +626,7 @@ def _vehicle_motions(
     return out
 
 
-def _reject_misfits(lidars: list[_Lidar], agreed: consensus.Consensus) -> list[str]:
+def _reject_misfits(lidars: list[LidarState], agreed: consensus.Consensus) -> list[str]:
     """Mark the alignments the cross-LiDAR check removed as rejected; one line each."""
     by_topic = {lidar.topic: lidar for lidar in lidars}
     lines = []
@@ -699,7 +652,7 @@ def _measures(result: Alignment) -> bool:
 
 
 def _cross_seed(
-    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
+    lidars: list[LidarState], recorded: extr.RecordedExtrinsics, config: CalibConfig
 ) -> list[str]:
     """Pairs of stops aligned by two LiDARs whose vehicle motions disagree: each is aligned
     again from the other LiDAR's motion, and the new result replaces the old one when it
@@ -743,7 +696,7 @@ def _cross_seed(
 
 
 def _cross_check(
-    lidars: list[_Lidar],
+    lidars: list[LidarState],
     recorded: extr.RecordedExtrinsics,
     reference: int,
     config: CalibConfig,
@@ -807,7 +760,7 @@ def _cross_check(
         )
 
 
-def _accepted_edges(lidar: _Lidar, nodes: set[int] | None = None) -> list[posegraph.Edge]:
+def _accepted_edges(lidar: LidarState, nodes: set[int] | None = None) -> list[posegraph.Edge]:
     return [
         _edge(a, b, lidar.results[(a, b)])
         for a, b, _s, _p in lidar.candidates
@@ -824,7 +777,7 @@ with information 0.038 had slid 8 cm and shifted 8 stops of one LiDAR's map by 8
 (calibration off by 4.9 cm); correct links there had 0.04-0.40."""
 
 
-def _firm_edges(lidar: _Lidar, nodes: set[int] | None = None) -> list[posegraph.Edge]:
+def _firm_edges(lidar: LidarState, nodes: set[int] | None = None) -> list[posegraph.Edge]:
     """Accepted alignments firm enough to join stops into a group."""
     return [
         edge
@@ -834,7 +787,7 @@ def _firm_edges(lidar: _Lidar, nodes: set[int] | None = None) -> list[posegraph.
     ]
 
 
-def _components(lidar: _Lidar) -> list[frozenset[int]]:
+def _components(lidar: LidarState) -> list[frozenset[int]]:
     """Groups of kept stops connected by firm accepted alignments."""
     edges = _firm_edges(lidar)
     remaining = set(lidar.kept)
@@ -846,7 +799,7 @@ def _components(lidar: _Lidar) -> list[frozenset[int]]:
     return out
 
 
-def _anchors(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
+def _anchors(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     """Stops at which the LiDARs' local maps are anchored, best first.
 
     Maps of different LiDARs can only be aligned when anchored at the same vehicle stop,
@@ -858,7 +811,7 @@ def _anchors(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
     """
     groups = {lidar.topic: _components(lidar) for lidar in lidars}
 
-    def group_of(lidar: _Lidar, stop: int) -> frozenset[int]:
+    def group_of(lidar: LidarState, stop: int) -> frozenset[int]:
         return next(g for g in groups[lidar.topic] if stop in g)
 
     common = sorted(set.intersection(*(set(lidar.kept) for lidar in lidars)))
@@ -878,7 +831,9 @@ def _anchors(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
     return anchors
 
 
-def _solve_group(lidar: _Lidar, group: frozenset[int], anchor: int, config: CalibConfig) -> None:
+def _solve_group(
+    lidar: LidarState, group: frozenset[int], anchor: int, config: CalibConfig
+) -> None:
     """Pose graph of one group of stops, with one refinement round: pairs that disagree
     with the graph are aligned again from it (GICP may have stopped early along a weak
     direction), then the graph is solved again."""
@@ -902,7 +857,7 @@ def _solve_group(lidar: _Lidar, group: frozenset[int], anchor: int, config: Cali
         lidar.graphs[group] = solution
 
 
-def _poses_at(lidar: _Lidar, anchor: int) -> dict[int, F64] | None:
+def _poses_at(lidar: LidarState, anchor: int) -> dict[int, F64] | None:
     """The LiDAR's solved poses re-anchored at `anchor` (None if no graph holds it)."""
     for solution in lidar.graphs.values():
         if anchor in solution.poses:
@@ -912,7 +867,7 @@ def _poses_at(lidar: _Lidar, anchor: int) -> dict[int, F64] | None:
 
 
 def _map_at(
-    lidar: _Lidar, anchor: int, config: CalibConfig, *, stops: set[int] | None = None
+    lidar: LidarState, anchor: int, config: CalibConfig, *, stops: set[int] | None = None
 ) -> tuple[Cloud, list[int]] | None:
     """The LiDAR's local map in its own frame at `anchor`, and the stops it holds (only
     those in `stops` when given)."""
@@ -925,7 +880,7 @@ def _map_at(
     return prepare(points, mc.voxel_m, mc.neighbours, config.registration.num_threads), nodes
 
 
-def _graph_lidars(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
+def _graph_lidars(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     """Step 4: anchors, then one pose graph per group of a LiDAR's stops an anchor uses."""
     anchors = _anchors(lidars, config)
     for lidar in lidars:
@@ -946,7 +901,7 @@ def _graph_lidars(lidars: list[_Lidar], config: CalibConfig) -> list[int]:
     return anchors
 
 
-def _causes(lidar: _Lidar) -> str:
+def _causes(lidar: LidarState) -> str:
     """Why a LiDAR's stops did not join: unknown vehicle motion and rejected pairs, counted
     by kind, each with its first example."""
     parts = []
@@ -973,7 +928,7 @@ def _causes(lidar: _Lidar) -> str:
     return "; ".join(parts) or "no accepted alignments"
 
 
-def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
+def _summarise_lidar(lidar: LidarState, main: int, config: CalibConfig) -> None:
     """Used stops, reasons for the others, pose-graph totals and per-pair output."""
     sel = config.selection
     used: set[int] = set()
@@ -1029,7 +984,7 @@ def _summarise_lidar(lidar: _Lidar, main: int, config: CalibConfig) -> None:
 
 
 def _consistency(
-    ref: _Lidar, other: _Lidar, ref_from_other: F64, anchors: list[int]
+    ref: LidarState, other: LidarState, ref_from_other: F64, anchors: list[int]
 ) -> tuple[float | None, float | None]:
     """Turn-angle disagreement and hand-eye rotation residual over common stops (deg)."""
     angle_diff: float | None = None
@@ -1065,8 +1020,8 @@ def _estimate(m2m: Alignment, config: CalibConfig) -> tuple[F64, F64]:
 
 
 def _map_pair(
-    ref: _Lidar,
-    other: _Lidar,
+    ref: LidarState,
+    other: LidarState,
     anchor: int,
     rec: F64,
     config: CalibConfig,
@@ -1109,8 +1064,8 @@ def _map_pair(
 
 
 def _extrinsic(
-    ref: _Lidar,
-    other: _Lidar,
+    ref: LidarState,
+    other: LidarState,
     anchors: list[int],
     recorded: extr.RecordedExtrinsics,
     config: CalibConfig,
@@ -1242,7 +1197,7 @@ def _stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
 
 
 def _lidar_out(
-    lidar: _Lidar, stops: list[selection.VehicleStop], top: TopViewOut | None = None
+    lidar: LidarState, stops: list[selection.VehicleStop], top: TopViewOut | None = None
 ) -> LidarOut:
     uses = []
     for stop in stops:
@@ -1284,7 +1239,7 @@ def _lidar_out(
 
 
 def _top_views(
-    lidars: list[_Lidar],
+    lidars: list[LidarState],
     anchors: list[int],
     extrinsics: list[ExtrinsicOut],
     recorded: extr.RecordedExtrinsics,
@@ -1322,7 +1277,7 @@ Measured on the simulator's sessions: ground plus one wall and corridors 0.0005-
 
 
 def _degenerate_scene(
-    lidars: list[_Lidar], recorded: extr.RecordedExtrinsics, config: CalibConfig
+    lidars: list[LidarState], recorded: extr.RecordedExtrinsics, config: CalibConfig
 ) -> tuple[str, DegeneracyOut] | None:
     """Why the scene itself cannot constrain an alignment, and its free direction; or None.
 
@@ -1336,7 +1291,7 @@ def _degenerate_scene(
     free: list[tuple[float, F64, int]] = []
     for k in order:
         cloud = prepare(
-            _vehicle_points(lidars, k, recorded), reg.coarse_voxel_m, 20, reg.num_threads
+            vehicle_points(lidars, k, recorded), reg.coarse_voxel_m, 20, reg.num_threads
         )
         normals = cloud.normals[np.linalg.norm(cloud.normals, axis=1) > 0.5]
         if normals.shape[0] < 10:
@@ -1366,7 +1321,7 @@ def _degenerate_scene(
 
 def _refusal(
     path: Path,
-    lidars: list[_Lidar],
+    lidars: list[LidarState],
     recorded: extr.RecordedExtrinsics,
     stops: list[selection.VehicleStop],
     why: str,
@@ -1442,7 +1397,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
     for topic in topics:
         frame, scans = read[topic]
         up = recorded.base_from_frame[frame][:3, :3].T @ np.array([0.0, 0.0, 1.0])
-        lidars.append(_Lidar(topic=topic, frame_id=frame, scans=scans, up=up))
+        lidars.append(LidarState(topic=topic, frame_id=frame, scans=scans, up=up))
     with timer.stage("stops"):
         stops = _find_stops(lidars, config, notes)
     with timer.stage("degeneracy"):
