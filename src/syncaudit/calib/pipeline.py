@@ -36,7 +36,6 @@ coarse turn chain and the map-to-map GICP; the result does not otherwise depend 
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import time
 from collections.abc import Iterator
@@ -53,15 +52,8 @@ from syncaudit.calib import extrinsics as extr
 from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.degeneracy import degenerate_scene
 from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
-from syncaudit.calib.registration import (
-    Alignment,
-    Cloud,
-    Conditioning,
-    align,
-    backend,
-    prepare,
-    visible_fraction,
-)
+from syncaudit.calib.pairs import align_pair, align_pairs, pair_edge, unless_slid
+from syncaudit.calib.registration import Alignment, Cloud, align, backend, prepare
 from syncaudit.calib.result import (
     AlignmentOut,
     CalibrationResult,
@@ -107,86 +99,6 @@ def _library_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             out[dist] = "unknown"
     return out
-
-
-def _strength(cond: Conditioning) -> float:
-    return min(cond.translation_information, cond.rotation_information)
-
-
-_MAX_SEED_CORRECTION_M = 0.5
-_MIN_MOVED_INFORMATION = 0.15
-"""A pair alignment that moved more than `_MAX_SEED_CORRECTION_M` from the vehicle's
-coarse motion between its two stops (the turn chain, verified on all LiDARs merged) is
-rejected when the direction it moved in is weakly constrained (mean squared constraint
-per correspondence below `_MIN_MOVED_INFORMATION`): it slid. Measured on the simulator's
-driving sessions: correct alignments land 0-19 cm from the coarse motion, or farther
-(1.2 m) only where the chain itself is wrong, and then along directions with information
-0.18-0.44; alignments that slid over bare ground (a bumper LiDAR) moved 73-88 cm along
-directions with information 0.031-0.131 and passed the error and conditioning tests. The
-margin (0.131 against 0.18) is thin: a refusal here is preferred to a slid map."""
-
-
-def _moved_information(alignment: Alignment, shift_m: F64) -> float:
-    """Mean squared point-to-plane constraint along the direction `shift_m` (target frame)."""
-    direction = alignment.target_from_source[:3, :3].T @ (shift_m / np.linalg.norm(shift_m))
-    return float(direction @ alignment.after.hessian[3:, 3:] @ direction)
-
-
-def _unless_slid(result: Alignment, seed: F64, seed_name: str) -> Alignment:
-    """`result`, rejected when it moved more than `_MAX_SEED_CORRECTION_M` from `seed`
-    along a barely constrained direction (it slid rather than converged)."""
-    if not result.accepted:
-        return result
-    # Where the source's origin lands in the target's frame, versus the seed's prediction.
-    shift = result.target_from_source[:3, 3] - seed[:3, 3]
-    moved_m = float(np.linalg.norm(shift))
-    if moved_m <= _MAX_SEED_CORRECTION_M:
-        return result
-    info = _moved_information(result, shift)
-    if info >= _MIN_MOVED_INFORMATION:
-        return result
-    x, y, z = (float(v) / moved_m for v in shift)
-    return dataclasses.replace(
-        result,
-        accepted=False,
-        reason=(
-            f"slid {moved_m * 100:.0f} cm from {seed_name} along ({x:.2f}, {y:.2f}, {z:.2f}), "
-            f"a direction barely constrained ({info:.3f} < {_MIN_MOVED_INFORMATION})"
-        ),
-    )
-
-
-def _align_pair(lidar: LidarState, a: int, b: int, initial: F64, config: CalibConfig) -> Alignment:
-    """GICP of stop `b` onto stop `a` from `initial`, judged on its own quality and then on
-    how far, and along how well constrained a direction, it moved from the vehicle's coarse
-    motion (a seed independent of this LiDAR's other pairs, so a slid result cannot vouch
-    for the next one)."""
-    reg = config.registration
-    target, source = lidar.fine[a], lidar.fine[b]
-    result = align(
-        target,
-        source,
-        initial,
-        reg.limits,
-        max_iterations=reg.max_iterations,
-        threads=reg.num_threads,
-        expected_overlap=visible_fraction(target, source, initial),
-        planar_axis=lidar.up if config.pose_graph.motion == "planar" else None,
-    )
-    if not result.accepted or a not in lidar.chain or b not in lidar.chain:
-        return result
-    coarse = se3.invert(lidar.chain[a]) @ lidar.chain[b]
-    return _unless_slid(result, coarse, "the vehicle's coarse motion")
-
-
-def _edge(a: int, b: int, alignment: Alignment) -> posegraph.Edge:
-    return posegraph.Edge(
-        a,
-        b,
-        alignment.target_from_source,
-        alignment.after.hessian,
-        _strength(alignment.after.conditioning),
-    )
 
 
 def _turn_axis(
@@ -244,45 +156,6 @@ _REALIGN_ROTATION_DEG = 0.01
 _REALIGN_TRANSLATION_M = 0.002
 """A pair is aligned again, seeded from the pose graph, when its result and the graph
 disagree by more than this: GICP may have stopped early along a weak direction."""
-
-
-def _align_pairs(lidar: LidarState, provisional: int, config: CalibConfig) -> None:
-    """Steps 2-3 for one LiDAR: choose stops and pairs, align the pairs.
-
-    `provisional` is a stop common to all LiDARs; it only anchors the seeds (relative
-    poses do not depend on it) and is always kept.
-    """
-    sel, reg = config.selection, config.registration
-    reference = provisional
-    order = sorted(lidar.stop_scan)
-    choice = selection.choose_stops(order, lidar.angles, reference, sel.min_step_deg)
-    lidar.dropped = {**choice.dropped, **lidar.dropped}
-    lidar.kept = choice.kept
-    for k in lidar.kept:
-        lidar.fine[k] = prepare(
-            lidar.scans[lidar.stop_scan[k]].points_m, reg.voxel_m, reg.neighbours, reg.num_threads
-        )
-    lidar.hfov_deg = selection.horizontal_fov_deg(lidar.fine[reference].points_m, lidar.up)
-    candidates = selection.candidate_pairs(
-        lidar.kept, lidar.angles, lidar.hfov_deg, sel.min_predicted_overlap, sel.max_pairs_per_scan
-    )
-    # Angularly adjacent pairs first; their fine results re-seed the chain for the rest.
-    candidates.sort(key=lambda c: c[2])
-    adjacent = set(itertools.pairwise(lidar.kept))
-    results: dict[tuple[int, int], Alignment] = {}
-    for a, b, _sep, _pred in candidates:
-        if (a, b) in adjacent:
-            chain_init = se3.invert(lidar.chain[a]) @ lidar.chain[b]
-            results[(a, b)] = _align_pair(lidar, a, b, chain_init, config)
-    refined = posegraph.spanning_poses(
-        reference, [_edge(a, b, r) for (a, b), r in results.items() if r.accepted]
-    )
-    seed = {k: refined.get(k, lidar.chain[k]) for k in lidar.kept}
-    for a, b, _sep, _pred in candidates:
-        if (a, b) not in results:
-            results[(a, b)] = _align_pair(lidar, a, b, se3.invert(seed[a]) @ seed[b], config)
-    lidar.candidates = candidates
-    lidar.results = results
 
 
 _MAX_DISAGREEMENT_M = 0.3
@@ -364,7 +237,7 @@ def _cross_seed(
                 if rot_deg <= _MAX_DISAGREEMENT_DEG and trans_m <= _MAX_DISAGREEMENT_M:
                     continue
                 initial = se3.invert(base) @ theirs @ base
-                again = _align_pair(lidar, a, b, initial, config)
+                again = align_pair(lidar, a, b, initial, config)
                 if (
                     again.after.overlap > mine.after.overlap
                     and again.after.rmse_m < mine.after.rmse_m
@@ -426,7 +299,7 @@ def _cross_check(
             for a, b, _sep, _pred in lidar.candidates:
                 if a in moved or b in moved:
                     initial = se3.invert(lidar.chain[a]) @ lidar.chain[b]
-                    lidar.results[(a, b)] = _align_pair(lidar, a, b, initial, config)
+                    lidar.results[(a, b)] = align_pair(lidar, a, b, initial, config)
         agreed = consensus.consensus(_vehicle_motions(lidars, recorded), reference, **kwargs)
         lines += _reject_misfits(lidars, agreed)
     if lines:
@@ -446,7 +319,7 @@ def _cross_check(
 
 def _accepted_edges(lidar: LidarState, nodes: set[int] | None = None) -> list[posegraph.Edge]:
     return [
-        _edge(a, b, lidar.results[(a, b)])
+        pair_edge(a, b, lidar.results[(a, b)])
         for a, b, _s, _p in lidar.candidates
         if lidar.results[(a, b)].accepted and (nodes is None or (a in nodes and b in nodes))
     ]
@@ -530,7 +403,7 @@ def _solve_group(
         predicted = se3.invert(solution.poses[a]) @ solution.poses[b]
         rot_deg, trans_m = se3.transform_difference(res.target_from_source, predicted)
         if rot_deg > _REALIGN_ROTATION_DEG or trans_m > _REALIGN_TRANSLATION_M:
-            lidar.results[(a, b)] = _align_pair(lidar, a, b, predicted, config)
+            lidar.results[(a, b)] = align_pair(lidar, a, b, predicted, config)
             realigned = True
     if realigned:
         nodes = posegraph.connected(nodes, _firm_edges(lidar, nodes), anchor)
@@ -734,7 +607,7 @@ def _map_pair(
         max_iterations=config.registration.max_iterations,
         threads=config.registration.num_threads,
     )
-    m2m = _unless_slid(m2m, rec, "the recorded extrinsic")
+    m2m = unless_slid(m2m, rec, "the recorded extrinsic")
     pairs.append(
         MapPairOut(
             anchor_stop=anchor,
@@ -1057,7 +930,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         reference = angular_chain(lidars, recorded, reference, config, odometry, notes)
     with timer.stage("align_pairs"):
         for lidar in lidars:
-            _align_pairs(lidar, reference, config)
+            align_pairs(lidar, reference, config)
     with timer.stage("cross_check"):
         _cross_check(lidars, recorded, reference, config, notes)
     with timer.stage("pose_graphs"):
