@@ -51,8 +51,9 @@ from syncaudit.calib import io, posegraph, se3, selection, topview
 from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.crosscheck import cross_check
 from syncaudit.calib.degeneracy import degenerate_scene
+from syncaudit.calib.links import accepted_edges, components, firm_edges
 from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
-from syncaudit.calib.pairs import align_pair, align_pairs, pair_edge, unless_slid
+from syncaudit.calib.pairs import align_pair, align_pairs, unless_slid
 from syncaudit.calib.registration import Alignment, Cloud, align, backend, prepare
 from syncaudit.calib.result import (
     AlignmentOut,
@@ -113,7 +114,7 @@ def _turn_axis(
     1.24 deg (translation information 0.034) was a sixth of its group's axis estimate,
     which tilted the planar graph's poses by up to 0.48 deg and the calibration by 0.25
     deg / 3.2 cm."""
-    firm = [e for e in _firm_edges(lidar) if (e.first, e.second) not in outliers]
+    firm = [e for e in firm_edges(lidar) if (e.first, e.second) not in outliers]
     axis = posegraph.turn_axis(firm, lidar.up)
     return axis if axis is not None else posegraph.turn_axis(edges, lidar.up)
 
@@ -158,45 +159,6 @@ _REALIGN_TRANSLATION_M = 0.002
 disagree by more than this: GICP may have stopped early along a weak direction."""
 
 
-def _accepted_edges(lidar: LidarState, nodes: set[int] | None = None) -> list[posegraph.Edge]:
-    return [
-        pair_edge(a, b, lidar.results[(a, b)])
-        for a, b, _s, _p in lidar.candidates
-        if lidar.results[(a, b)].accepted and (nodes is None or (a in nodes and b in nodes))
-    ]
-
-
-_FIRM_TRANSLATION_INFORMATION = 0.05
-"""Stops join a group (one local map) only through alignments at least this well
-constrained in translation; weaker accepted ones still close loops inside a group. A weak
-alignment that is the only link between two groups can slide along its weak direction
-with nothing to contradict it: measured on a roof left/right 32-beam drive, a lone link
-with information 0.038 had slid 8 cm and shifted 8 stops of one LiDAR's map by 8 cm
-(calibration off by 4.9 cm); correct links there had 0.04-0.40."""
-
-
-def _firm_edges(lidar: LidarState, nodes: set[int] | None = None) -> list[posegraph.Edge]:
-    """Accepted alignments firm enough to join stops into a group."""
-    return [
-        edge
-        for edge in _accepted_edges(lidar, nodes)
-        if lidar.results[(edge.first, edge.second)].after.conditioning.translation_information
-        >= _FIRM_TRANSLATION_INFORMATION
-    ]
-
-
-def _components(lidar: LidarState) -> list[frozenset[int]]:
-    """Groups of kept stops connected by firm accepted alignments."""
-    edges = _firm_edges(lidar)
-    remaining = set(lidar.kept)
-    out = []
-    while remaining:
-        group = frozenset(posegraph.connected(lidar.kept, edges, min(remaining)))
-        out.append(group)
-        remaining -= group
-    return out
-
-
 def _anchors(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     """Stops at which the LiDARs' local maps are anchored, best first.
 
@@ -207,7 +169,7 @@ def _anchors(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     the configured reference stop, else the shared stop whose groups are largest for the
     weakest LiDAR (earliest on ties).
     """
-    groups = {lidar.topic: _components(lidar) for lidar in lidars}
+    groups = {lidar.topic: components(lidar) for lidar in lidars}
 
     def group_of(lidar: LidarState, stop: int) -> frozenset[int]:
         return next(g for g in groups[lidar.topic] if stop in g)
@@ -236,7 +198,7 @@ def _solve_group(
     with the graph are aligned again from it (GICP may have stopped early along a weak
     direction), then the graph is solved again."""
     nodes = set(group)
-    solution = _solve(lidar, anchor, sorted(nodes), _accepted_edges(lidar, nodes), config)
+    solution = _solve(lidar, anchor, sorted(nodes), accepted_edges(lidar, nodes), config)
     realigned = False
     for (a, b), res in list(lidar.results.items()):
         if a not in nodes or b not in nodes:
@@ -247,9 +209,9 @@ def _solve_group(
             lidar.results[(a, b)] = align_pair(lidar, a, b, predicted, config)
             realigned = True
     if realigned:
-        nodes = posegraph.connected(nodes, _firm_edges(lidar, nodes), anchor)
+        nodes = posegraph.connected(nodes, firm_edges(lidar, nodes), anchor)
         if len(nodes) >= config.selection.min_stops:
-            edges = _accepted_edges(lidar, nodes)
+            edges = accepted_edges(lidar, nodes)
             solution = _solve(lidar, anchor, sorted(nodes), edges, config)
     if len(nodes) >= config.selection.min_stops:
         lidar.graphs[group] = solution
@@ -282,7 +244,7 @@ def _graph_lidars(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     """Step 4: anchors, then one pose graph per group of a LiDAR's stops an anchor uses."""
     anchors = _anchors(lidars, config)
     for lidar in lidars:
-        groups = _components(lidar)
+        groups = components(lidar)
         for anchor in anchors:
             group = next(g for g in groups if anchor in g)
             if group not in lidar.graphs and len(group) >= config.selection.min_stops:
@@ -335,7 +297,7 @@ def _summarise_lidar(lidar: LidarState, main: int, config: CalibConfig) -> None:
         used |= set(solution.poses)
         residuals.update({(r.first, r.second): r for r in solution.residuals})
     lidar.used = used
-    for group in _components(lidar):
+    for group in components(lidar):
         for k in group - used:
             if len(group) < sel.min_stops:
                 lidar.dropped.setdefault(
@@ -357,7 +319,7 @@ def _summarise_lidar(lidar: LidarState, main: int, config: CalibConfig) -> None:
             iterations=max(s.iterations for s in sols),
         )
     else:
-        largest = max((len(g) for g in _components(lidar)), default=0)
+        largest = max((len(g) for g in components(lidar)), default=0)
         lidar.reason = (
             f"{lidar.topic}: at most {largest} of {len(lidar.stop_scan)} stops could be "
             f"aligned together ({_causes(lidar)}); need {sel.min_stops}"
