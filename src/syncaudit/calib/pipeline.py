@@ -31,6 +31,12 @@ Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown moti
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
 estimated, to choose stops and seed registrations. The recorded extrinsics seed the
 coarse turn chain and the map-to-map GICP; the result does not otherwise depend on them.
+
+Each stage is a module of its own, and this one only calls them in order: `loading` (step
+1), `stops` and `degeneracy` (2), `turnchain` (3), `pairs` and `crosscheck` (4; the
+cross-LiDAR check compares the vehicle motions the LiDARs' pairs imply), `links` and
+`stopgraph` (5), `maptomap` (6, 7), `summary` and `outcome` (the result and its reasons).
+They share one `state.LidarState` per LiDAR.
 """
 
 from __future__ import annotations
