@@ -85,6 +85,7 @@ def _anchors(lidars: list[LidarState], config: CalibConfig) -> list[int]:
     groups = {lidar.topic: components(lidar) for lidar in lidars}
 
     def group_of(lidar: LidarState, stop: int) -> frozenset[int]:
+        """The group of the LiDAR's stops that holds `stop`."""
         return next(g for g in groups[lidar.topic] if stop in g)
 
     common = sorted(set.intersection(*(set(lidar.kept) for lidar in lidars)))
