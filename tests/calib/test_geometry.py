@@ -12,9 +12,9 @@ import pytest
 from syncaudit.calib import se3
 from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.io import decode_xyz, pointcloud2_dtype
-from syncaudit.calib.pipeline import _verify_turn
 from syncaudit.calib.registration import prepare
 from syncaudit.calib.scene import Box, Pole, Scene
+from syncaudit.calib.turnchain import verify_turn
 from syncaudit.errors import LogReadError, NoDataError
 
 
@@ -149,17 +149,17 @@ def test_a_coarse_turn_that_tilts_or_rises_is_not_a_drive_on_level_ground() -> N
     cloud = prepare(np.concatenate(walls), 0.5, 20, 1)
     config = CalibConfig()
     flipped = se3.make_transform(se3.rpy_to_matrix(math.pi, 0.0, 0.4), (0.1, 0.6, 3.84))
-    why = _verify_turn((cloud, cloud), (cloud, cloud), flipped, config)
+    why = verify_turn((cloud, cloud), (cloud, cloud), flipped, config)
     assert why == "not a motion on level ground (the base tilts 180.0 deg)"
     tilted = se3.make_transform(se3.rpy_to_matrix(0.0, math.radians(12.0), 0.5), (0.3, 0.1, 0.0))
-    assert _verify_turn((cloud, cloud), (cloud, cloud), tilted, config) == (
+    assert verify_turn((cloud, cloud), (cloud, cloud), tilted, config) == (
         "not a motion on level ground (the base tilts 12.0 deg)"
     )
-    assert _verify_turn((cloud, cloud), (cloud, cloud), np.eye(4), config) is None
+    assert verify_turn((cloud, cloud), (cloud, cloud), np.eye(4), config) is None
     free = config.model_copy(
         update={"pose_graph": config.pose_graph.model_copy(update={"motion": "free"})}
     )
-    assert not (_verify_turn((cloud, cloud), (cloud, cloud), flipped, free) or "").startswith(
+    assert not (verify_turn((cloud, cloud), (cloud, cloud), flipped, free) or "").startswith(
         "not a motion on level ground"
     )
 
