@@ -9,7 +9,7 @@ import pytest
 
 from syncaudit import collect
 from syncaudit.audit import audit_log
-from syncaudit.logs import open_log
+from syncaudit.logs import open_log, sqlite_rows
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
@@ -165,6 +165,7 @@ def test_bag_units_through_the_registry(
     log_path = sample / log_name
     rig = load_rig(sample / f"{log_name}.rig.yaml")
     monkeypatch.setattr(collect, "GROUP_BYTES", 50_000)
+    monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", 1 << 19)  # several in 2.8 MB
     with open_log(log_path) as log:
         plan = _plan(log, rig)
         units = log.read_units(frozenset(plan.topics))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import random
 import shutil
 import sqlite3
 from collections.abc import Callable
@@ -143,6 +144,7 @@ def test_units_serially_and_in_two_processes_equal_rosbags(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     unit_bytes = 40_000 if compression == CompressionMode.NONE else 600  # zstd: ~20 B a row
+    monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", unit_bytes)
     monkeypatch.setattr(sqlite_rows, "UNIT_BYTES", unit_bytes)
     path = write_bag(tmp_path / "bag", ros2_store, compression=compression)
     topics = frozenset({"/a", "/c"})
@@ -394,3 +396,177 @@ def test_prefix_channels_give_the_payloads_first_bytes(
     for (*_, topic, full), (*_, _topic, head) in zip(whole, short, strict=True):
         assert head == (full[:16] if topic == "/a" and cut else full)
     assert any(len(r[5]) > 16 for r in whole if r[4] == "/a")
+
+
+def write_big_bag(path: Path, store: Typestore, compression: CompressionMode) -> Path:
+    """/big payloads of 100 B to 60 KB (about two thirds over `INLINE_BYTES`, read by blob
+    I/O), /small ones of 20-200 B between them; random bytes (seeded), so that zstd leaves
+    the big ones big."""
+    string = store.types["std_msgs/msg/String"].__msgtype__
+    writer = Writer(path, version=9)
+    writer.set_compression(compression, CompressionFormat.ZSTD)
+    with writer:
+        big = writer.add_connection("/big", string, typestore=store)
+        small = writer.add_connection("/small", string, typestore=store)
+        for i in range(60):
+            size = 100 + (i * 7919) % 60_000
+            writer.write(
+                big, 1_000 * (i + 1), bytes([0, 1, 0, 0]) + random.Random(i).randbytes(size)
+            )
+            writer.write(small, 1_000 * (i + 1) + 500, bytes([0, 1, 0, 0, i]) * (4 + i % 40))
+    return path
+
+
+@pytest.mark.parametrize("compression", [CompressionMode.NONE, CompressionMode.MESSAGE])
+def test_payloads_over_the_inline_size_come_whole_through_blob_io(
+    tmp_path: Path,
+    ros2_store: Typestore,
+    compression: CompressionMode,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Payloads over `INLINE_BYTES` are read through blob I/O, smaller ones with their rows:
+    units (serially and in two processes) and the serial reader give rosbags' bytes."""
+    path = write_big_bag(tmp_path / "bag", ros2_store, compression)
+    expected = reference(path)
+    assert sum(len(d) > sqlite_rows.INLINE_BYTES for _t, _s, d in expected) > 15
+    opened: list[int] = []
+    blob_bytes = sqlite_rows._blob_bytes
+
+    def counted(rows: Any, rowid: int, size: int) -> object:
+        opened.append(rowid)
+        return blob_bytes(rows, rowid, size)
+
+    monkeypatch.setattr(sqlite_rows, "_blob_bytes", counted)
+    monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", 200_000)
+    topics = frozenset({"/big", "/small"})
+    with open_log(path) as log:
+        units = log.read_units(topics)
+        channels = log.unit_channels(topics)
+    assert units is not None and len(units) > 3
+    jobs = [(u, channels) for u in units]
+    assert _merged(map(_read_unit, jobs)) == expected
+    with ProcessPoolExecutor(2) as pool:
+        assert _merged(pool.map(_read_unit, jobs)) == expected
+    assert ours(path) == expected
+    stored = {
+        rowid: size
+        for rowid, size in sqlite3.connect(next(path.glob("*.db3"))).execute(
+            "SELECT id, length(data) FROM messages"
+        )
+    }
+    big = {r for r, n in stored.items() if n > sqlite_rows.INLINE_BYTES}
+    assert big and set(opened) == big  # every big payload by blob I/O, nothing else
+
+
+def test_values_that_are_no_blob_read_as_before(bag: Path, tmp_path: Path) -> None:
+    """A row whose data is text or a number (no recorder writes one; a tool might): the
+    text's UTF-8 (bytes that are no UTF-8 replaced, as the stdlib reads them; raw by
+    prefix), the number's digits; blobs empty, above and below the inline size as stored.
+    (rosbag2's schema says `data BLOB NOT NULL`.)"""
+    (db3,) = bag.glob("*.db3")
+    path = tmp_path / "odd.db3"
+    shutil.copyfile(db3, path)
+    big = b"\x00\x01\x00\x00" + bytes(range(256)) * 100
+    values: list[object] = [b"", "t\u00e9xt", 1234, big, b"\x00\x01small", 0.1 / 3]
+    with sqlite3.connect(path) as db:
+        ids = [r[0] for r in db.execute("SELECT id FROM messages WHERE topic_id = 1 LIMIT 7")]
+        for rowid, value in zip(ids, values, strict=False):
+            db.execute("UPDATE messages SET data = ? WHERE id = ?", (value, rowid))
+        db.execute("UPDATE messages SET data = CAST(x'ff41' AS TEXT) WHERE id = ?", (ids[6],))
+    db.close()
+    digits = str(0.1 / 3).encode()
+    want = [b"", "t\u00e9xt".encode(), b"1234", big, b"\x00\x01small", digits, b"\xef\xbf\xbdA"]
+    with open_log(path) as log:
+        topic = log.unit_channels(frozenset({"/a"}))
+        units = log.read_units(frozenset({"/a"}))
+        serial = [bytes(m.data) for m in log.messages("/a")]
+    assert units is not None
+    whole = [row[5] for u in units for row in _read_unit((u, topic))]
+    marked = {c: dataclasses.replace(i, prefix_bytes=8) for c, i in topic.items()}
+    heads = [row[5] for u in units for row in _read_unit((u, marked))]
+    assert whole[:7] == want and serial[:7] == want
+    assert heads[:7] == [*want[:3], big[:8], want[4], digits, b"\xffA"]
+    assert len(whole) == len(serial) == 200
+
+
+@pytest.mark.parametrize("stamp", ["CAST(x'ff' AS TEXT)", "'soon'"])
+def test_text_timestamp_is_one_line(bag: Path, tmp_path: Path, stamp: str) -> None:
+    """A wanted row whose timestamp is text (UTF-8 or not) fails its unit with one line
+    naming the file and row (exit 3); the same row in a topic not read is stepped over."""
+    (db3,) = bag.glob("*.db3")
+    path = tmp_path / "odd.db3"
+    shutil.copyfile(db3, path)
+    with open_log(path) as log:
+        units = log.read_units(frozenset({"/a", "/b"}))
+        channels = log.unit_channels(frozenset({"/a", "/b"}))
+        only_a = log.unit_channels(frozenset({"/a"}))
+    assert units is not None
+    with sqlite3.connect(path) as db:
+        (rowid,) = db.execute("SELECT id FROM messages WHERE topic_id = 2 LIMIT 1 OFFSET 50")
+        db.execute(f"UPDATE messages SET timestamp = {stamp} WHERE id = ?", rowid)
+    db.close()
+    got = [row for u in units for row in _read_unit((u, only_a))]
+    assert len(got) == 200 and {r[4] for r in got} == {"/a"}
+    with pytest.raises(LogReadError) as info:
+        for unit in units:
+            _read_unit((unit, channels))
+    text = str(info.value)
+    assert (
+        text.startswith(f"{path}: bag database row {rowid[0]} has timestamp ") and "\n" not in text
+    )
+    assert text.endswith("not an integer") and info.value.exit_code == 3
+
+
+def test_damaged_overflow_page_of_a_big_payload_is_one_line(
+    tmp_path: Path, ros2_store: Typestore
+) -> None:
+    """An overflow page of a payload read by blob I/O zeroed (a bad sector): the unit's read
+    fails with one line naming the file and its rows (exit code 3), never a traceback."""
+    path = write_big_bag(tmp_path / "bag", ros2_store, CompressionMode.NONE)
+    (db3,) = path.glob("*.db3")
+    payload = next(d for _t, _s, d in reference(path, {"/big"}) if len(d) > 50_000)
+    raw = bytearray(db3.read_bytes())
+    page = 4096
+    at = raw.find(payload[30_000:30_100])  # in the middle of its overflow chain
+    assert at > 0
+    raw[at - at % page : at - at % page + page] = bytes(page)
+    db3.write_bytes(bytes(raw))
+    topics = frozenset({"/big"})
+    with open_log(path) as log:
+        units = log.read_units(topics)
+        channels = log.unit_channels(topics)
+    assert units is not None
+    with pytest.raises(LogReadError) as info:
+        for unit in units:
+            _read_unit((unit, channels))
+    text = str(info.value)
+    assert text.startswith(f"{db3}: bag database damaged in rows ") and "\n" not in text
+    assert info.value.exit_code == 3
+
+
+def test_database_locked_by_a_writer_is_read_without_locking(
+    tmp_path: Path, ros2_store: Typestore
+) -> None:
+    """A writer holding an exclusive lock (a recorder mid-transaction) does not block or fail
+    the read: the file is opened immutable, so sqlite takes no lock; units (blob I/O for the
+    big payloads too) and the serial reader give the committed rows."""
+    path = write_big_bag(tmp_path / "bag", ros2_store, CompressionMode.NONE)
+    expected = reference(path)
+    (db3,) = path.glob("*.db3")
+    writer = sqlite3.connect(db3, isolation_level=None, timeout=0)
+    try:
+        writer.execute("PRAGMA journal_mode=DELETE")
+        writer.execute("BEGIN EXCLUSIVE")
+        with pytest.raises(sqlite3.OperationalError, match="locked"):
+            sqlite3.connect(db3, timeout=0).execute("SELECT COUNT(*) FROM messages").fetchone()
+        topics = frozenset({"/big", "/small"})
+        with open_log(path) as log:
+            units = log.read_units(topics)
+            channels = log.unit_channels(topics)
+            assert ours(path) == expected
+        assert units is not None
+        assert _merged(map(_read_unit, [(u, channels) for u in units])) == expected
+    finally:
+        writer.execute("ROLLBACK")
+        writer.close()
+    assert _siblings(path) == {"metadata.yaml", db3.name}

@@ -1,4 +1,7 @@
-"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`), via sqlite3."""
+"""ROS 2 bags with SQLite storage (a folder with metadata.yaml, or a bare `.db3`).
+
+Opened and planned with the stdlib sqlite3; rows read with apsw (`sqlite_rows`).
+"""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.logs import sqlite_rows
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
 from syncaudit.logs.rosbag2_meta import BagMetadata
@@ -213,15 +217,15 @@ class SqliteLog(LogReader):
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Rowid ranges of about 1 MiB of the topics' payload, per file, in file order."""
-        return self._units(self._wanted(topics))
+        return self._units(self._wanted(topics), sqlite_rows.WORKER_UNIT_BYTES)
 
-    def _units(self, channels: dict[int, ChannelInfo]) -> list[ReadUnit]:
+    def _units(self, channels: dict[int, ChannelInfo], unit_bytes: int) -> list[ReadUnit]:
         keys = {(c.topic, c.msgtype) for c in channels.values()}
         units: list[ReadUnit] = []
         for db, info in zip(self._dbs, self._files, strict=True):
             ids = [t.topic_id for t in info.topics.values() if (t.name, t.msgtype) in keys]
             try:
-                units.extend(plan_units(db, info, ids))
+                units.extend(plan_units(db, info, ids, unit_bytes))
             except sqlite3.DatabaseError as exc:
                 raise LogReadError(
                     f"{info.path}: bag database damaged while planning reads: {one_line(exc)}"
@@ -243,7 +247,7 @@ class SqliteLog(LogReader):
             return
         units = [
             u
-            for u in self._units(channels)
+            for u in self._units(channels, sqlite_rows.UNIT_BYTES)
             if (start_ns is None or u.end_ns >= start_ns)
             and (stop_ns is None or u.start_ns < stop_ns)
         ]
