@@ -76,6 +76,22 @@ def alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
+def survivors(pids: list[int], *, timeout_s: float = 5.0, poll_s: float = 0.01) -> list[int]:
+    """Those of `pids` still alive once none is, or `timeout_s` passed.
+
+    Called after the CLI's pipes reached end of file: its workers inherited them, so each
+    has closed them and is exiting; only its last steps in the kernel may not be done
+    (a loaded machine can leave a killed process unscheduled for a moment). A worker that
+    went on running would have held the pipes open, so this wait hides none.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = [pid for pid in pids if alive(pid)]
+        if not left or time.monotonic() >= deadline:
+            return left
+        time.sleep(poll_s)
+
+
 def wait_for_workers(
     proc: subprocess.Popen[str], count: int, *, timeout_s: float = 60.0, poll_s: float = 0.01
 ) -> list[int]:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from slowed_cli import alive, start, wait_for_workers
+from slowed_cli import start, survivors, wait_for_workers
 from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
 from syncaudit.workers import death_cause
 
@@ -53,7 +53,7 @@ def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None
     ]
     assert not json_out.exists()
     assert not list(tmp_path.iterdir())  # no temporary left either
-    assert not [pid for pid in workers if alive(pid)]
+    assert survivors(workers) == []
 
 
 def _die(how: str) -> None:
