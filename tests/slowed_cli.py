@@ -33,6 +33,20 @@ main()
 """
 
 
+_FOREGROUND = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.argv[1], sys.argv[1:])"
+)
+
+
+def foreground(argv: list[str]) -> list[str]:
+    """`argv` run with SIGINT's default action, as a shell with job control runs a
+    foreground command, whatever this process inherited (a shell runs a background job,
+    `cmd &` in a script, with SIGINT ignored; Python, and so the CLI, then keeps ignoring
+    Ctrl-C, rightly). The command is exec'ed: its pid is the one the test signals."""
+    return [sys.executable, "-c", _FOREGROUND, *argv]
+
+
 def slowed_cli_script(*, sleep_s: float, tasks_per_worker: int | None = None) -> str:
     """Python source running the CLI with one chunk per task, each held `sleep_s` in its
     worker (`tasks_per_worker`: tasks in flight per worker, default the CLI's own)."""
@@ -45,12 +59,14 @@ def start(
 ) -> subprocess.Popen[str]:
     """`syncaudit ARGS` slowed (see `slowed_cli_script`), in its own process group."""
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            slowed_cli_script(sleep_s=sleep_s, tasks_per_worker=tasks_per_worker),
-            *args,
-        ],
+        foreground(
+            [
+                sys.executable,
+                "-c",
+                slowed_cli_script(sleep_s=sleep_s, tasks_per_worker=tasks_per_worker),
+                *args,
+            ]
+        ),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,  # its own process group, as a shell gives a command
