@@ -119,11 +119,14 @@ def test_death_cause_waits_for_a_status_the_pools_thread_reaped_first() -> None:
     store = threading.Timer(
         0.2, lambda: setattr(popen, "returncode", os.waitstatus_to_exitcode(status))
     )
-    store.start()  # ... and stores a moment later
     terminated = multiprocessing.get_context("fork").Process(target=_die, args=("sleep",))
     terminated.start()
     terminated.terminate()
     terminated.join(10)
+    # ... and stores a moment later: started now, so that a slow fork or join above (a
+    # loaded machine) cannot let the status arrive before `death_cause` looks for it.
+    store.start()
+    assert killed.exitcode is None  # no status yet: `death_cause` must wait for it
     try:
         said, exit_code = death_cause([terminated, killed])
     finally:
