@@ -30,18 +30,21 @@ def test_a_handler_waiting_out_its_delay_ends_with_the_test(
 ) -> None:
     before = _handlers()
     served = _server(tmp_path / "www")
-    base, state = next(served)
-    (state.root / "slow.bin").write_bytes(bytes(1000))
-    state.delay_s = 600
-    with pytest.raises((TimeoutError, urllib.error.URLError)):
-        urllib.request.urlopen(f"{base}/slow.bin", timeout=0.5)  # the client gives up
-    deadline = time.monotonic() + 60
-    while len(_handlers()) == len(before) and time.monotonic() < deadline:
-        time.sleep(0.01)  # (the handler thread exists once the server accepted)
-    assert len(_handlers()) == len(before) + 1, "the server never took the request"
-    began = time.monotonic()
-    with pytest.raises(StopIteration):
-        next(served)  # the fixture's teardown
+    try:
+        base, state = next(served)
+        (state.root / "slow.bin").write_bytes(bytes(1000))
+        state.delay_s = 600
+        with pytest.raises((TimeoutError, urllib.error.URLError)):
+            urllib.request.urlopen(f"{base}/slow.bin", timeout=0.5)  # the client gives up
+        deadline = time.monotonic() + 60
+        while len(_handlers()) == len(before) and time.monotonic() < deadline:
+            time.sleep(0.01)  # (the handler thread exists once the server accepted)
+        assert len(_handlers()) == len(before) + 1, "the server never took the request"
+        began = time.monotonic()
+        with pytest.raises(StopIteration):
+            next(served)  # the fixture's teardown
+    finally:
+        served.close()  # (after a failed assertion: the teardown still runs)
     assert time.monotonic() - began < 60  # woken, not the 600 s delay
     assert _handlers() == before  # joined: nothing of this test answers later
     assert state.errors == []
@@ -52,16 +55,19 @@ def test_a_client_hanging_up_mid_reply_is_counted_not_printed(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
     served = _server(tmp_path / "www")
-    base, state = next(served)
-    (state.root / "big.bin").write_bytes(bytes(64 << 20))  # more than socket buffers hold
-    address = urlsplit(base)
-    with socket.create_connection((address.hostname, address.port), timeout=60) as client:
-        client.sendall(b"GET /big.bin HTTP/1.0\r\nHost: x\r\n\r\n")
-        assert client.recv(4096).startswith(b"HTTP/1.0 200")
-    # Closed with unread data: the kernel resets the connection; the handler's next
-    # write fails as a real server's does when a reader stops early.
-    with pytest.raises(StopIteration):
-        next(served)
+    try:
+        base, state = next(served)
+        (state.root / "big.bin").write_bytes(bytes(64 << 20))  # more than socket buffers hold
+        address = urlsplit(base)
+        with socket.create_connection((address.hostname, address.port), timeout=60) as client:
+            client.sendall(b"GET /big.bin HTTP/1.0\r\nHost: x\r\n\r\n")
+            assert client.recv(4096).startswith(b"HTTP/1.0 200")
+        # Closed with unread data: the kernel resets the connection; the handler's next
+        # write fails as a real server's does when a reader stops early.
+        with pytest.raises(StopIteration):
+            next(served)
+    finally:
+        served.close()
     assert state.hangups == 1
     assert state.errors == []
     err = capfd.readouterr().err
