@@ -53,6 +53,9 @@ def preload() -> None:
 def _worker_main(conn: Connection, task: Task, options: JobOptions) -> None:
     """Worker loop: receive a job, send its outcome; None ends the loop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides about interrupts
+    # Started with SIGINT blocked (see `_spawn`): a Ctrl-C that reached it before the line
+    # above stayed pending, and is discarded now that it is ignored.
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     os.setpgid(0, 0)  # its own group: killing it also kills the chunk processes it starts
     while True:
         try:
@@ -108,7 +111,14 @@ class LocalExecutor:
         process = self._context.Process(
             target=_worker_main, args=(child, self.task, options), daemon=False
         )
-        process.start()
+        # A Ctrl-C reaches the whole process group: one arriving while a worker starts,
+        # before it ignores SIGINT, would end it with a KeyboardInterrupt traceback. The
+        # worker inherits the blocked mask (across fork and exec) and unblocks it itself.
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
         child.close()
         return _Worker(process, parent)
 
