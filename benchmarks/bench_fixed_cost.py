@@ -3,8 +3,10 @@
 
 What a user waits for on a small log is start-up, not reading: the interpreter, the
 imports a command needs, opening the log, the analysis and the report. This runs, as
-subprocesses of the installed console script, in `--runs` interleaved rounds after one
-unmeasured warm-up round (bytecode compiled, page cache warm):
+subprocesses of the installed console script, in `--runs` interleaved rounds after
+syncaudit's bytecode is compiled (`compileall`: an environment with PYTHONDONTWRITEBYTECODE
+set would otherwise compile every module from source on every run, ~0.07 CPU s that an
+installed wheel never pays) and one unmeasured warm-up round (page cache warm):
 
 - `python -c pass`: the interpreter alone, the floor under every command;
 - `syncaudit --help` (target <= 0.2 s wall);
@@ -12,8 +14,9 @@ unmeasured warm-up round (bytecode compiled, page cache warm):
   wall), its tables to a pipe as in CI.
 
 and prints, per command, the median, lowest and highest wall time, the median CPU time
-(user + sys, from wait4), and the machine's load average and the CPU the rest of the
-machine used meanwhile: a figure taken on a busy machine says so. `--imports` adds where
+(user + sys of the command and its worker processes, from getrusage), and the machine's
+load average and the CPU the rest of the machine used meanwhile: a figure taken on a busy
+machine says so. `--imports` adds where
 the audit's import time goes (`python -X importtime`, cumulative, the heavy packages).
 
 Run `python benchmarks/bench_fixed_cost.py --help`. Standard library only.
@@ -24,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -104,6 +108,13 @@ def run_once(contender: Contender, *, record: bool = True) -> None:
         contender.wall_s.append(wall)
 
 
+def _children_cpu_s() -> float:
+    """User + system CPU seconds of this process's reaped children (getrusage: microsecond
+    resolution, where os.times() counts 10 ms clock ticks)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def measure(contenders: list[Contender], runs: int) -> tuple[float, float, float]:
     """`runs` interleaved rounds after one warm-up; (load before, load after, others' CPU s)."""
     for contender in contenders:
@@ -113,15 +124,26 @@ def measure(contenders: list[Contender], runs: int) -> tuple[float, float, float
     for _ in range(runs):
         for contender in contenders:
             busy = _busy_s()
-            before = os.times()
+            before = _children_cpu_s()
             run_once(contender)
-            after = os.times()
-            cpu = (after.children_user - before.children_user) + (
-                after.children_system - before.children_system
-            )
+            cpu = _children_cpu_s() - before
             contender.cpu_s.append(cpu)
             others += max(0.0, _busy_s() - busy - cpu)
     return load_before, os.getloadavg()[0], others
+
+
+def compile_bytecode(src_dirs: Sequence[Path]) -> str:
+    """Compile the `syncaudit` packages of these source folders (or of the import path)."""
+    where = [str(d / "syncaudit") for d in src_dirs]
+    if not where:
+        import importlib.util
+
+        spec = importlib.util.find_spec("syncaudit")
+        where = list(spec.submodule_search_locations or []) if spec is not None else []
+    if not where:
+        return "syncaudit not importable"
+    done = subprocess.run([sys.executable, "-m", "compileall", "-q", *where], check=False)
+    return "compiled" if done.returncode == 0 else f"compileall exit {done.returncode}"
 
 
 def import_times(argv: Sequence[str]) -> dict[str, float]:
@@ -173,6 +195,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         contenders += [Contender(f"{c.name} [baseline]", c.argv, env) for c in contenders[1:]]
         print(f"baseline: syncaudit from {src}")
     runs = max(1, args.runs)
+    trees = [REPO / "src"] if (REPO / "src" / "syncaudit").is_dir() else []
+    if args.baseline_src is not None:
+        trees.append(args.baseline_src.resolve())
+    print(f"syncaudit bytecode: {compile_bytecode(trees)}")
     load_before, load_after, others = measure(contenders, runs)
     print(
         f"syncaudit fixed cost: {runs} run(s) each, interleaved, after a warm-up; {os.cpu_count()} "

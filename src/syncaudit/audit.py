@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from syncaudit.analysis.controller import ControllerConfig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.routing import CameraRouter
@@ -155,7 +154,12 @@ def _row(row: Any) -> dict[str, Any]:
 
 
 def audit_log(
-    path: str | Path, rig: Rig | None = None, *, jobs: int | None = None, check_crc: bool = False
+    path: str | Path,
+    rig: Rig | None = None,
+    *,
+    jobs: int | None = None,
+    check_crc: bool = False,
+    meanwhile: Callable[[], object] | None = None,
 ) -> AuditResult:
     """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics.
 
@@ -163,7 +167,9 @@ def audit_log(
     per core); other containers, and `jobs=1`, read serially. The result is the same.
     `check_crc` verifies every MCAP chunk's CRC (as the mcap reader, off by default: a
     damaged zstd/lz4 chunk fails to decompress anyway, and CRCs cost about as much CPU as
-    the decompression).
+    the decompression). `meanwhile` is the caller's own work for later (e.g. importing
+    what renders the result), run once while worker processes read, where it overlaps
+    them, or before a serial read.
 
     Raises:
         LogOpenError, LogReadError, UnknownTypeError, DecodeError: the log cannot be read.
@@ -178,7 +184,7 @@ def audit_log(
         elif rig.lidar.topic not in log.topics:
             raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
         jobs = default_jobs() if jobs is None else max(1, jobs)
-        return _audit(log, rig, guessed, jobs, check_crc)
+        return _audit(log, rig, guessed, jobs, check_crc, meanwhile)
 
 
 def _plan(
@@ -216,8 +222,20 @@ def _owner(owners: list[CameraTableBuilder]) -> str:
 def _import_analysis() -> None:
     """Import the analysis while the extraction workers read their first tasks, rather
     than before they start or after the last item, when it would add to the wall time."""
-    importlib.import_module("syncaudit.analysis.sync")
-    importlib.import_module("syncaudit.analysis.replay")
+    # Import statements, not importlib: `python -X importtime` names only those.
+    import syncaudit.analysis.replay  # and analysis.controller
+    import syncaudit.analysis.sync  # noqa: F401
+
+
+def _meanwhile(caller: Callable[[], object] | None) -> Callable[[], object]:
+    """What `_read` runs while workers read: the analysis' imports, then the caller's work."""
+
+    def both() -> None:
+        _import_analysis()
+        if caller is not None:
+            caller()
+
+    return both
 
 
 Located = tuple[CameraConfig, float, str]
@@ -247,6 +265,7 @@ def _read(
     jobs: int,
     check_crc: bool,
     warnings: list[str],
+    meanwhile: Callable[[], object] | None = None,
 ) -> tuple[LidarScan, list[CameraTables]]:
     """One pass over the log: the LiDAR's reduced timing and every camera's tables.
 
@@ -261,7 +280,7 @@ def _read(
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
     plan, router = _plan(log, rig, [c for c, _, _ in located], check_crc)
-    for kind, topic, payload in iter_items(log, plan, jobs, meanwhile=_import_analysis):
+    for kind, topic, payload in iter_items(log, plan, jobs, meanwhile=_meanwhile(meanwhile)):
         if kind == "lidar":
             scanner.feed(payload)
         else:
@@ -314,16 +333,26 @@ def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[st
     return [f"camera {cam.name}: {what}" for what, present in checks if not present]
 
 
-def _audit(log: LogReader, rig: Rig, guessed: list[str], jobs: int, check_crc: bool) -> AuditResult:
+def _audit(
+    log: LogReader,
+    rig: Rig,
+    guessed: list[str],
+    jobs: int,
+    check_crc: bool,
+    meanwhile: Callable[[], object] | None = None,
+) -> AuditResult:
     """Locate the cameras, read the log once, find the clock offset, analyse each camera."""
     # Camera topics in encodings that cannot be read are dropped (warned); see rig_vs_log.
     rig, warnings = check_rig_against_log(log, rig)
     missing: list[str] = []
     located = _locate_cameras(log, rig, warnings)
-    scan, all_tables = _read(log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings)
+    scan, all_tables = _read(
+        log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings, meanwhile=meanwhile
+    )
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
     # Imported only now: `_read` has them imported while workers read.
+    from syncaudit.analysis.controller import ControllerConfig
     from syncaudit.analysis.replay import replay_controller
     from syncaudit.analysis.sync import analyze_camera
 

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from syncaudit.analysis.stamps import MISSING_NS, delta_ns, present, stamps_ns
 from syncaudit.camera.sequences import SequenceCounter, incomparable
+from syncaudit.columns.distinct import distinct
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.table import Table
 
@@ -84,9 +85,9 @@ def sequence_problem(
         missing = int(np.sum(~present(seq)))
         if missing:
             return f"{missing} of {len(seq)} {what}s have no sequence number"
-        distinct = np.unique(seq).size
-        if distinct != len(seq):
-            return f"{what} sequence numbers repeat ({distinct} distinct in {len(seq)})"
+        n_distinct = distinct(seq).size
+        if n_distinct != len(seq):
+            return f"{what} sequence numbers repeat ({n_distinct} distinct in {len(seq)})"
     if counters is not None and (mismatch := incomparable(*counters)) is not None:
         return mismatch
     for what, table in (("frame", frames), ("trigger", triggers)):

@@ -12,6 +12,7 @@ from syncaudit.cli.common import (
     print_json,
     run,
 )
+from syncaudit.cli.startup import one_blas_thread
 
 
 @app.command()
@@ -37,4 +38,12 @@ def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> 
         if report.error is not None:
             fail(" ".join(report.error.split()), report.exit_code)
 
-    run(job)
+    run(job, imports=_import_info)
+
+
+def _import_info() -> None:
+    """The modules `info` needs, imported while the collector is paused (see `run`), numpy
+    with one OpenBLAS thread (the reading's parallelism is its worker processes)."""
+    one_blas_thread()
+    import syncaudit.inspect_log
+    import syncaudit.rig  # noqa: F401

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from syncaudit.cli.startup import resume_gc
 from syncaudit.errors import ConfigError, Interrupted, OutputError, SyncauditError, UsageError
 
 if TYPE_CHECKING:
@@ -43,6 +44,7 @@ def _fail(code: int, message: str) -> typer.Exit:
 
 def _guarded(body: Any) -> Any:
     """Known errors: their lines and exit codes; anything else: exit 70, never a traceback."""
+    resume_gc()  # the console script's start-up pause (syncaudit.cli.startup)
     try:
         return body()
     except typer.Exit:

@@ -24,6 +24,7 @@ from typing import Final, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from syncaudit.columns.distinct import distinct
 from syncaudit.errors import DecodeError
 from syncaudit.lidar.packets import PacketTiming
 
@@ -651,7 +652,7 @@ def detect_hesai_model(data: NDArray[np.uint8], size: NDArray[np.integer]) -> st
             f"{bad.size} packet(s) are no known Hesai model, first #{i}: "
             f"bytes {head}, size {int(sz[i])}"
         )
-    found = np.unique(code)
+    found = distinct(code)
     if found.size > 1:
         names = ", ".join(_MODELS[int(c)] for c in found)
         raise DecodeError(f"packets of more than one Hesai model: {names}")
@@ -801,7 +802,7 @@ def _check_shared_azimuth(
     """DecodeError where a multi-return firing's blocks do not share one azimuth."""
     n = azimuth.shape[0]
     uniform = rows.size == n and (r == r[0]).all()
-    for returns in [int(r[0])] if uniform else np.unique(r[rows]).tolist():
+    for returns in [int(r[0])] if uniform else distinct(r[rows]).tolist():
         sel = rows if uniform else rows[r[rows] == returns]
         picked = azimuth if uniform else azimuth[sel]
         groups = picked.reshape(sel.size, layout.n_blocks // returns, returns)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from syncaudit.columns.distinct import distinct
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.samples import PacketSamples
 
@@ -218,7 +219,7 @@ class RevolutionTracker:
                 self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
         target_k, target_j, target_t = ks[~zero], j_of[~zero] - 1, t_cross[~zero]
         n_targets = offsets.size - 1
-        for k in np.unique(target_k).tolist():
+        for k in distinct(target_k).tolist():
             row = self._targets.get(k)
             if row is None:
                 row = self._targets[k] = np.full(n_targets, -1, dtype=np.int64)

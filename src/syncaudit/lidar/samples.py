@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from syncaudit.columns.distinct import distinct
 from syncaudit.lidar.packets import PacketTiming
 
 FULL_TURN_DEG = 360.0
@@ -154,7 +155,7 @@ def _distinct(values: NDArray[np.uint8]) -> frozenset[int]:
     """The distinct values, as Python ints (one comparison when they are all the same)."""
     if values.size and (values == values[0]).all():
         return frozenset(values[:1].tolist())
-    return frozenset(np.unique(values).tolist())
+    return frozenset(distinct(values).tolist())
 
 
 def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
