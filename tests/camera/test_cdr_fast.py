@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
+from syncaudit.camera.cdr_fast import FAST_READERS, _Cursor, _TruncatedError, read_fast
 from syncaudit.camera.extract import exposure_row, trigger_row
 from syncaudit.logs import open_log
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
@@ -43,3 +43,35 @@ def test_fast_rows_equal_rosbags_rows(log_path: Path) -> None:
 def test_no_fast_path_for_other_types_or_encodings() -> None:
     assert read_fast(b"\x00" * 64, "syncaudit_msgs/msg/CameraExposure", "protobuf") is None
     assert read_fast(b"\x00\x01\x00\x00" + b"\x00" * 60, "sensor_msgs/msg/Image", "cdr") is None
+
+
+def _plain(value: object) -> object:
+    """A namespace as nested dicts (namespaces compare by identity of nested ones)."""
+    if hasattr(value, "__dict__"):
+        return {k: _plain(v) for k, v in vars(value).items()}
+    return value
+
+
+def test_ros1_one_pass_readers_equal_the_cursor_on_whole_and_cut_messages(
+    tmp_path: Path,
+) -> None:
+    """The one-unpack ROS 1 readers give the cursor's fields, and on every truncation the
+    cursor's own `damaged` text (they fall back to it)."""
+    out = tmp_path / "log.bag"
+    simulate_sync_log(out, SyncSimConfig(seed=5, duration_s=0.3, log_format="bag"))
+    checked = dict.fromkeys(FAST_READERS, 0)
+    with open_log(out) as log:
+        topics = [t.name for t in log.topics.values() if t.msgtype in FAST_READERS]
+        for msg in log.messages(topics):
+            data = bytes(msg.data)
+            for cut in (len(data), *range(0, len(data), 3)):
+                part = data[:cut]
+                try:
+                    expected = FAST_READERS[msg.msgtype](_Cursor(part, ros1=True))
+                except _TruncatedError:
+                    got = read_fast(part, msg.msgtype, "ros1")
+                    assert got is not None and got.damaged.startswith("truncated ")
+                    continue
+                assert _plain(read_fast(part, msg.msgtype, "ros1")) == _plain(expected)
+            checked[msg.msgtype] += 1
+    assert all(count >= 3 for count in checked.values()), checked

@@ -117,3 +117,39 @@ def test_a_pipe_gets_one_plain_line_per_log(small_fleet: Path, tmp_path: Path) -
         "[2/2] warn uploads/car2/pandar40p_adaptive.mcap",
     ]
     assert lines[-1] == "gate: 2 log(s): 0 pass, 1 warn, 1 fail, 0 error"
+
+
+def test_the_bar_is_drawn_with_each_logs_state_before_its_status_line(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each log's count is drawn when it ends, not at the next tick of the bar's refresh
+    thread: with no refresh thread at all (a loaded machine starves it), the bar redrawn
+    under each status line shows that log's count (it showed 0/? on CI-like load)."""
+    import io
+    from types import SimpleNamespace
+
+    import rich.progress
+    from rich.console import Console
+
+    from syncaudit.fleet import cli as fleet_cli
+
+    out = io.StringIO()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    monkeypatch.setattr(
+        fleet_cli,
+        "_stderr",
+        lambda: Console(file=out, force_terminal=True, width=WIDTH, soft_wrap=True),
+    )
+    original = rich.progress.Progress.__init__
+
+    def no_refresh_thread(self: rich.progress.Progress, *args: object, **kwargs: object) -> None:
+        original(self, *args, **{**kwargs, "auto_refresh": False})  # type: ignore[arg-type]
+
+    monkeypatch.setattr(rich.progress.Progress, "__init__", no_refresh_thread)
+    update, finish = fleet_cli._progress_printer()
+    update(SimpleNamespace(verdict="fail", path="uploads/car1/a.mcap", error=""), 1, 2)
+    update(SimpleNamespace(verdict="warn", path="uploads/car2/b.mcap", error=""), 2, 2)
+    finish()
+    screen = _screen_lines(out.getvalue())
+    assert re.search(r"gate .*1/2 .*fail: uploads/car1/a\.mcap", screen), screen
+    assert re.search(r"gate .*2/2 .*warn: uploads/car2/b\.mcap", screen), screen

@@ -9,12 +9,15 @@ recorder writes in arrival order). Damage: every cut position class, a bag never
 
 from __future__ import annotations
 
+import dataclasses
 import random
 import struct
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import lz4.frame
+import numpy as np
 import pytest
 from rosbags.rosbag1 import Reader, Writer
 from rosbags.typesys.store import Typestore
@@ -348,3 +351,276 @@ def test_mutated_bags_end_in_a_documented_error_or_a_read(
             outcome = type(exc).__name__
         outcomes[outcome] = outcomes.get(outcome, 0) + 1
     assert outcomes.get("read", 0) > 50 and outcomes.get("LogReadError", 0) > 10, outcomes
+
+
+# ---- lz4 chunks read lazily (stored blocks stay views of the mapped file) ----------------
+
+LZ4_FRAMES = {
+    "rosbags": {},  # lz4.frame.compress defaults: linked 64 KiB blocks, content size
+    "roslz4": {  # rosbag's roslz4: independent 1 MiB blocks, content checksum, no size
+        "block_size": lz4.frame.BLOCKSIZE_MAX1MB,
+        "block_linked": False,
+        "content_checksum": True,
+        "store_size": False,
+    },
+    "block-checksums": {
+        "block_size": lz4.frame.BLOCKSIZE_MAX256KB,
+        "block_checksum": True,
+        "content_checksum": True,
+    },
+}
+
+
+def write_camera_bag(path: Path, store: Typestore, frame: dict[str, object]) -> Path:
+    """JPEG-like images (incompressible, 150-250 KB) and small messages, in lz4 chunks
+    framed by the LZ4 library as `frame` says (rosbags' default chunk size)."""
+    rng = random.Random(13)
+    writer = Writer(path)
+    writer.set_compression(Writer.CompressionFormat.LZ4)
+    writer.compressor = lambda data: lz4.frame.compress(data, **frame)  # type: ignore[method-assign]
+    image_t = store.types["sensor_msgs/msg/CompressedImage"]
+    header_t = store.types["std_msgs/msg/Header"]
+    time_t = store.types["builtin_interfaces/msg/Time"]
+    string_t = store.types["std_msgs/msg/String"]
+    with writer:
+        image = writer.add_connection("/cam/image", image_t.__msgtype__, typestore=store)
+        meta = writer.add_connection("/cam/meta", string_t.__msgtype__, typestore=store)
+        for i in range(30):
+            t = 1_000_000_000 + i * 33_000_000
+            pixels = np.frombuffer(rng.randbytes(rng.randrange(150_000, 250_000)), np.uint8)
+            stamp = header_t(seq=i, stamp=time_t(sec=1, nanosec=i), frame_id="cam_optical")
+            msg = image_t(header=stamp, format="jpeg", data=pixels)
+            writer.write(image, t, store.serialize_ros1(msg, image_t.__msgtype__))
+            text = string_t(data=f"exposure {i} " * 20)
+            writer.write(meta, t + 1_000, store.serialize_ros1(text, string_t.__msgtype__))
+    return path
+
+
+@pytest.fixture(scope="module")
+def camera_bags(tmp_path_factory: pytest.TempPathFactory, ros1_store: Typestore) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("ros1cam")
+    return {n: write_camera_bag(folder / f"{n}.bag", ros1_store, f) for n, f in LZ4_FRAMES.items()}
+
+
+def _unit_messages(path: Path, *, check_crc: bool = False, prefix_bytes: int = 0) -> list[Message]:
+    """Every message through one chunk reader, merged as the parent merges units."""
+    topics = frozenset({"/cam/image", "/cam/meta"})
+    with open_log(path) as log:
+        units = log.read_units(topics)
+        channels = log.unit_channels(topics)
+    assert units is not None
+    channels = {
+        c: dataclasses.replace(i, prefix_bytes=prefix_bytes if i.topic == "/cam/image" else 0)
+        for c, i in channels.items()
+    }
+    reader = Rosbag1ChunkReader(check_crc=check_crc)
+    try:
+        rows = [
+            (t, unit.offset, i, channels[c].topic, bytes(p))
+            for unit in units
+            for t, i, c, p in reader.messages(unit, channels)
+        ]
+    finally:
+        reader.close()
+    return _merged(iter([rows]))
+
+
+@pytest.mark.parametrize("frame", sorted(LZ4_FRAMES))
+def test_lz4_frames_of_every_writer_read_as_rosbags_reads_them(
+    frame: str, camera_bags: dict[str, Path], untouched: Untouched
+) -> None:
+    path = untouched(camera_bags[frame])
+    expected = reference(path)
+    assert len(expected) == 60
+    assert ours(path) == expected
+    assert _unit_messages(path) == expected
+    assert _unit_messages(path, check_crc=True) == expected
+    # images wanted for their header only: just that prefix, of the same bytes
+    prefixed = _unit_messages(path, prefix_bytes=64)
+    assert prefixed == [(t, s, d[:64] if t == "/cam/image" else d) for t, s, d in expected]
+
+
+def _chunk_spans(path: Path) -> list[tuple[int, int]]:
+    """(offset, length) of every chunk record, from the index."""
+    with open_log(path) as log:
+        units = log.read_units(frozenset({"/cam/image", "/cam/meta"}))
+    assert units is not None
+    return [(u.offset, u.length) for u in units]
+
+
+def _read_all(path: Path, *, check_crc: bool = False) -> str:
+    """The one-line error reading every message of `path` through the chunk reader."""
+    with pytest.raises(LogReadError) as info:
+        _unit_messages(path, check_crc=check_crc)
+    text = str(info.value)
+    assert "\n" not in text
+    return text
+
+
+def test_damaged_lz4_chunks_name_the_file_and_the_chunk(
+    camera_bags: dict[str, Path], tmp_path: Path
+) -> None:
+    raw = camera_bags["roslz4"].read_bytes()
+    (offset, length), *_ = _chunk_spans(camera_bags["roslz4"])
+    (hlen,) = struct.unpack_from("<I", raw, offset)
+    frame_at = offset + 8 + hlen
+    path = tmp_path / "damaged.bag"
+    where = f"{path}: ROS 1 chunk at byte {offset}: lz4 data damaged: "
+
+    # a block size past anything the frame allows
+    bad = bytearray(raw)
+    struct.pack_into("<I", bad, frame_at + 7, 0xFFFFFFFF)
+    path.write_bytes(bytes(bad))
+    assert _read_all(path).startswith(
+        where + "block at byte 7 of 2147483647 bytes is over the frame's 1048576-byte maximum"
+    )
+
+    # a compressed block with garbage in it: it may still decode (to wrong records, which
+    # the record walk refuses); with --check-crc the content checksum names it
+    bad = bytearray(raw)
+    bad[frame_at + 40 : frame_at + 80] = b"\xff" * 40
+    path.write_bytes(bytes(bad))
+    assert _read_all(path).startswith(f"{path}: ROS 1 chunk at byte {offset}: ")
+    assert _read_all(path, check_crc=True).startswith(where)
+
+    # a header checksum that does not match
+    bad = bytearray(raw)
+    bad[frame_at + 6] ^= 0xFF
+    path.write_bytes(bytes(bad))
+    assert _read_all(path).startswith(where + "frame header checksum does not match")
+
+    # the content checksum is verified with --check-crc only (as MCAP chunk CRCs are)
+    bad = bytearray(raw)
+    bad[offset + length - 1] ^= 0xFF
+    path.write_bytes(bytes(bad))
+    assert _unit_messages(path) == reference(camera_bags["roslz4"])
+    assert _read_all(path, check_crc=True).startswith(where)
+
+
+def test_lz4_chunk_claiming_more_than_it_holds_is_refused(
+    camera_bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """A chunk `size` larger than its frame (a bomb would be the same, with a frame that
+    holds more): decoding stops at the size, and the chunk is refused."""
+    raw = bytearray(camera_bags["roslz4"].read_bytes())
+    (offset, _length), *_ = _chunk_spans(camera_bags["roslz4"])
+    at = raw.index(b"size=", offset) + 5
+    (size,) = struct.unpack_from("<I", raw, at)
+    for claimed, problem in [(size + 1, f"not {size + 1}"), (size - 1, f"{size - 1} bytes")]:
+        struct.pack_into("<I", raw, at, claimed)
+        path = tmp_path / "claims.bag"
+        path.write_bytes(bytes(raw))
+        text = _read_all(path)
+        assert text.startswith(f"{path}: ROS 1 chunk at byte {offset}: lz4 data damaged: ")
+        assert problem in text
+
+
+def test_bag_cut_after_it_was_opened_is_a_read_error_not_a_crash(
+    camera_bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """Chunks are read in place as they are reached: a file that shrinks under the reader
+    is a read error naming the chunk."""
+    path = tmp_path / "shrinking.bag"
+    path.write_bytes(camera_bags["rosbags"].read_bytes())
+    with open_log(path) as log, pytest.raises(LogReadError) as info:
+        with path.open("r+b") as handle:
+            handle.truncate(path.stat().st_size // 2)
+        for _msg in log.messages():
+            pass
+    assert str(info.value).startswith(f"{path}: ROS 1 chunk at byte ")
+    assert "file changed since it was opened?" in str(info.value)
+
+
+def _reorder_message_headers(raw: bytes, order: tuple[str, str, str]) -> bytes:
+    """Every 38-byte message header rewritten with its fields in `order` (rosbag writes
+    them sorted by name; rosbags op first): the same record lengths, so the index holds."""
+    out = bytearray(raw)
+    start = b"\x26\x00\x00\x00\x04\x00\x00\x00op=\x02"
+    at = out.find(start)
+    count = 0
+    while at >= 0:
+        header = bytes(out[at + 4 : at + 42])
+        fields = {}
+        pos = 0
+        while pos < len(header):
+            (n,) = struct.unpack_from("<I", header, pos)
+            field = header[pos : pos + 4 + n]
+            fields[field[4:].split(b"=", 1)[0].decode()] = field
+            pos += 4 + n
+        out[at + 4 : at + 42] = b"".join(fields[name] for name in order)
+        count += 1
+        at = out.find(start, at + 42)
+    assert count == 301
+    return bytes(out)
+
+
+@pytest.mark.parametrize("order", [("conn", "op", "time"), ("time", "conn", "op")])
+def test_message_header_fields_in_any_order(
+    order: tuple[str, str, str], bags: dict[str, Path], tmp_path: Path
+) -> None:
+    path = tmp_path / "ordered.bag"
+    path.write_bytes(_reorder_message_headers(bags["none"].read_bytes(), order))
+    expected = reference(bags["none"])
+    assert reference(path) == expected  # rosbags reads fields by name, in any order
+    assert ours(path) == expected
+
+
+def _frame_targets(raw: bytes, spans: list[tuple[int, int]]) -> list[int]:
+    """Offsets of what a damaged lz4 chunk gets wrong: chunk headers, frame descriptors,
+    block sizes and the first bytes of each block."""
+    out: list[int] = []
+    for offset, length in spans:
+        (hlen,) = struct.unpack_from("<I", raw, offset)
+        frame = offset + 8 + hlen
+        out += range(offset, frame + 20)
+        pos = frame + 7 + (8 if raw[frame + 4] & 0x08 else 0)
+        while pos < offset + length - 4:
+            (word,) = struct.unpack_from("<I", raw, pos)
+            if word == 0:
+                break
+            out += (pos, pos + 1, pos + 3, pos + 4, pos + 40)
+            pos += 4 + (word & 0x7FFFFFFF) + (4 if raw[frame + 4] & 0x10 else 0)
+    return out
+
+
+def test_mutated_lz4_frames_end_in_a_read_error_or_a_read(
+    camera_bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """Hostile values in chunk headers, frame descriptors and block sizes: read, or one
+    LogReadError line naming the file, with and without --check-crc; never a traceback."""
+    rng = random.Random(7)
+    path = tmp_path / "mutant.bag"
+    outcomes: dict[str, int] = {}
+    for name in ("roslz4", "rosbags"):
+        raw = camera_bags[name].read_bytes()
+        targets = _frame_targets(raw, _chunk_spans(camera_bags[name]))
+        for _ in range(30):
+            bad = bytearray(raw)
+            at = rng.choice(targets)
+            bad[at : at + 4] = rng.choice(
+                [bytes(4), b"\xff\xff\xff\x7f", b"\xff\xff\xff\xff", b"\x00\x00\x01\x80"]
+            )
+            path.write_bytes(bytes(bad))
+            for check_crc in (False, True):
+                try:
+                    _unit_messages(path, check_crc=check_crc)
+                    outcome = "read"
+                except SyncauditError as exc:
+                    text = str(exc)
+                    assert text.startswith(str(path)) and "\n" not in text, text
+                    outcome = type(exc).__name__
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    assert outcomes.get("LogReadError", 0) > 40, outcomes
+
+
+def test_check_crc_reaches_the_chunk_reader_of_the_workers(bags: dict[str, Path]) -> None:
+    """`--check-crc` (the workers' `open_unit_reader(..., check_crc=True)`) switches the
+    ROS 1 chunk reader to the checksum-verifying frame decoder."""
+    from syncaudit.logs.units import open_unit_reader
+
+    for check_crc in (False, True):
+        reader = open_unit_reader("rosbag1-chunk", str(bags["lz4"]), check_crc=check_crc)
+        try:
+            assert isinstance(reader, Rosbag1ChunkReader) and reader.check_crc is check_crc
+        finally:
+            reader.close()

@@ -73,7 +73,9 @@ def audit(
     check_crc: Annotated[
         bool,
         typer.Option(
-            "--check-crc", help="Verify every MCAP chunk's CRC (a quarter to a third slower)."
+            "--check-crc",
+            help="Verify every MCAP chunk's CRC (a quarter to a third slower) and every "
+            "ROS 1 lz4 chunk's checksums.",
         ),
     ] = False,
 ) -> None:

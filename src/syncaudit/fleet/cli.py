@@ -91,7 +91,9 @@ def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
 
         def update(log: Any, done: int, total: int) -> None:
             description = f"{log.verdict}: {_escape(log.path)}"
-            bar.update(task, completed=done, total=total, description=description)
+            # Drawn now, not at the next tick of the bar's refresh thread: the status line
+            # printed below redraws the bar as last drawn (a loaded machine showed 0/? there).
+            bar.update(task, completed=done, total=total, description=description, refresh=True)
             if log.verdict != "pass":
                 bar.console.print(
                     f"[{colours[log.verdict]}]{log.verdict:5}[/] {_escape(log.path)}"

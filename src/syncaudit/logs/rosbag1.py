@@ -14,12 +14,15 @@ Format (wiki.ros.org/Bags/Format/2.0): after the line `#ROSBAG V2.0\\n` come rec
   section at `index_pos`, written when the recording closes.
 
 `lz4` chunks are LZ4 *frames* (roslz4 writes the frame format; rosbags and Embag read them
-with the LZ4F frame decoder). A bag whose recorder died has `index_pos` 0 or an index cut
-off: it is then read by scanning the chunks from the start, as `rosbag reindex` does.
+with the LZ4F frame decoder); `lz4_frame` walks them block by block, leaving blocks
+stored uncompressed in the file (see `Rosbag1ChunkReader`). A bag whose recorder died has
+`index_pos` 0 or an index cut off: it is then read by scanning the chunks from the start,
+as `rosbag reindex` does.
 """
 
 from __future__ import annotations
 
+import bisect
 import bz2
 import os
 import struct
@@ -31,6 +34,13 @@ from typing import BinaryIO
 import lz4.frame
 
 from syncaudit.errors import LogReadError
+from syncaudit.logs.lz4_frame import (
+    FileSpan,
+    FrameError,
+    FrameSource,
+    Pieces,
+    decode_frame,
+)
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
 
@@ -395,12 +405,14 @@ def _scan_chunk(
     return found
 
 
-def chunk_body(
+def chunk_head(
     record: bytes | memoryview, offset: int, *, partial: bool = False
-) -> bytes | memoryview:
-    """The uncompressed records of the chunk record `record` (at `offset` in its file).
+) -> tuple[str, int, memoryview]:
+    """(compression, uncompressed size, data) of the chunk record `record` (at `offset`).
 
-    `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
+    The size is refused where it cannot be honest (over `MAX_CHUNK_BYTES`, or a large one
+    over `MAX_RATIO` times the data). `partial`: the record is cut off, its data may be
+    short. Raises LogReadError.
     """
     where = f"ROS 1 chunk at byte {offset}"
     if len(record) < 8:
@@ -423,6 +435,18 @@ def chunk_body(
             f"{where}: chunk claims {size} uncompressed bytes from {dlen} (refused as a "
             "decompression bomb or a damaged size field)"
         )
+    return compression, size, data
+
+
+def chunk_body(
+    record: bytes | memoryview, offset: int, *, partial: bool = False
+) -> bytes | memoryview:
+    """The uncompressed records of the chunk record `record` (at `offset` in its file).
+
+    `partial`: the record is cut off; return what decompresses of it. Raises LogReadError.
+    """
+    where = f"ROS 1 chunk at byte {offset}"
+    compression, size, data = chunk_head(record, offset, partial=partial)
     try:
         body: bytes | memoryview
         if compression == "none":
@@ -502,15 +526,180 @@ def open_bag_file(path: Path) -> BagFile:
     return BagFile(handle, size)
 
 
+_MSG_HEAD_BYTES = 38
+"""Header bytes of a message data record holding just `op`, `conn` and `time`."""
+_MSG_OP_FIRST = struct.Struct("<I3sBI5sII5sII")
+"""That header as rosbags and rosbag's Python writer write it: op, conn, time."""
+_MSG_CONN_FIRST = struct.Struct("<I5sII3sBI5sII")
+"""That header with its fields sorted by name (rosbag's C++ writer keeps them in a
+std::map): conn, op, time. Any other layout is parsed field by field."""
+
+
+def whole(body: bytes | memoryview) -> Pieces:
+    """Pieces of a body held in one buffer."""
+    return Pieces([0], [body], len(body))
+
+
+READ_AHEAD_BYTES = 1024
+"""Bytes read at once from a stored block left in the file: a record header and an image's
+header prefix, or a few small records, in one `pread`."""
+
+
+class _PieceCursor:
+    """Reads content of `Pieces` at offsets; joins pieces only for a read that spans them.
+
+    A piece left in the file (`FileSpan`) is read `READ_AHEAD_BYTES` at a time (or what a
+    read asks, if more), never whole.
+    """
+
+    __slots__ = ("base", "buf", "pieces", "top")
+
+    def __init__(self, pieces: Pieces) -> None:
+        self.pieces = pieces
+        self.buf: bytes | memoryview = b""
+        self.base = self.top = 0
+
+    def at(self, pos: int, size: int) -> tuple[bytes | memoryview, int]:
+        """(buffer, offset in it) of content bytes `pos` to `pos + size` (within the
+        content: the caller checks)."""
+        if self.base <= pos and pos + size <= self.top:
+            return self.buf, pos - self.base
+        starts, buffers = self.pieces.starts, self.pieces.buffers
+        k = bisect.bisect_right(starts, pos) - 1
+        piece, start = buffers[k], starts[k]
+        end = start + len(piece)
+        if pos + size <= end:
+            if isinstance(piece, FileSpan):
+                stop = min(end, pos + max(size, READ_AHEAD_BYTES))
+                self.buf, self.base, self.top = piece.read(pos - start, stop - start), pos, stop
+            else:
+                self.buf, self.base, self.top = piece, start, end
+            return self.buf, pos - self.base
+        # Spanning pieces (a LiDAR scan over many blocks): gathered into one new buffer,
+        # each piece copied once (read straight into it from the file).
+        out = bytearray(size)
+        view = memoryview(out)
+        got, first = 0, pos - start
+        for piece in buffers[k:]:
+            n = min(len(piece) - first, size - got)
+            if isinstance(piece, FileSpan):
+                piece.read_into(view[got : got + n], first)
+            else:
+                view[got : got + n] = piece[first : first + n]
+            got += n
+            first = 0
+            if got >= size:
+                break
+        return view, 0
+
+
+def wanted_messages(
+    pieces: Pieces, channels: dict[int, ChannelInfo], offset: int, *, partial: bool = False
+) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+    """(log time, message index, connection id, payload) of the messages of `channels` in
+    an uncompressed chunk body, in file order (the index counts every message record).
+
+    A channel with `prefix_bytes` gets that much of its payloads (an image's header), so
+    pixels stored in blocks of their own are never touched. `partial`: the body is the
+    start of a cut-off chunk; stop quietly at the first incomplete record. Otherwise damage
+    raises LogReadError naming the chunk's `offset` and the offset in the chunk.
+    """
+    cursor = _PieceCursor(pieces)
+    size = pieces.size
+    pos = index = 0
+    while pos < size:
+        problem = ""
+        if pos + 4 > size:
+            problem = "record cut off"
+        else:
+            buf, at = cursor.at(pos, 4)
+            (hlen,) = _U32.unpack_from(buf, at)
+            dlen_at = pos + 4 + hlen
+            if dlen_at + 4 > size:
+                problem = "record header overruns the chunk"
+            else:
+                buf, at = cursor.at(pos + 4, hlen + 4)
+                (dlen,) = _U32.unpack_from(buf, at + hlen)
+                end = dlen_at + 4 + dlen
+                if end > size:
+                    problem = "record data overruns the chunk"
+        if problem:
+            if partial:
+                return
+            raise LogReadError(
+                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
+            )
+        conn_id = -1
+        op = 0
+        if hlen == _MSG_HEAD_BYTES:
+            # The usual message header in one unpack (either field order); anything else
+            # (other fields, another order) is parsed field by field below.
+            (n1, k1, op, n2, k2, conn_id, n3, k3, sec, nsec) = _MSG_OP_FIRST.unpack_from(buf, at)
+            if not (n1 == 4 and k1 == b"op=" and n2 == 9 and k2 == b"conn=" and n3 == 13):
+                (n1, k1, conn_id, n2, k2, op, n3, k3, sec, nsec) = _MSG_CONN_FIRST.unpack_from(
+                    buf, at
+                )
+                if not (n1 == 9 and k1 == b"conn=" and n2 == 4 and k2 == b"op=" and n3 == 13):
+                    conn_id = -1
+            if k3 != b"time=":
+                conn_id = -1
+        if conn_id < 0:
+            try:
+                fields = parse_header(buf, at, at + hlen)
+                op = _op(fields)
+            except ValueError as exc:
+                if partial:
+                    return
+                raise LogReadError(
+                    f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the "
+                    f"chunk: {exc})"
+                ) from None
+            if op != OP_MSG_DATA:
+                pos = end
+                continue
+            try:
+                conn_id = _u32(fields, "conn")
+                info = channels.get(conn_id)
+                t = _time(fields, "time") if info is not None else 0
+            except ValueError as exc:
+                raise LogReadError(
+                    f"ROS 1 chunk at byte {offset}: bad message record ({exc})"
+                ) from None
+        elif op != OP_MSG_DATA:
+            pos = end
+            continue
+        else:
+            info = channels.get(conn_id)
+            t = sec * 1_000_000_000 + nsec
+        if info is not None:
+            wanted = dlen if info.prefix_bytes <= 0 else min(dlen, info.prefix_bytes)
+            data, data_at = cursor.at(dlen_at + 4, wanted)
+            yield t, index, conn_id, memoryview(data)[data_at : data_at + wanted]
+        index += 1
+        pos = end
+
+
+HEAD_BYTES = 4096
+"""Bytes read first of an lz4 chunk record: its header, the frame's descriptor and first
+block size (a chunk header holds two short fields)."""
+
+
 class Rosbag1ChunkReader:
     """Per-worker reader of 'rosbag1-chunk' units: one open file per source, reused.
 
+    An lz4 chunk of a local file is read block by block (`lz4_frame`): blocks stored
+    uncompressed (JPEG pixels: most of a camera bag) stay in the file, and only the record
+    headers and wanted payloads in them are read (`pread`), so the bytes of images nobody
+    looks at are neither copied nor mapped. Other chunks are read whole into one reused
+    buffer (`preadv`) and decompressed from there.
     `source` (optional) is the file the worker will read (`logs.units` builds one reader per
-    worker and file); units of other files are read too.
+    worker and file); units of other files are read too. `check_crc`: verify lz4 frames'
+    block and content checksums (by decoding them whole with `lz4.frame`, which does).
     """
 
-    def __init__(self, source: str | None = None) -> None:
+    def __init__(self, source: str | None = None, *, check_crc: bool = False) -> None:
         self._files: dict[str, BagFile] = {}
+        self.check_crc = check_crc
         self._buffer = bytearray()
         """Chunk records are read into this one buffer (no allocation per chunk)."""
         del source  # files are opened when their first unit is read
@@ -530,32 +719,58 @@ class Rosbag1ChunkReader:
             except OSError as exc:
                 raise LogReadError(f"{unit.source}: cannot read: {one_line(exc)}") from exc
             self._files[unit.source] = bag
-        record = self._read(bag, unit.offset, unit.length)
-        if len(record) < unit.length:
-            raise LogReadError(
-                f"{unit.source}: ROS 1 chunk at byte {unit.offset} cut off "
-                f"({len(record)} of {unit.length} bytes; file changed since it was opened?)"
-            )
-        partial = _declared_length(record) > unit.length
         try:
-            body = chunk_body(record, unit.offset, partial=partial)
-            if isinstance(body, memoryview):
-                # An uncompressed chunk's payloads are views of the buffer: callers may hold
-                # them past the next unit (the serial merge does), so it is theirs now.
-                self._buffer = bytearray()
-            index = 0
-            for op, fields, data in walk_records(body, unit.offset, partial=partial):
-                if op != OP_MSG_DATA:
-                    continue
-                conn_id = _u32(fields, "conn")
-                if conn_id in channels:
-                    yield _time(fields, "time"), index, conn_id, data
-                index += 1
+            pieces = self._lz4_in_place(bag, unit)
+            partial = False
+            if pieces is None:
+                record = self._read(bag, unit.offset, unit.length)
+                if len(record) < unit.length:
+                    raise LogReadError(
+                        f"ROS 1 chunk at byte {unit.offset} cut off ({len(record)} of "
+                        f"{unit.length} bytes; file changed since it was opened?)"
+                    )
+                partial = _declared_length(record) > unit.length
+                body = chunk_body(record, unit.offset, partial=partial)
+                if isinstance(body, memoryview):
+                    # An uncompressed chunk's payloads are views of the buffer: callers may
+                    # hold them past the next unit (the serial merge does), so it is theirs.
+                    self._buffer = bytearray()
+                pieces = whole(body)
+            yield from wanted_messages(pieces, channels, unit.offset, partial=partial)
         except LogReadError as exc:
             raise LogReadError(f"{unit.source}: {exc}") from None
-        except ValueError as exc:
+        except (FrameError, OSError) as exc:  # the file shrank or failed under the reader
             raise LogReadError(
-                f"{unit.source}: ROS 1 chunk at byte {unit.offset}: bad message record ({exc})"
+                f"{unit.source}: ROS 1 chunk at byte {unit.offset}: {one_line(exc)}"
+            ) from None
+
+    def _lz4_in_place(self, bag: BagFile, unit: ReadUnit) -> Pieces | None:
+        """The records of a whole lz4 chunk of a local file, its stored blocks left in the
+        file; None where the chunk is read whole instead (another compression, a chunk cut
+        off or unreadable: the whole read reports it, `check_crc`, a file in memory)."""
+        fileno = getattr(bag.handle, "fileno", None)
+        if self.check_crc or fileno is None:
+            return None
+        fd = fileno()
+        head = os.pread(fd, min(unit.length, HEAD_BYTES), unit.offset)
+        if len(head) < 8:
+            return None
+        (hlen,) = _U32.unpack_from(head, 0)
+        if 8 + hlen > len(head):
+            return None
+        (dlen,) = _U32.unpack_from(head, 4 + hlen)
+        if 8 + hlen + dlen != unit.length or unit.offset + unit.length > os.fstat(fd).st_size:
+            return None
+        compression, size, _data = chunk_head(head, unit.offset, partial=True)
+        if compression != "lz4":
+            return None
+        start = 8 + hlen
+        source = FrameSource(fd=fd, offset=unit.offset + start, length=dlen, head=head[start:])
+        try:
+            return decode_frame(source, size)
+        except FrameError as exc:
+            raise LogReadError(
+                f"ROS 1 chunk at byte {unit.offset}: lz4 data damaged: {exc}"
             ) from None
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
