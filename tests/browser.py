@@ -86,8 +86,16 @@ def screenshot(page: Path, name: str, *, width: int = 1100, height: int = 2400) 
     """A PNG of the page kept under the artifacts folder; returns its path."""
     shot = ARTIFACTS / name
     shot.parent.mkdir(parents=True, exist_ok=True)
-    _run([f"--screenshot={shot}", f"--window-size={width},{height}", page.resolve().as_uri()])
+    made = _private(shot)
+    _run([f"--screenshot={made}", f"--window-size={width},{height}", page.resolve().as_uri()])
+    os.replace(made, shot)
     return shot
+
+
+def _private(shot: Path) -> Path:
+    """A name beside `shot` no other test run uses: the artifacts folder is shared by every
+    pytest on the machine, and a file is only ever replaced whole (never seen half written)."""
+    return shot.with_name(f".{shot.stem}.{os.getpid()}{shot.suffix}")
 
 
 class BrowserError(RuntimeError):
@@ -292,5 +300,7 @@ class Session:
         shot = ARTIFACTS / name
         shot.parent.mkdir(parents=True, exist_ok=True)
         data = self.call("Page.captureScreenshot", {"format": "png"})["data"]
-        shot.write_bytes(base64.b64decode(data))
+        made = _private(shot)
+        made.write_bytes(base64.b64decode(data))
+        os.replace(made, shot)
         return shot

@@ -33,6 +33,20 @@ main()
 """
 
 
+_FOREGROUND = (
+    "import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+    "os.execv(sys.argv[1], sys.argv[1:])"
+)
+
+
+def foreground(argv: list[str]) -> list[str]:
+    """`argv` run with SIGINT's default action, as a shell with job control runs a
+    foreground command, whatever this process inherited (a shell runs a background job,
+    `cmd &` in a script, with SIGINT ignored; Python, and so the CLI, then keeps ignoring
+    Ctrl-C, rightly). The command is exec'ed: its pid is the one the test signals."""
+    return [sys.executable, "-c", _FOREGROUND, *argv]
+
+
 def slowed_cli_script(*, sleep_s: float, tasks_per_worker: int | None = None) -> str:
     """Python source running the CLI with one chunk per task, each held `sleep_s` in its
     worker (`tasks_per_worker`: tasks in flight per worker, default the CLI's own)."""
@@ -45,12 +59,14 @@ def start(
 ) -> subprocess.Popen[str]:
     """`syncaudit ARGS` slowed (see `slowed_cli_script`), in its own process group."""
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            slowed_cli_script(sleep_s=sleep_s, tasks_per_worker=tasks_per_worker),
-            *args,
-        ],
+        foreground(
+            [
+                sys.executable,
+                "-c",
+                slowed_cli_script(sleep_s=sleep_s, tasks_per_worker=tasks_per_worker),
+                *args,
+            ]
+        ),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,  # its own process group, as a shell gives a command
@@ -74,6 +90,22 @@ def alive(pid: int) -> bool:
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def survivors(pids: list[int], *, timeout_s: float = 5.0, poll_s: float = 0.01) -> list[int]:
+    """Those of `pids` still alive once none is, or `timeout_s` passed.
+
+    Called after the CLI's pipes reached end of file: its workers inherited them, so each
+    has closed them and is exiting; only its last steps in the kernel may not be done
+    (a loaded machine can leave a killed process unscheduled for a moment). A worker that
+    went on running would have held the pipes open, so this wait hides none.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = [pid for pid in pids if alive(pid)]
+        if not left or time.monotonic() >= deadline:
+            return left
+        time.sleep(poll_s)
 
 
 def wait_for_workers(

@@ -54,14 +54,26 @@ def _init_worker(parent_pid: int) -> None:
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
             libc.mallopt(_M_MMAP_THRESHOLD, KEEP_HEAP_BYTES)
             libc.mallopt(_M_TRIM_THRESHOLD, KEEP_HEAP_BYTES)
-        except (OSError, AttributeError):  # pragma: no cover - no prctl/mallopt: best effort
+        except (OSError, AttributeError):  # pragma: no cover - no mallopt: best effort
+            pass
+    die_with_parent(parent_pid)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """In a child process: have the kernel SIGKILL it when its parent dies (Linux
+    PR_SET_PDEATHSIG), so a parent killed outright (the OOM killer, `kill -9`) leaves no
+    orphan working on; exit now if the parent `parent_pid` is already gone."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl: best effort
             pass
     if os.getppid() != parent_pid:  # the parent died before the prctl took hold
         os._exit(1)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def _raise_interrupt(signum: int, frame: FrameType | None) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from slowed_cli import alive, start, wait_for_workers
+from slowed_cli import start, survivors, wait_for_workers
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
@@ -36,12 +36,13 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], float]:
     out, rig = log
-    proc = start(["audit", str(out), "--rig", str(rig)], sleep_s=SLEEP_S)
+    # Two workers whatever the machine's cores (the default is one per core).
+    proc = start(["audit", str(out), "--rig", str(rig), "--jobs", "2"], sleep_s=SLEEP_S)
     workers = wait_for_workers(proc, 2, poll_s=0.005)
-    if proc.poll() is not None or not workers:
-        proc.kill()
-        proc.communicate()
-        pytest.skip("the audit finished before its worker phase could be interrupted")
+    if proc.poll() is not None or len(workers) < 2:
+        os.killpg(proc.pid, signal.SIGKILL)
+        _, stderr = proc.communicate()
+        pytest.fail(f"the audit's two workers never ran (exit {proc.returncode}): {stderr}")
     time.sleep(0.05)
     began = time.monotonic()
     if send == "SIGINT-group":
@@ -55,8 +56,7 @@ def _interrupt(log: tuple[Path, Path], send: str) -> tuple[int, str, list[int], 
         proc.communicate()
         pytest.fail(f"{send}: the audit hung after the signal")
     took = time.monotonic() - began
-    time.sleep(0.2)  # workers killed by PDEATHSIG/terminate need a moment to go
-    return proc.returncode, stderr, [w for w in workers if alive(w)], took
+    return proc.returncode, stderr, survivors(workers), took
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from slowed_cli import foreground
 from syncaudit.cli import app
 
 runner = CliRunner()
@@ -449,17 +450,19 @@ def test_a_signal_leaves_no_partial_output(tmp_path: Path, signum: int) -> None:
     out = tmp_path / "long.mcap"
     out.write_text("previous")
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "syncaudit",
-            "simulate",
-            "sync",
-            str(out),
-            "--duration",
-            "120",
-            "--overwrite",
-        ],
+        foreground(
+            [
+                sys.executable,
+                "-m",
+                "syncaudit",
+                "simulate",
+                "sync",
+                str(out),
+                "--duration",
+                "120",
+                "--overwrite",
+            ]
+        ),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

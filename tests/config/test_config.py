@@ -87,10 +87,10 @@ def test_deep_nesting_and_size_are_bounded(tmp_path: Path) -> None:
             load_rig(path)
     big = tmp_path / "big.yaml"
     big.write_text(RIG + "#" * MAX_CONFIG_BYTES)
-    started = time.perf_counter()
+    started = time.process_time()  # CPU time: the work done, not the machine's load
     with pytest.raises(ConfigError, match="larger than 1024 KiB"):
         load_rig(big)
-    assert time.perf_counter() - started < 1.0
+    assert time.process_time() - started < 1.0
 
 
 def test_not_a_mapping_and_missing_lidar(tmp_path: Path) -> None:

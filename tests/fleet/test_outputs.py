@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from slowed_cli import foreground
 from syncaudit.cli import app
 from syncaudit.errors import OutputError
 from syncaudit.fleet.gate import GateOptions, run_gate
@@ -189,7 +190,10 @@ def test_an_interrupted_run_leaves_no_temporary_and_the_previous_outputs(
     env = {**os.environ, "SYNCAUDIT_FLEET_TEST_HANG": "z_hangme"}
     with stderr.open("w") as err:
         proc = subprocess.Popen(
-            [*argv, "--overwrite", "--force"], stdout=subprocess.DEVNULL, stderr=err, env=env
+            foreground([*argv, "--overwrite", "--force"]),
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            env=env,
         )
         try:
             _wait_for(stderr, "[1/2] pass")  # the good log is judged, the other hangs

@@ -406,17 +406,43 @@ def run_cli(args: list[str], *, cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
     return Run(args, code, stderr, seconds, rss_kb / 1024, orphans)
 
 
+_PF_EXITING = 0x4
+"""/proc/PID/stat flags: the process is in the kernel's exit path."""
+_SIGKILL_BIT = 1 << (signal.SIGKILL - 1)
+
+
 def _session_members(sid: int) -> list[int]:
-    """Processes still alive in session `sid` (workers the run left behind)."""
+    """Processes still alive in session `sid` (workers the run left behind).
+
+    A worker already killed is not left behind, even where a loaded machine has not yet
+    let it run its exit: the kernel turns a fatal signal (the parent's PR_SET_PDEATHSIG
+    SIGKILL, its SIGTERM) into a pending SIGKILL at once, and marks a process exiting
+    before it becomes a zombie. Without this, such a worker counted as an orphan.
+    """
     out = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
             fields = stat.read_text().rsplit(")", 1)[1].split()
         except (OSError, IndexError):
             continue
-        if int(fields[3]) == sid and fields[0] != "Z":
+        if int(fields[3]) == sid and fields[0] not in "ZX" and not _dying(stat.parent, fields):
             out.append(int(stat.parent.name))
     return out
+
+
+def _dying(proc: Path, fields: list[str]) -> bool:
+    """Whether a process is exiting or has a SIGKILL pending (its end is certain)."""
+    if int(fields[6]) & _PF_EXITING:
+        return True
+    try:
+        status = (proc / "status").read_text()
+    except OSError:
+        return True  # gone since its stat was read
+    for line in status.splitlines():
+        key, _, value = line.partition(":")
+        if key in ("SigPnd", "ShdPnd") and int(value, 16) & _SIGKILL_BIT:
+            return True
+    return False
 
 
 def _kill_session(sid: int) -> None:

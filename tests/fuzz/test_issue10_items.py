@@ -141,10 +141,10 @@ def test_a_rig_of_thousands_of_cameras_is_refused_at_once(rig: Rig) -> None:
         rig.cameras[i % 3].model_copy(update={"name": f"cam{i}"}) for i in range(MAX_CAMERAS + 1)
     ]
     many = rig.model_copy(update={"cameras": cams})
-    start = time.monotonic()
+    start = time.process_time()  # CPU time: the work done, not the machine's load
     with pytest.raises(ConfigError, match=f"cameras: the rig lists {MAX_CAMERAS + 1} cameras"):
         audit_log(VLP16, many, jobs=1)
-    assert time.monotonic() - start < 5.0
+    assert time.process_time() - start < 5.0
 
 
 def test_info_command_prints_what_it_read_then_exits_as_audit(tmp_path: Path) -> None:

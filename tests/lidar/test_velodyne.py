@@ -313,9 +313,9 @@ def test_view_is_zero_copy_and_fast(vlp16: list[Scan]) -> None:
     )
     times = []
     for _ in range(200):
-        t0 = time.perf_counter()
+        t0 = time.thread_time()  # CPU time: a loaded machine's waits are not the view's
         v.velodyne_scan_packets(big, "cdr")
-        times.append(time.perf_counter() - t0)
+        times.append(time.thread_time() - t0)
     assert float(np.median(times)) < 500e-6  # measured ~13 us for 600 packets
 
 

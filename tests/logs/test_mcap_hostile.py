@@ -85,10 +85,10 @@ def test_huge_uncompressed_size_refused_before_allocating(
     path = tmp_path / "huge.mcap"
     _write(path, probe, compression, **(LINEAR if mode == "linear" else {}))
     offset = _set_size(path, size, which=1)
-    began = time.perf_counter()
+    began = time.process_time()  # CPU time: the work done, not the machine's load
     with pytest.raises(LogReadError, match="limit for one chunk") as info:
         _read_all(path)
-    assert time.perf_counter() - began < 2.0
+    assert time.process_time() - began < 2.0
     text = str(info.value)
     assert f"{path}: MCAP chunk at offset {offset}" in text and "\n" not in text
 
@@ -151,7 +151,7 @@ def test_lz4_bomb_stops_at_the_declared_size(
     _write(path, probe, CompressionType.LZ4, n=4, **(LINEAR if mode == "linear" else {}))
     monkeypatch.undo()
     assert path.stat().st_size < 2_000_000
-    began = time.perf_counter()
+    began = time.process_time()  # CPU time: the work done, not the machine's load
     with pytest.raises(LogReadError, match=r"lz4 data holds more bytes|holds more than") as info:
         if mode == "worker":
             with open_log(path) as log:
@@ -165,7 +165,7 @@ def test_lz4_bomb_stops_at_the_declared_size(
                 reader.close()
         else:
             _read_all(path)
-    assert time.perf_counter() - began < 2.0
+    assert time.process_time() - began < 2.0
     assert str(path) in str(info.value)
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from slowed_cli import alive, start, wait_for_workers
+from slowed_cli import start, survivors, wait_for_workers
 from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
 from syncaudit.workers import death_cause
 
@@ -53,7 +53,7 @@ def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None
     ]
     assert not json_out.exists()
     assert not list(tmp_path.iterdir())  # no temporary left either
-    assert not [pid for pid in workers if alive(pid)]
+    assert survivors(workers) == []
 
 
 def _die(how: str) -> None:
@@ -119,11 +119,14 @@ def test_death_cause_waits_for_a_status_the_pools_thread_reaped_first() -> None:
     store = threading.Timer(
         0.2, lambda: setattr(popen, "returncode", os.waitstatus_to_exitcode(status))
     )
-    store.start()  # ... and stores a moment later
     terminated = multiprocessing.get_context("fork").Process(target=_die, args=("sleep",))
     terminated.start()
     terminated.terminate()
     terminated.join(10)
+    # ... and stores a moment later: started now, so that a slow fork or join above (a
+    # loaded machine) cannot let the status arrive before `death_cause` looks for it.
+    store.start()
+    assert killed.exitcode is None  # no status yet: `death_cause` must wait for it
     try:
         said, exit_code = death_cause([terminated, killed])
     finally:

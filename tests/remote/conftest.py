@@ -1,10 +1,19 @@
-"""A real HTTP server on loopback that honours Range requests (and can misbehave)."""
+"""A real HTTP server on loopback that honours Range requests (and can misbehave).
+
+Each test's server is its own and ends with the test: the fixture wakes any handler still
+waiting (`delay_s`), stops the server and joins every handler thread, so no request of an
+earlier test is still being answered while later tests run. A client that hangs up before
+the reply is complete (a reader that timed out, a ranged reader that has what it needs) is
+counted in `hangups` quietly; any other error in a handler fails the test at teardown
+instead of being printed by socketserver in the middle of other tests' output.
+"""
 
 from __future__ import annotations
 
 import re
+import sys
 import threading
-import time
+import traceback
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
@@ -41,6 +50,38 @@ class ServerState:
     ranged_bytes: int = 0
     """Bytes asked for by the Range headers of 206 replies."""
     lock: threading.Lock = field(default_factory=threading.Lock)
+    stop: threading.Event = field(default_factory=threading.Event)
+    """Set when the test ends: a handler waiting out `delay_s` returns without replying."""
+    hangups: int = 0
+    """Replies cut short because the client closed its connection first."""
+    errors: list[str] = field(default_factory=list)
+    """Tracebacks of any other exception raised while handling a request."""
+
+
+HANGUPS = (BrokenPipeError, ConnectionResetError, ConnectionAbortedError)
+"""What writing to a connection the client has closed raises."""
+HANDLER_TIMEOUT_S = 60.0
+"""Socket timeout of a handler's connection: bounds the teardown's join of a handler whose
+client neither reads nor closes (never reached by a working client, even on a loaded
+machine)."""
+
+
+class RangeServer(ThreadingHTTPServer):
+    """A threaded HTTP server whose handler threads are joined when it closes, and whose
+    handler errors go to the test's `ServerState` instead of stderr."""
+
+    daemon_threads = False  # tracked, so that server_close() joins them
+    block_on_close = True
+    state: ServerState
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A client that hung up is counted; anything else is kept for the teardown."""
+        error = sys.exc_info()[1]
+        with self.state.lock:
+            if isinstance(error, HANGUPS):
+                self.state.hangups += 1
+            else:
+                self.state.errors.append(f"request from {client_address}: {traceback.format_exc()}")
 
 
 class RangeHandler(SimpleHTTPRequestHandler):
@@ -48,6 +89,7 @@ class RangeHandler(SimpleHTTPRequestHandler):
 
     state: ServerState
     disable_nagle_algorithm = True  # TCP_NODELAY, as real servers (nginx, aiohttp) set it
+    timeout = HANDLER_TIMEOUT_S
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, directory=str(self.state.root), **kwargs)
@@ -67,8 +109,9 @@ class RangeHandler(SimpleHTTPRequestHandler):
             self.send_header("Content-Length", "0")
             self.end_headers()
             return
-        if state.delay_s:
-            time.sleep(state.delay_s)
+        if state.delay_s and state.stop.wait(state.delay_s):
+            self.close_connection = True  # the test is over: no reply to a gone client
+            return
         path = Path(self.translate_path(self.path))
         if path.is_dir() or not path.is_file():
             super().do_GET()
@@ -155,12 +198,15 @@ def _server(root: Path) -> Iterator[tuple[str, ServerState]]:
     root.mkdir()
     state = ServerState(root)
     handler = type("Handler", (RangeHandler,), {"state": state})
-    server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    server.daemon_threads = True
+    server = RangeServer(("127.0.0.1", 0), handler)
+    server.state = state
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
         yield f"http://127.0.0.1:{server.server_address[1]}", state
     finally:
+        state.stop.set()
         server.shutdown()
-        server.server_close()
+        server.server_close()  # joins every handler thread
+        thread.join()
+    assert not state.errors, "the test server failed a request:\n" + "\n".join(state.errors)

@@ -9,8 +9,10 @@ Worker loss is Dask's: when a worker dies while auditing a log, the scheduler gi
 log to another worker and counts the death on the task (`suspicious`); past the
 scheduler's `distributed.scheduler.allowed-failures` (default 3) the task fails with
 `KilledWorker`, which becomes the log's error row (exit 3). The tries a log took are
-read back from the scheduler. A log past `timeout_s` is cancelled, its worker restarted
-by its nanny (a Python thread cannot be stopped otherwise), and a timeout row recorded.
+read back from the scheduler. A try past `timeout_s` is cancelled, its worker restarted
+by its nanny (a Python thread cannot be stopped otherwise), and a timeout row recorded;
+as in a local run, each try has its own clock (a retry after a worker died does not
+inherit the time the dead worker spent, nor the time the log waited to be retried).
 """
 
 from __future__ import annotations
@@ -119,7 +121,7 @@ class DaskExecutor:
                 cluster_task, _absolute(job), options, self.task, pure=False
             )
             futures[future] = job
-        started: dict[Any, float] = {}
+        started: dict[Any, tuple[str, float]] = {}
         try:
             while futures:
                 try:
@@ -171,9 +173,14 @@ class DaskExecutor:
         return outcome
 
     def _expire(
-        self, futures: dict[Any, LogJob], started: dict[Any, float]
+        self, futures: dict[Any, LogJob], started: dict[Any, tuple[str, float]]
     ) -> Iterator[LogOutcome]:
-        """Time out logs processing longer than `timeout_s`: cancel, restart their worker."""
+        """Time out tries running longer than `timeout_s`: cancel, restart their worker.
+
+        `started` maps a future to the worker running its current try and when the driver
+        first saw it there; a log no longer running (its worker died, it waits for a
+        retry) or running on another worker is on a new try, with a new clock.
+        """
         if not futures:
             return
         now = time.monotonic()
@@ -182,10 +189,14 @@ class DaskExecutor:
         for future in list(futures):
             worker = running.get(future.key)
             if worker is None:
+                started.pop(future, None)
                 continue
-            since = started.setdefault(future, now)
+            if future not in started or started[future][0] != worker:
+                started[future] = (worker, now)
+            since = started[future][1]
             if now - since < self.timeout_s:
                 continue
+            started.pop(future)
             job = futures.pop(future)
             future.cancel()
             with contextlib.suppress(Exception):

@@ -23,6 +23,7 @@ from typing import Any, Protocol
 
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.job import JobOptions, LogOutcome, apply_test_hooks, run_log_job
+from syncaudit.workers import die_with_parent
 
 Task = Callable[[LogJob, JobOptions], LogOutcome]
 DEFAULT_TIMEOUT_S = 3600.0
@@ -50,9 +51,14 @@ def preload() -> None:
     import syncaudit.report.html  # noqa: F401
 
 
-def _worker_main(conn: Connection, task: Task, options: JobOptions) -> None:
+def _worker_main(conn: Connection, task: Task, options: JobOptions, driver_pid: int) -> None:
     """Worker loop: receive a job, send its outcome; None ends the loop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides about interrupts
+    # Started with SIGINT blocked (see `_spawn`): a Ctrl-C that reached it before the line
+    # above stayed pending, and is discarded now that it is ignored.
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    # A driver killed outright must not leave its workers auditing (or hanging) on.
+    die_with_parent(driver_pid)
     os.setpgid(0, 0)  # its own group: killing it also kills the chunk processes it starts
     while True:
         try:
@@ -106,9 +112,16 @@ class LocalExecutor:
         parent, child = self._context.Pipe()
         # Not a daemon: a worker may start its own chunk pool (few logs, many cores).
         process = self._context.Process(
-            target=_worker_main, args=(child, self.task, options), daemon=False
+            target=_worker_main, args=(child, self.task, options, os.getpid()), daemon=False
         )
-        process.start()
+        # A Ctrl-C reaches the whole process group: one arriving while a worker starts,
+        # before it ignores SIGINT, would end it with a KeyboardInterrupt traceback. The
+        # worker inherits the blocked mask (across fork and exec) and unblocks it itself.
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
         child.close()
         return _Worker(process, parent)
 
