@@ -11,6 +11,7 @@ from pathlib import Path
 import lz4.frame
 import pytest
 
+from lz4_layouts import LZ4_LAYOUTS
 from syncaudit.logs.lz4_frame import (
     FileSpan,
     FrameError,
@@ -21,20 +22,7 @@ from syncaudit.logs.lz4_frame import (
 )
 
 FRAMES = {
-    # rosbags' writer: lz4.frame.compress defaults
-    "rosbags": {"block_size": lz4.frame.BLOCKSIZE_MAX64KB, "store_size": True},
-    # roslz4 (rosbag): independent 1 MiB blocks, a content checksum, no content size
-    "roslz4": {
-        "block_size": lz4.frame.BLOCKSIZE_MAX1MB,
-        "block_linked": False,
-        "content_checksum": True,
-        "store_size": False,
-    },
-    "block-checksums": {
-        "block_size": lz4.frame.BLOCKSIZE_MAX256KB,
-        "block_checksum": True,
-        "content_checksum": True,
-    },
+    **LZ4_LAYOUTS,
     "linked-4mb": {"block_size": lz4.frame.BLOCKSIZE_MAX4MB, "store_size": False},
 }
 

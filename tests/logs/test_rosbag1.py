@@ -22,6 +22,7 @@ import pytest
 from rosbags.rosbag1 import Reader, Writer
 from rosbags.typesys.store import Typestore
 
+from lz4_layouts import LZ4_LAYOUTS
 from syncaudit.errors import LogReadError, SyncauditError
 from syncaudit.logs import open_log
 from syncaudit.logs.model import ChannelInfo, ReadUnit
@@ -355,20 +356,7 @@ def test_mutated_bags_end_in_a_documented_error_or_a_read(
 
 # ---- lz4 chunks read lazily (stored blocks stay views of the mapped file) ----------------
 
-LZ4_FRAMES = {
-    "rosbags": {},  # lz4.frame.compress defaults: linked 64 KiB blocks, content size
-    "roslz4": {  # rosbag's roslz4: independent 1 MiB blocks, content checksum, no size
-        "block_size": lz4.frame.BLOCKSIZE_MAX1MB,
-        "block_linked": False,
-        "content_checksum": True,
-        "store_size": False,
-    },
-    "block-checksums": {
-        "block_size": lz4.frame.BLOCKSIZE_MAX256KB,
-        "block_checksum": True,
-        "content_checksum": True,
-    },
-}
+LZ4_FRAMES = LZ4_LAYOUTS
 
 
 def write_camera_bag(path: Path, store: Typestore, frame: dict[str, object]) -> Path:
