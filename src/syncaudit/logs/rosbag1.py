@@ -473,51 +473,6 @@ def chunk_body(
     return body
 
 
-def walk_records(
-    body: bytes | memoryview, offset: int, *, partial: bool = False
-) -> Iterator[tuple[int, dict[str, bytes], memoryview]]:
-    """(op, header fields, data) of each record in an uncompressed chunk body.
-
-    `partial`: the body is the decompressed start of a cut-off chunk; stop quietly at the
-    first incomplete record. Otherwise a record overrunning the body raises LogReadError.
-    """
-    view = memoryview(body)
-    size = len(body)
-    pos = 0
-    while pos < size:
-        problem = ""
-        if pos + 4 > size:
-            problem = "record cut off"
-        else:
-            (hlen,) = _U32.unpack_from(body, pos)
-            dlen_at = pos + 4 + hlen
-            if dlen_at + 4 > size:
-                problem = "record header overruns the chunk"
-            else:
-                (dlen,) = _U32.unpack_from(body, dlen_at)
-                end = dlen_at + 4 + dlen
-                if end > size:
-                    problem = "record data overruns the chunk"
-        if problem:
-            if partial:
-                return
-            raise LogReadError(
-                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
-            )
-        try:
-            fields = parse_header(body, pos + 4, dlen_at)
-            op = _op(fields)
-        except ValueError as exc:
-            if partial:
-                return
-            raise LogReadError(
-                f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the chunk: "
-                f"{exc})"
-            ) from None
-        yield op, fields, view[dlen_at + 4 : end]
-        pos = end
-
-
 def open_bag_file(path: Path) -> BagFile:
     """Open a bag file for reading at offsets (caller closes `.handle`)."""
     handle = path.open("rb")
@@ -593,6 +548,77 @@ class _PieceCursor:
         return view, 0
 
 
+def _records(
+    cursor: _PieceCursor, offset: int, *, partial: bool
+) -> Iterator[tuple[int, bytes | memoryview, int, int, int, int]]:
+    """(record offset, buffer, header offset in it, header length, data offset, data length)
+    of each record of an uncompressed chunk body, its framing checked; the buffer holds the
+    header and the data length after it.
+
+    `partial`: the body is the start of a cut-off chunk; stop quietly at the first
+    incomplete record. Otherwise a record overrunning the body raises LogReadError naming
+    the chunk's `offset` and the offset in the chunk.
+    """
+    size = cursor.pieces.size
+    pos = 0
+    while pos < size:
+        problem = ""
+        if pos + 4 > size:
+            problem = "record cut off"
+        else:
+            buf, at = cursor.at(pos, 4)
+            (hlen,) = _U32.unpack_from(buf, at)
+            data_at = pos + 8 + hlen
+            if data_at > size:
+                problem = "record header overruns the chunk"
+            else:
+                buf, at = cursor.at(pos + 4, hlen + 4)
+                (dlen,) = _U32.unpack_from(buf, at + hlen)
+                if data_at + dlen > size:
+                    problem = "record data overruns the chunk"
+        if problem:
+            if partial:
+                return
+            raise LogReadError(
+                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
+            )
+        yield pos, buf, at, hlen, data_at, dlen
+        pos = data_at + dlen
+
+
+def _header(
+    buf: bytes | memoryview, at: int, hlen: int, offset: int, pos: int
+) -> tuple[dict[str, bytes], int]:
+    """(fields, op) of the record header at `buf[at:at + hlen]`; LogReadError if unreadable."""
+    try:
+        fields = parse_header(buf, at, at + hlen)
+        return fields, _op(fields)
+    except ValueError as exc:
+        raise LogReadError(
+            f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the chunk: {exc})"
+        ) from None
+
+
+def walk_records(
+    body: bytes | memoryview, offset: int, *, partial: bool = False
+) -> Iterator[tuple[int, dict[str, bytes], memoryview]]:
+    """(op, header fields, data) of each record in an uncompressed chunk body.
+
+    `partial`: the body is the decompressed start of a cut-off chunk; stop quietly at the
+    first incomplete record. Otherwise a record overrunning the body raises LogReadError.
+    """
+    cursor = _PieceCursor(whole(body))
+    for pos, buf, at, hlen, data_at, dlen in _records(cursor, offset, partial=partial):
+        try:
+            fields, op = _header(buf, at, hlen, offset, pos)
+        except LogReadError:
+            if partial:
+                return
+            raise
+        data, data_pos = cursor.at(data_at, dlen)
+        yield op, fields, memoryview(data)[data_pos : data_pos + dlen]
+
+
 def wanted_messages(
     pieces: Pieces, channels: dict[int, ChannelInfo], offset: int, *, partial: bool = False
 ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
@@ -605,30 +631,8 @@ def wanted_messages(
     raises LogReadError naming the chunk's `offset` and the offset in the chunk.
     """
     cursor = _PieceCursor(pieces)
-    size = pieces.size
-    pos = index = 0
-    while pos < size:
-        problem = ""
-        if pos + 4 > size:
-            problem = "record cut off"
-        else:
-            buf, at = cursor.at(pos, 4)
-            (hlen,) = _U32.unpack_from(buf, at)
-            dlen_at = pos + 4 + hlen
-            if dlen_at + 4 > size:
-                problem = "record header overruns the chunk"
-            else:
-                buf, at = cursor.at(pos + 4, hlen + 4)
-                (dlen,) = _U32.unpack_from(buf, at + hlen)
-                end = dlen_at + 4 + dlen
-                if end > size:
-                    problem = "record data overruns the chunk"
-        if problem:
-            if partial:
-                return
-            raise LogReadError(
-                f"ROS 1 chunk at byte {offset}: {problem} (offset {pos} in the chunk)"
-            )
+    index = 0
+    for pos, buf, at, hlen, data_at, dlen in _records(cursor, offset, partial=partial):
         conn_id = -1
         op = 0
         if hlen == _MSG_HEAD_BYTES:
@@ -645,17 +649,12 @@ def wanted_messages(
                 conn_id = -1
         if conn_id < 0:
             try:
-                fields = parse_header(buf, at, at + hlen)
-                op = _op(fields)
-            except ValueError as exc:
+                fields, op = _header(buf, at, hlen, offset, pos)
+            except LogReadError:
                 if partial:
                     return
-                raise LogReadError(
-                    f"ROS 1 chunk at byte {offset}: unreadable record (offset {pos} in the "
-                    f"chunk: {exc})"
-                ) from None
+                raise
             if op != OP_MSG_DATA:
-                pos = end
                 continue
             try:
                 conn_id = _u32(fields, "conn")
@@ -666,17 +665,15 @@ def wanted_messages(
                     f"ROS 1 chunk at byte {offset}: bad message record ({exc})"
                 ) from None
         elif op != OP_MSG_DATA:
-            pos = end
             continue
         else:
             info = channels.get(conn_id)
             t = sec * 1_000_000_000 + nsec
         if info is not None:
             wanted = dlen if info.prefix_bytes <= 0 else min(dlen, info.prefix_bytes)
-            data, data_at = cursor.at(dlen_at + 4, wanted)
-            yield t, index, conn_id, memoryview(data)[data_at : data_at + wanted]
+            data, data_pos = cursor.at(data_at, wanted)
+            yield t, index, conn_id, memoryview(data)[data_pos : data_pos + wanted]
         index += 1
-        pos = end
 
 
 HEAD_BYTES = 4096
