@@ -67,7 +67,11 @@ class ClockEstimator:
         self._sumsq += float(np.square(rel).sum())
         self._min = min(self._min, int(raw.min()))
         self._max = max(self._max, int(raw.max()))
-        kept = raw[(np.arange(raw.size) + self._phase) % self._stride == 0]
+        # Every stride-th difference counting on from the last chunk's: the indices i with
+        # (i + phase) % stride == 0 (copied: a view would keep all of `raw` alive).
+        kept = (
+            raw if self._stride == 1 else raw[(-self._phase) % self._stride :: self._stride].copy()
+        )
         self._phase = (self._phase + raw.size) % self._stride
         self._sample.append(kept)
         self._sample_size += kept.size

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from syncaudit.columns.distinct import distinct
 from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.columns.runs import run_starts
 from syncaudit.lidar.samples import PacketSamples
 
 FULL_TURN_DEG = 360.0
@@ -24,6 +25,53 @@ MAX_BLOCK_STEP_DEG = 90.0
 """Steps larger than this between consecutive blocks are gaps, not rotation samples."""
 CROP_BIN_DEG = 5.0
 """Gaps that start within this angle of each other in most revolutions are a cropped sector."""
+NO_TURN_BOUND_DEG = 90.0
+"""Where the fastest block-to-block rate times the longest moving step's time stays below
+this, the gap-turn correction of every moving step is 0 whatever the median rate."""
+
+
+def _orient(azimuth_deg: NDArray[np.float64], direction: int) -> NDArray[np.float64]:
+    """(direction * azimuth) % 360, skipping the float remainder where it changes nothing.
+
+    `x % 360` is `x` itself for every 0 <= x < 360 but -0.0 (which becomes +0.0), so an
+    increasing azimuth already in range (every vendor decoder's) is returned as it is;
+    NaN fails the range test and takes the remainder like anything else.
+    """
+    if direction == 1 and azimuth_deg.size:
+        lo, hi = float(azimuth_deg.min()), float(azimuth_deg.max())
+        in_range = lo >= 0.0 and hi < FULL_TURN_DEG
+        if in_range and (lo > 0.0 or not np.signbit(azimuth_deg).any()):
+            return azimuth_deg
+    oriented: NDArray[np.float64] = (direction * azimuth_deg) % FULL_TURN_DEG
+    return oriented
+
+
+def _gap_turns(
+    omega_deg_ns: float, dts: NDArray[np.float64], step: NDArray[np.float64]
+) -> NDArray[np.int64]:
+    """Whole turns a step hides beyond its forward angle: round((omega * dt - step) / 360)."""
+    turns: NDArray[np.int64] = np.round((omega_deg_ns * dts - step) / FULL_TURN_DEG).astype(
+        np.int64
+    )
+    return turns
+
+
+def _median_int(values: NDArray[np.int64], guess: float) -> float:
+    """`float(np.median(values))` of a nonempty int64 array, without the partition when
+    `guess` (e.g. the previous chunk's median) is the value at both middle positions.
+
+    The k-th smallest value is v exactly when fewer than k + 1 values are below v and more
+    than k are at or below it; np.median is then float(v) (odd size) or
+    (float(v) + float(v)) / 2 == float(v) (even size).
+    """
+    n = values.size
+    if n and math.isfinite(guess) and guess == math.floor(guess):
+        v = int(guess)
+        below = int(np.count_nonzero(values < v))
+        upto = int(np.count_nonzero(values <= v))
+        if below <= (n - 1) // 2 and n // 2 < upto:
+            return float(v)
+    return float(np.median(values))
 
 
 def _interpolate(
@@ -73,8 +121,12 @@ class RevolutionTracker:
     target_azimuth_deg: tuple[float, ...] = ()
     _carry: _Carry | None = None
     _omega_deg_ns: float = math.nan
+    _omega_ratios: NDArray[np.float64] | None = None
+    """Rates (deg/ns) whose median is the block rate, until it is first needed."""
     _period_ns: float = math.nan
     _last_packet_ns: int | None = None
+    _gap_median_ns: float = math.nan
+    """The last chunk's median packet gap: the likely median of the next."""
     _zero: dict[int, tuple[int, int, int]] = field(default_factory=dict)
     _targets: dict[int, NDArray[np.int64]] = field(default_factory=dict)
     """Per revolution k: each target's crossing time (-1 where not seen)."""
@@ -100,7 +152,7 @@ class RevolutionTracker:
         if times.size == 0:
             return
         packet_of = samples.sample_packet
-        oriented = (self.direction * samples.sample_azimuth_deg) % FULL_TURN_DEG
+        oriented = _orient(samples.sample_azimuth_deg, self.direction)
         turns = self._turns(times, oriented)
         unwrapped = oriented + FULL_TURN_DEG * turns
         self._count_packets(samples.sensor_time_ns, unwrapped, packet_of)
@@ -137,13 +189,53 @@ class RevolutionTracker:
         step = delta + FULL_TURN_DEG * wraps
         dts = np.diff(np.concatenate(([prev_t], times))).astype(np.float64)
         moving = (dts > 0) & (step > 0) & (step < MAX_BLOCK_STEP_DEG)
-        if np.any(moving):
-            self._omega_deg_ns = float(np.median(step[moving] / dts[moving]))
-        if math.isfinite(self._omega_deg_ns):
-            expected = self._omega_deg_ns * dts
-            wraps += np.round((expected - step) / FULL_TURN_DEG).astype(np.int64)
+        moving_dts = dts[moving]
+        ratios = step[moving] / moving_dts
+        if ratios.size:
+            self._omega_ratios = ratios  # the block rate: their median, taken when needed
+            self._add_gap_turns(wraps, dts, step, moving, ratios, float(moving_dts.max()))
+        elif math.isfinite(self._omega()):
+            wraps += _gap_turns(self._omega(), dts, step)
         turns: NDArray[np.int64] = prev_turns + np.cumsum(wraps)
         return turns
+
+    def _omega(self) -> float:
+        """The block rate (deg/ns): median of the last chunk's moving rates; NaN before any."""
+        if self._omega_ratios is not None:
+            self._omega_deg_ns = float(np.median(self._omega_ratios))
+            self._omega_ratios = None
+        return self._omega_deg_ns
+
+    def _add_gap_turns(
+        self,
+        wraps: NDArray[np.int64],
+        dts: NDArray[np.float64],
+        step: NDArray[np.float64],
+        moving: NDArray[np.bool_],
+        ratios: NDArray[np.float64],
+        max_moving_dt: float,
+    ) -> None:
+        """wraps += _gap_turns(median of `ratios`, dts, step), mostly without the median.
+
+        The median lies in [min, max] of `ratios` (the mean of two middle values too), and
+        round((w * dt - step) / 360) is monotonic in w for each sample (every float step is
+        monotonic), so where it is the same at both ends it is the value at the median.
+        For moving samples (0 < step < 90, 0 < dt) it is 0 at both ends as soon as
+        max * longest dt < 90: then -90 < w * dt - step < 90. Only the other samples (gaps,
+        repeats: a few) are evaluated at both ends, and the median taken only if they differ.
+        """
+        lo, hi = float(ratios.min()), float(ratios.max())
+        if not hi * max_moving_dt < NO_TURN_BOUND_DEG:
+            wraps += _gap_turns(self._omega(), dts, step)
+            return
+        others = np.flatnonzero(~moving)
+        if not others.size:
+            return
+        dt_o, step_o = dts[others], step[others]
+        at_lo = _gap_turns(lo, dt_o, step_o)
+        if not np.array_equal(at_lo, _gap_turns(hi, dt_o, step_o)):
+            at_lo = _gap_turns(self._omega(), dt_o, step_o)
+        wraps[others] += at_lo
 
     def _count_packets(
         self,
@@ -152,14 +244,18 @@ class RevolutionTracker:
         packet_of: NDArray[np.int64],
     ) -> None:
         """Packets per revolution, and packets missing from gaps in the sensor-time cadence."""
-        packets, first = np.unique(packet_of, return_index=True)
+        first = run_starts(packet_of)  # packet_of is nondecreasing from packet_samples
+        if first is None:
+            packets, first = np.unique(packet_of, return_index=True)
+        else:
+            packets = packet_of[first]
         rev = np.floor((unwrapped[first] - self._zero_oriented) / FULL_TURN_DEG).astype(np.int64)
         stamps = sensor_ns[packets]
         prev = self._last_packet_ns
         gaps = np.diff(stamps if prev is None else np.concatenate(([prev], stamps)))
         positive = gaps[gaps > 0]
         if positive.size:
-            median = float(np.median(positive))
+            median = self._gap_median_ns = _median_int(positive, self._gap_median_ns)
             self._period_ns = (
                 median if not math.isfinite(self._period_ns) else min(median, self._period_ns)
             )
@@ -170,9 +266,7 @@ class RevolutionTracker:
         for i in np.flatnonzero(missing).tolist():
             angle = float((unwrapped[first[i]] - self._zero_oriented) % FULL_TURN_DEG)
             self._gaps.append((int(rev[i]), angle, int(missing[i])))
-        revs, inverse = np.unique(rev, return_inverse=True)
-        counts = np.bincount(inverse)
-        drops = np.bincount(inverse, weights=missing).astype(np.int64)
+        revs, counts, drops = _per_revolution(rev, missing)
         for k, count, drop in zip(revs.tolist(), counts.tolist(), drops.tolist(), strict=True):
             self._packets[k] = self._packets.get(k, 0) + count
             self._dropped[k] = self._dropped.get(k, 0) + drop
@@ -239,7 +333,7 @@ class RevolutionTracker:
     @property
     def omega_blocks_deg_s(self) -> float:
         """Angular velocity from consecutive blocks (works with less than a revolution)."""
-        return self._omega_deg_ns * 1e9
+        return self._omega() * 1e9
 
     def cropped_sector(self) -> tuple[float, float, int] | None:
         """(end angle of the recorded sector, missing packets per turn, revolutions) where the
@@ -291,3 +385,21 @@ class RevolutionTracker:
             zero_packet_sensor_ns=np.array([self._zero[k][1] for k in ks], dtype=np.int64),
             zero_packet_driver_ns=np.array([self._zero[k][2] for k in ks], dtype=np.int64),
         )
+
+
+def _per_revolution(
+    rev: NDArray[np.int64], missing: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """The distinct revolutions of a chunk's packets, packets and missing packets in each.
+
+    Revolution numbers are nondecreasing but where the angle steps back across a
+    boundary; runs of equal numbers then give what `np.unique` and `np.bincount` give.
+    """
+    starts = run_starts(rev)
+    if starts is None:
+        revs, inverse = np.unique(rev, return_inverse=True)
+        counts = np.bincount(inverse)
+        drops = np.bincount(inverse, weights=missing).astype(np.int64)
+        return revs, counts, drops
+    counts = np.diff(starts, append=rev.size)
+    return rev[starts], counts, np.add.reduceat(missing, starts)
