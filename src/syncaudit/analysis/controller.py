@@ -180,26 +180,38 @@ def eq2_delay_ns(
 
 
 class DelayController:
-    """Online self-adaptive trigger delay for one camera (Eq. 2, 3, 5, 6 + thresholds)."""
+    """Online self-adaptive trigger delay for one camera (Eq. 2, 3, 5, 6 + thresholds).
+
+    Per frame it only stores the inputs and updates the error window's exact sums: the
+    running averages of Eq. 2/3 are summed when an adjustment needs them (exact integer
+    sums, so the same values as sums kept per push), and the window's statistics are built
+    as objects only when judged over a threshold or asked for.
+    """
 
     def __init__(self, config: ControllerConfig, initial_delay_ns: int | None = None) -> None:
         """`initial_delay_ns` is the delay used until the first adjustment; None: compute
         it by Eq. 2 from the first observation."""
         self.config = config
-        n = config.window_frames
-        self._t1 = RingBuffer(n)
-        self._t2 = RingBuffer(n)
-        self._t3 = RingBuffer(n)
-        self._t4 = RingBuffer(n)
-        self._t5 = RingBuffer(n)
-        self._t_rotate = RingBuffer(n)
-        self._abs_error = RingBuffer(n)
-        self._signed_error = RingBuffer(n)
+        self._capacity = config.window_frames
+        self._inputs: list[tuple[int, int, int, int, int, int]] = []
+        """The last N (t1, t2, t3, t4, t5, t_rotate), a ring: the oldest at `_next`."""
+        self._next = 0
+        self._errors: list[int] = [0] * self._capacity
+        """The error window's signed errors, a ring of `_error_count` from `_error_next`."""
+        self._error_next = 0
+        self._error_count = 0
+        self._sum_abs = 0
+        self._sum_sq = 0
+        self._sum_signed = 0
         self._delay_ns: int | None = None if initial_delay_ns is None else int(initial_delay_ns)
         self.frames_seen = 0
         self.adjustments: list[Adjustment] = []
-        self.last_stats: WindowStats | None = None
+        self._last: tuple[int, int, int, int] | None = None
+
+    @property
+    def last_stats(self) -> WindowStats | None:
         """Error statistics of the window judged at the last update."""
+        return None if self._last is None else _stats(*self._last)
 
     @property
     def delay_ns(self) -> int | None:
@@ -207,68 +219,106 @@ class DelayController:
         initial delay was given)."""
         return self._delay_ns
 
+    def _mean_input(self, column: int) -> float:
+        """Running average of one input over the last N frames; NaN before any."""
+        n = len(self._inputs)
+        return sum(row[column] for row in self._inputs) / n if n else float("nan")
+
     def mean_t5_ns(self) -> float:
         """Eq. 3: running average of the last N exposure durations."""
-        return self._t5.mean()
+        return self._mean_input(4)
 
     def eq2_delay_ns(self) -> float:
         """Eq. 2 with the running averages of t_rotate, t1..t4 and t5 (Eq. 3)."""
         return eq2_delay_ns(
-            self._t_rotate.mean(),
-            self._t1.mean(),
-            self._t2.mean(),
-            self._t3.mean(),
-            self._t4.mean(),
-            self._t5.mean(),
+            self._mean_input(5),
+            self._mean_input(0),
+            self._mean_input(1),
+            self._mean_input(2),
+            self._mean_input(3),
+            self._mean_input(4),
         )
 
     def window_stats(self) -> WindowStats:
         """Eq. 5, Eq. 6 and the signed mean over the current error window."""
-        n = len(self._abs_error)
-        return WindowStats(
-            frames=n,
-            error_mean_ns=eq5_mean_abs(self._abs_error.sum, n),
-            error_var_ns2=eq6_variance(self._abs_error.sum, self._abs_error.sum_sq, n),
-            signed_error_mean_ns=self._signed_error.mean(),
-        )
+        return _stats(self._error_count, self._sum_abs, self._sum_sq, self._sum_signed)
 
     def _clamp(self, delay_ns: float) -> int:
         """Round to ns and clamp to [0, t_rotate]: a negative sleep cannot be waited, and
         a sleep past t_rotate would aim at the next camera's sector."""
-        upper = max(0, round(self._t_rotate.mean()))
+        upper = max(0, round(self._mean_input(5)))
         return min(max(0, round(delay_ns)), upper)
 
     def update(self, frame: FrameObservation) -> int:
         """Feed one frame's observation; return the delay (ns) for the next trigger."""
-        self._t1.push(frame.t1_ns)
-        self._t2.push(frame.t2_ns)
-        self._t3.push(frame.t3_ns)
-        self._t4.push(frame.t4_ns)
-        self._t5.push(frame.exposure_ns)
-        self._t_rotate.push(frame.t_rotate_ns)
-        self._abs_error.push(abs(int(frame.error_ns)))
-        self._signed_error.push(int(frame.error_ns))
+        return self.observe(
+            frame.t1_ns,
+            frame.t2_ns,
+            frame.t3_ns,
+            frame.t4_ns,
+            frame.exposure_ns,
+            frame.error_ns,
+            frame.t_rotate_ns,
+        )
+
+    def observe(
+        self,
+        t1_ns: int,
+        t2_ns: int,
+        t3_ns: int,
+        t4_ns: int,
+        exposure_ns: int,
+        error_ns: int,
+        t_rotate_ns: int,
+    ) -> int:
+        """`update` for one frame's values as they are (the replay's per-frame call)."""
+        row = (int(t1_ns), int(t2_ns), int(t3_ns), int(t4_ns), int(exposure_ns), int(t_rotate_ns))
+        capacity = self._capacity
+        if len(self._inputs) < capacity:
+            self._inputs.append(row)
+        else:
+            self._inputs[self._next] = row
+            self._next = (self._next + 1) % capacity
+        error = int(error_ns)
+        magnitude = abs(error)
+        slot = self._error_next
+        if self._error_count == capacity:
+            old = self._errors[slot]
+            old_magnitude = abs(old)
+            self._sum_abs -= old_magnitude
+            self._sum_sq -= old_magnitude * old_magnitude
+            self._sum_signed -= old
+        else:
+            self._error_count += 1
+        self._errors[slot] = error
+        self._error_next = (slot + 1) % capacity
+        self._sum_abs += magnitude
+        self._sum_sq += magnitude * magnitude
+        self._sum_signed += error
         index = self.frames_seen
         self.frames_seen += 1
-        stats = self.window_stats()
-        self.last_stats = stats
+        n = self._error_count
+        self._last = (n, self._sum_abs, self._sum_sq, self._sum_signed)
 
         if self._delay_ns is None:
             # No configured delay: start from Eq. 2 (the method's initial t_sleep); the
             # error of this frame belongs to no delay of ours, so the window restarts.
+            stats = _stats(*self._last)
             self._set_delay(index, self._clamp(self.eq2_delay_ns()), "initial", stats)
             return self._require_delay()
 
-        if stats.frames < self.config.min_frames:
-            return self._require_delay()
-        over_mean = stats.error_mean_ns > self.config.mean_error_threshold_ns
-        over_var = stats.error_var_ns2 > self.config.variance_threshold_ns2
+        config = self.config
+        if n < config.min_frames:
+            return self._delay_ns
+        over_mean = eq5_mean_abs(self._sum_abs, n) > config.mean_error_threshold_ns
+        over_var = eq6_variance(self._sum_abs, self._sum_sq, n) > config.variance_threshold_ns2
         if not (over_mean or over_var):
-            return self._require_delay()
+            return self._delay_ns
+        stats = _stats(*self._last)
         reason: Literal["mean", "variance", "mean+variance"] = (
             "mean+variance" if over_mean and over_var else "mean" if over_mean else "variance"
         )
-        if self.config.mode == "recompute":
+        if config.mode == "recompute":
             new_delay = self._clamp(self.eq2_delay_ns())
         else:
             new_delay = self._clamp(self._require_delay() - stats.signed_error_mean_ns)
@@ -287,10 +337,23 @@ class DelayController:
         self.adjustments.append(
             Adjustment(index, new_delay_ns if old is None else old, new_delay_ns, reason, stats)
         )
-        self._abs_error.clear()
-        self._signed_error.clear()
+        self._error_next = 0
+        self._error_count = 0
+        self._sum_abs = 0
+        self._sum_sq = 0
+        self._sum_signed = 0
 
     def _require_delay(self) -> int:
         if self._delay_ns is None:  # pragma: no cover - set by the first update
             raise RuntimeError("controller has no delay yet")
         return self._delay_ns
+
+
+def _stats(n: int, sum_abs: int, sum_sq: int, sum_signed: int) -> WindowStats:
+    """Eq. 5, Eq. 6 and the signed mean of a window of n errors from its exact sums."""
+    return WindowStats(
+        frames=n,
+        error_mean_ns=eq5_mean_abs(sum_abs, n),
+        error_var_ns2=eq6_variance(sum_abs, sum_sq, n),
+        signed_error_mean_ns=sum_signed / n if n else float("nan"),
+    )

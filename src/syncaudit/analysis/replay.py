@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.analysis.controller import ControllerConfig, DelayController
 from syncaudit.analysis.stamps import values_ns
 from syncaudit.analysis.stats import error_mean, error_variance
 from syncaudit.columns.table import Table
@@ -78,25 +78,23 @@ def replay_controller(frames: Table, config: ControllerConfig) -> ReplayResult |
     if not values.shape[0]:
         return None
     controller = DelayController(config, initial_delay_ns=int(values[0, 6]))
-    errors = np.empty(values.shape[0])
-    delays = np.empty(values.shape[0], dtype=np.int64)
+    error_list: list[float] = []
+    delay_list: list[int] = []
     delay = int(values[0, 6])
-    rotate_list = rotate.tolist()
-    # Python floats: the loop is per frame (the online algorithm), numpy scalars are slow.
-    for i, (t1, t2, t3, t4, t5, err, applied, _) in enumerate(values.tolist()):
+    observe = controller.observe
+    # Python floats and ints: the loop is per frame (the online algorithm), and numpy
+    # scalars, per-frame objects and item assignment into arrays are slow.
+    for (t1, t2, t3, t4, t5, err, applied, _), rot in zip(
+        values.tolist(), rotate.tolist(), strict=True
+    ):
         corrected = err + (delay - applied)
-        errors[i], delays[i] = corrected, delay
-        delay = controller.update(
-            FrameObservation(
-                t1_ns=round(t1),
-                t2_ns=round(t2),
-                t3_ns=round(t3),
-                t4_ns=round(t4),
-                exposure_ns=round(t5),
-                error_ns=round(corrected),
-                t_rotate_ns=round(rotate_list[i]),
-            )
+        error_list.append(corrected)
+        delay_list.append(delay)
+        delay = observe(
+            round(t1), round(t2), round(t3), round(t4), round(t5), round(corrected), round(rot)
         )
+    errors = np.array(error_list, dtype=np.float64)
+    delays = np.array(delay_list, dtype=np.int64)
     abs_err = np.abs(errors)
     first = controller.adjustments[0].frame_index + 1 if controller.adjustments else 0
     settled = abs_err[first:]
