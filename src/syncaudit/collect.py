@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import gc
 import heapq
+import itertools
 import multiprocessing
 import os
 from collections.abc import Callable, Iterator
@@ -188,6 +189,10 @@ _INHERITED_LOGS: dict[str, LogReader] = {}
 """Logs open in the parent while its pool runs: forked workers use them as they are."""
 _WORKER_STATE: dict[tuple[str, bool], tuple[LogReader, _Readers]] = {}
 """Per worker process: the log and its unit readers (buffers reused for every task)."""
+_INHERITED_TASKS: dict[str, _Task] = {}
+"""Task of each pool running in the parent, by token: forked workers look theirs up rather
+than unpickling it (its channels and plan, ~3 KB) with every group."""
+_task_tokens = itertools.count()
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,8 +208,11 @@ class _Task:
     signed URL's query string, which `log_path` and every message leave out). Not shown."""
 
 
-def _extract_group(task: _Task, units: list[ReadUnit]) -> list[Keyed]:
-    """Read and extract one group of units (the worker task)."""
+def _extract_group(task: _Task | str, units: list[ReadUnit]) -> list[Keyed]:
+    """Read and extract one group of units (the worker task); `task` is the task itself, or
+    a forked worker's token of it in `_INHERITED_TASKS`."""
+    if isinstance(task, str):
+        task = _INHERITED_TASKS[task]
     key = (task.log_path, task.plan.check_crc)
     if key not in _WORKER_STATE:
         log = _INHERITED_LOGS.get(task.log_path)
@@ -258,12 +266,16 @@ def _parallel_results(
     task = _Task(path, channels, ranks, plan, open_as=getattr(log, "url", ""))
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+    sent: _Task | str = task
     if context.get_start_method() == "fork":
         # Forked workers inherit the open log, with the type registries they will need
-        # built once here (parsing a log's schemas costs ~80 ms: only where needed).
+        # built once here (parsing a log's schemas costs ~80 ms: only where needed), and
+        # the task: each group is sent with its token.
         for encoding in _deserialised_encodings(log, plan):
             log.type_registry(encoding)
         _INHERITED_LOGS[path] = log
+        sent = f"{path}#{next(_task_tokens)}"
+        _INHERITED_TASKS[sent] = task
     # Forked workers share the parent's heap copy-on-write; a frozen heap is never
     # traversed (or written) by their garbage collector, which would copy it page by page.
     # (A caller's own freeze is left as it is.)
@@ -276,7 +288,7 @@ def _parallel_results(
             submitted = 0
             for _ in range(len(groups)):
                 while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
-                    window.append(pool.submit(_extract_group, task, groups[submitted]))
+                    window.append(pool.submit(_extract_group, sent, groups[submitted]))
                     submitted += 1
                 if meanwhile is not None:
                     meanwhile()
@@ -286,6 +298,8 @@ def _parallel_results(
         if freeze:
             gc.unfreeze()
         _INHERITED_LOGS.pop(path, None)
+        if isinstance(sent, str):
+            _INHERITED_TASKS.pop(sent, None)
 
 
 def _deserialised_encodings(log: LogReader, plan: ExtractPlan) -> set[str]:

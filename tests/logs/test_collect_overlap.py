@@ -65,3 +65,27 @@ def test_importing_the_audit_does_not_import_pandas_or_rosbags() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
     )
     assert done.stdout.strip() == "[]"
+
+
+_extract_group = collect._extract_group
+
+
+def _token_only(task: object, units: list[object]) -> list[collect.Keyed]:
+    """A worker task that fails unless the task came as its token (forked workers)."""
+    if not isinstance(task, str) or task not in collect._INHERITED_TASKS:
+        raise AssertionError(f"task sent as {type(task).__name__}, not a known token")
+    return _extract_group(task, units)  # type: ignore[arg-type]
+
+
+@pytest.mark.skipif(
+    "fork" not in multiprocessing.get_all_start_methods(), reason="forked workers only"
+)
+def test_forked_workers_get_the_task_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Forked workers look the task up by token rather than unpickling it per group; the
+    items are the serial path's, and the parent forgets the task when the pool ends."""
+    serial = _items(1, [])
+    monkeypatch.setattr(collect, "GROUP_BYTES", 1)  # a task per chunk: seven tasks
+    monkeypatch.setattr(collect, "_extract_group", _token_only)
+    parallel = _items(2, [])
+    assert repr(parallel) == repr(serial)
+    assert collect._INHERITED_TASKS == {}
