@@ -69,7 +69,7 @@ class PacketSamples:
         views of its bytes, gives the same dtypes, shapes and values.
         """
         arrays = [np.asarray(getattr(self, name)) for name in _ARRAY_FIELDS]
-        layout = tuple((a.dtype.str, a.shape) for a in arrays)
+        layout = tuple((_dtype_code(a.dtype), a.shape) for a in arrays)
         buffer = b"".join(a.tobytes() for a in arrays)
         others = tuple(getattr(self, name) for name in _OTHER_FIELDS)
         return _unpickle_samples, (layout, buffer, others)
@@ -85,16 +85,31 @@ _ARRAY_FIELDS = (
 _OTHER_FIELDS = tuple(f.name for f in fields(PacketSamples) if f.name not in _ARRAY_FIELDS)
 
 
+_CODES: dict[np.dtype[Any], str] = {}
+_DTYPES: dict[str, np.dtype[Any]] = {}
+"""dtype <-> its `str` ('<i8'), cached: computing either costs more than a view."""
+
+
+def _dtype_code(dtype: np.dtype[Any]) -> str:
+    code = _CODES.get(dtype)
+    if code is None:
+        code = _CODES[dtype] = dtype.str
+    return code
+
+
 def _unpickle_samples(
     layout: tuple[tuple[str, tuple[int, ...]], ...], buffer: bytes, others: tuple[Any, ...]
 ) -> PacketSamples:
     """The PacketSamples `PacketSamples.__reduce__` packed: arrays viewing `buffer`."""
     values: dict[str, Any] = dict(zip(_OTHER_FIELDS, others, strict=True))
     offset = 0
-    for name, (dtype_str, shape) in zip(_ARRAY_FIELDS, layout, strict=True):
-        dtype = np.dtype(dtype_str)
+    for name, (code, shape) in zip(_ARRAY_FIELDS, layout, strict=True):
+        dtype = _DTYPES.get(code)
+        if dtype is None:
+            dtype = _DTYPES[code] = np.dtype(code)
         count = math.prod(shape)
-        values[name] = np.frombuffer(buffer, dtype=dtype, count=count, offset=offset).reshape(shape)
+        array = np.frombuffer(buffer, dtype=dtype, count=count, offset=offset)
+        values[name] = array if len(shape) == 1 else array.reshape(shape)
         offset += count * dtype.itemsize
     return PacketSamples(**values)
 
