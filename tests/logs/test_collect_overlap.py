@@ -7,6 +7,7 @@ read, never both and never twice.
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import subprocess
 import sys
@@ -89,3 +90,27 @@ def test_forked_workers_get_the_task_once(monkeypatch: pytest.MonkeyPatch) -> No
     parallel = _items(2, [])
     assert repr(parallel) == repr(serial)
     assert collect._INHERITED_TASKS == {}
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_cycle_collector_paused_while_workers_read(
+    monkeypatch: pytest.MonkeyPatch, enabled: bool
+) -> None:
+    """The parent's collector is off while the pool runs, and as the caller had it after."""
+    monkeypatch.setattr(collect, "GROUP_BYTES", 1)
+    rig = load_rig(Path(f"{LOG}.rig.yaml"))
+    during: list[bool] = []
+    was = gc.isenabled()
+    try:
+        gc.enable() if enabled else gc.disable()
+        with open_log(LOG) as log:
+            plan, _ = _plan(log, rig, list(rig.cameras))
+            items = list(
+                collect.iter_items(log, plan, 2, meanwhile=lambda: during.append(gc.isenabled()))
+            )
+        after = gc.isenabled()
+    finally:
+        gc.enable() if was else gc.disable()
+    assert during == [False]
+    assert after is enabled
+    assert len(items) > 100
