@@ -301,11 +301,13 @@ def _parallel_results(
                     meanwhile = None
                 yield window.pop(0).result()
     finally:
-        if freeze:
-            # What the read made (rows kept for the analysis) joins the heap frozen before
-            # it and then the oldest generation, as that heap does: no young-generation
-            # pass walks it once the collector runs again.
+        if collecting:
+            # What the read made (rows kept for the analysis; an audit makes no cycles)
+            # joins the heap frozen for the fork, so no young-generation pass walks it once
+            # the collector runs again: with ours it then goes to the oldest generation;
+            # a caller's freeze (the CLI's imports) keeps it.
             gc.freeze()
+        if freeze:
             gc.unfreeze()
         if collecting:
             gc.enable()

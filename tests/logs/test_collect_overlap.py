@@ -92,25 +92,33 @@ def test_forked_workers_get_the_task_once(monkeypatch: pytest.MonkeyPatch) -> No
     assert collect._INHERITED_TASKS == {}
 
 
-@pytest.mark.parametrize("enabled", [True, False])
+@pytest.mark.parametrize(("enabled", "caller_froze"), [(True, False), (True, True), (False, False)])
 def test_cycle_collector_paused_while_workers_read(
-    monkeypatch: pytest.MonkeyPatch, enabled: bool
+    monkeypatch: pytest.MonkeyPatch, enabled: bool, caller_froze: bool
 ) -> None:
-    """The parent's collector is off while the pool runs, and as the caller had it after."""
+    """The parent's collector is off while the pool runs, and as the caller had it after;
+    what the read made is no young-generation pass's work."""
     monkeypatch.setattr(collect, "GROUP_BYTES", 1)
     rig = load_rig(Path(f"{LOG}.rig.yaml"))
     during: list[bool] = []
     was = gc.isenabled()
     try:
         gc.enable() if enabled else gc.disable()
+        if caller_froze:  # as the CLI does once its imports are done
+            gc.freeze()
         with open_log(LOG) as log:
             plan, _ = _plan(log, rig, list(rig.cameras))
             items = list(
                 collect.iter_items(log, plan, 2, meanwhile=lambda: during.append(gc.isenabled()))
             )
+            young = gc.get_count()[0]  # objects made since the read's end (or a pass)
         after = gc.isenabled()
     finally:
+        if caller_froze:
+            gc.unfreeze()
         gc.enable() if was else gc.disable()
     assert during == [False]
     assert after is enabled
+    if enabled:  # the read's rows were frozen with the heap, not left to young passes
+        assert young < 50
     assert len(items) > 100
