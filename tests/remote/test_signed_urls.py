@@ -50,6 +50,9 @@ def test_workers_read_a_signed_url_that_is_never_shown(
     def spy(pool: ProcessPoolExecutor, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
         if args and isinstance(args[0], collect._Task):
             tasks.append(args)  # what travels to the reader workers: (task, units)
+        elif args and isinstance(args[0], str):  # a forked worker's token of its task
+            assert "s3cr3t" not in args[0]
+            tasks.append((collect._INHERITED_TASKS[args[0]], *args[1:]))
         return submit(pool, fn, *args, **kwargs)
 
     monkeypatch.setattr(ProcessPoolExecutor, "submit", spy)
@@ -66,7 +69,8 @@ def test_workers_read_a_signed_url_that_is_never_shown(
     assert _without_path(remote) == _without_path(audit_log(SAMPLES / name, rig, jobs=2))
     assert "s3cr3t" not in repr(remote.to_dict()) and "s3cr3t" not in repr(stats)
     assert all(" bytes=" in r and "s3cr3t" in r for r in state.requests)  # all signed
-    # The task carries the signed URL to spawned workers, and does not show it.
+    # The task carries the signed URL to spawned workers (forked ones inherit it), and
+    # does not show it.
     tasks = [(task, units) for task, units in tasks if task.log_path == f"{base}/{name}"]
     assert tasks and all(task.open_as == url for task, _ in tasks)
     assert all("s3cr3t" not in repr(task) + repr(units) for task, units in tasks)
