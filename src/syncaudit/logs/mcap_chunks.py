@@ -217,6 +217,16 @@ class ChunkReader:
             raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
         return records
 
+    @property
+    def fileno(self) -> int:
+        """The open file's descriptor."""
+        return self._file.fileno()
+
+    @property
+    def size(self) -> int:
+        """The file's size in bytes (when opened)."""
+        return self._size
+
     def _stored_uncompressed(self, offset: int, length: int) -> bool:
         """Whether the chunk record at `offset` names no compression (from its first bytes;
         a damaged head says no, and the buffered read then reports the damage)."""
@@ -381,17 +391,27 @@ def iter_chunk_messages(
             if channel in channels:
                 if log_time > MAX_LOG_TIME_NS:
                     topic = infos[channel].topic if infos is not None else f"channel {channel}"
-                    raise LogReadError(
-                        f"{where}: message {index} on {topic} has log time {log_time} ns, "
-                        "past the int64 range (year 2262): corrupt time"
-                    )
+                    raise log_time_error(where, index, topic, log_time)
                 yield index, channel, log_time, view[body + _MESSAGE_HEAD.size : body + length]
         elif opcode == OP_CHANNEL and infos is not None and length >= _CHANNEL_HEAD.size:
             _check_channel(records, body, length, infos, where)
         pos = body + length
         index += 1
     if pos != end:
-        raise LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
+        raise overrun_error(where)
+
+
+def log_time_error(where: str, index: int, topic: str, log_time: int) -> LogReadError:
+    """The error for a message whose log time is past int64 (a corrupt time)."""
+    return LogReadError(
+        f"{where}: message {index} on {topic} has log time {log_time} ns, "
+        "past the int64 range (year 2262): corrupt time"
+    )
+
+
+def overrun_error(where: str) -> LogReadError:
+    """The error for chunk records that do not tile their chunk."""
+    return LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
 
 
 def _check_channel(
@@ -412,11 +432,20 @@ def _check_channel(
 
 
 class McapChunkUnitReader:
-    """Per-worker reader of 'mcap-chunk' units of one MCAP file."""
+    """Per-worker reader of 'mcap-chunk' units of one MCAP file.
+
+    A chunk stored uncompressed is read from the file record by record (`StoredChunks`:
+    only record headers and wanted payloads, an image cut to its channel's
+    `prefix_bytes`), unless CRCs are checked, which needs every byte; other chunks are
+    read whole and decompressed (`ChunkReader`).
+    """
 
     def __init__(self, source: str, *, check_crc: bool = False) -> None:
+        from syncaudit.logs.mcap_stored import StoredChunks
+
         self.source = source
         self._reader = ChunkReader(source, check_crc=check_crc)
+        self._stored = None if check_crc else StoredChunks(self._reader.fileno, self._reader.size)
 
     def messages(
         self, unit: ReadUnit, channels: dict[int, ChannelInfo]
@@ -425,9 +454,17 @@ class McapChunkUnitReader:
 
         Payloads are views into a buffer reused by the next unit: use them before that.
         """
-        records = self._reader.read(unit.offset, unit.length)
         where = chunk_where(self.source, unit.offset)
-        for index, cid, log_time, data in iter_chunk_messages(records, channels, where=where):
+        span = (
+            None if self._stored is None else self._stored.usable_records(unit.offset, unit.length)
+        )
+        if span is not None:
+            assert self._stored is not None
+            messages = self._stored.messages(*span, channels, where)
+        else:
+            records = self._reader.read(unit.offset, unit.length)
+            messages = iter_chunk_messages(records, channels, where=where)
+        for index, cid, log_time, data in messages:
             yield log_time, index, cid, data
 
     def close(self) -> None:
