@@ -240,12 +240,16 @@ def test_message_with_a_hostile_length_in_a_later_window(tmp_path: Path) -> None
     assert "chunk records overrun the chunk" in _error(path, unit, channels)
 
 
-def test_file_cut_after_opening(tmp_path: Path) -> None:
-    """The file shrinks under an open reader: the short read is one line, not a crash."""
+@pytest.mark.parametrize("when", ["before", "after"])
+def test_file_cut(tmp_path: Path, when: str) -> None:
+    """The file cut inside the chunk before the reader opens it (the head check sends the
+    chunk to `ChunkReader`) or under the open reader (a short read): one line, no crash."""
     path = tmp_path / "plain.mcap"
     _write(path)
     units, channels = _units(path)
     unit = max(units, key=lambda u: u.offset)
+    if when == "before":
+        os.truncate(path, unit.offset + unit.length // 2)
     reader = McapChunkUnitReader(str(path))
     try:
         os.truncate(path, unit.offset + unit.length // 2)
