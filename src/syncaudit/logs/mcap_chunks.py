@@ -455,12 +455,10 @@ class McapChunkUnitReader:
         Payloads are views into a buffer reused by the next unit: use them before that.
         """
         where = chunk_where(self.source, unit.offset)
-        span = (
-            None if self._stored is None else self._stored.usable_records(unit.offset, unit.length)
-        )
-        if span is not None:
-            assert self._stored is not None
-            messages = self._stored.messages(*span, channels, where)
+        stored = self._stored
+        span = None if stored is None else stored.usable_records(unit.offset, unit.length)
+        if stored is not None and span is not None:
+            messages = stored.messages(*span, channels, where)
         else:
             records = self._reader.read(unit.offset, unit.length)
             messages = iter_chunk_messages(records, channels, where=where)

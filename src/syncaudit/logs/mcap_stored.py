@@ -13,7 +13,7 @@ faulted in a few pages at a time on first touch, and every chunk costs an mmap a
 munmap. Reading and decoding every unit of the 2 GB rosbags MCAP bench log (755 VLS-128
 scans of 761 KB, 4524 images of 350 KB) with --jobs 1 cost 0.30 CPU s mapped, 0.27 with
 the scans prefaulted (MADV_POPULATE_READ), 0.23 with the headers walked in the mapping
-and the scans read with `preadv`, 0.19 this way (0.5 s load, 3 runs each).
+and the scans read with `preadv`, 0.19 this way (3 runs each, load average ~2).
 
 The chunk's head is checked by `usable_records` only for being plainly sound: any doubt
 sends the chunk to `ChunkReader.read`, which reports the damage as it always has. The
