@@ -124,7 +124,8 @@ def iter_items(
 def _collection_paused() -> Iterator[None]:
     """No cyclic garbage collection while a log is read: the items and rows made then hold
     no reference cycles (reference counting frees them), and the collector's passes over
-    them cost ~5 % of the parent's CPU (12 of 250 ms per 2 GB audit)."""
+    them cost ~5 % of the parent's CPU (12 of 250 ms per 2 GB audit). Worker processes,
+    forked meanwhile, read with the collector paused too."""
     enabled = gc.isenabled()
     gc.disable()
     try:
