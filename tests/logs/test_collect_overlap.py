@@ -65,3 +65,30 @@ def test_importing_the_audit_does_not_import_pandas_or_rosbags() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
     )
     assert done.stdout.strip() == "[]"
+
+
+def test_no_garbage_collection_while_a_log_is_read() -> None:
+    """The collector is paused while items stream (parallel or serial) and on again after,
+    also when the caller stops early; a caller's own disabled collector stays disabled."""
+    import gc
+    import types
+
+    rig = load_rig(Path(f"{LOG}.rig.yaml"))
+    with open_log(LOG) as log:
+        plan, _ = _plan(log, rig, list(rig.cameras))
+        for jobs in (1, 2):
+            states = [gc.isenabled() for _ in collect.iter_items(log, plan, jobs)]
+            assert states and not any(states)
+            assert gc.isenabled()
+        items = collect.iter_items(log, plan, 2)
+        assert isinstance(items, types.GeneratorType)
+        next(items)
+        assert not gc.isenabled()
+        items.close()
+        assert gc.isenabled()
+        gc.disable()
+        try:
+            assert len(list(collect.iter_items(log, plan, 1))) > 100
+            assert not gc.isenabled()
+        finally:
+            gc.enable()
