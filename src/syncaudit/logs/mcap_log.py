@@ -37,6 +37,7 @@ from mcap.summary import Summary
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
 from syncaudit.logs.base import LogReader
+from syncaudit.logs.magic import MCAP_MAGIC
 from syncaudit.logs.mcap_chunks import (
     MAX_CHUNK_BYTES,
     MAX_LOG_TIME_NS,
@@ -53,7 +54,7 @@ from syncaudit.logs.typesys import TypeRegistry, normalise_type_name, one_line, 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
 
-MAGIC = b"\x89MCAP0\r\n"
+MAGIC = MCAP_MAGIC
 _RECORD_HEAD = struct.Struct("<BQ")
 HEADER_CHECKS = 4096
 """Chunk headers checked against their index at open (4096 chunks: ~16 GB of 4 MB chunks)."""
