@@ -16,8 +16,9 @@ from mcap.writer import CompressionType, Writer
 
 from syncaudit.errors import LogReadError
 from syncaudit.logs import mcap_stored, open_log
-from syncaudit.logs.mcap_chunks import ChunkReader, McapChunkUnitReader
+from syncaudit.logs.mcap_chunks import ChunkReader
 from syncaudit.logs.mcap_stored import WINDOW_BYTES
+from syncaudit.logs.mcap_units import McapChunkUnitReader
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 PREFIX = 256

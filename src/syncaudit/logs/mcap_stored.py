@@ -28,16 +28,16 @@ from collections.abc import Iterator
 
 from syncaudit.errors import LogReadError
 from syncaudit.logs.mcap_chunks import (
-    _CHANNEL_HEAD,
-    _CHUNK_HEAD,
-    _MESSAGE_HEAD,
-    _RECORD_HEAD,
+    CHANNEL_HEAD,
+    CHUNK_HEAD,
     MAX_CHUNK_BYTES,
     MAX_LOG_TIME_NS,
+    MESSAGE_HEAD,
     OP_CHANNEL,
     OP_CHUNK,
     OP_MESSAGE,
-    _check_channel,
+    RECORD_HEAD,
+    check_channel,
     log_time_error,
     overrun_error,
 )
@@ -48,7 +48,7 @@ WINDOW_BYTES = 4096
 """Bytes read at once where record headers lie: a header and an image's 256-byte prefix,
 or the small exposure/trigger records that follow an image, in one `pread` (4-16 KiB
 measured alike)."""
-_NAME_AT = _RECORD_HEAD.size + _CHUNK_HEAD.size
+_NAME_AT = RECORD_HEAD.size + CHUNK_HEAD.size
 _RECORDS_AT = _NAME_AT + 4 + 8  # an empty compression name, then the records' length
 
 
@@ -82,7 +82,7 @@ class StoredChunks:
         self._base, self._top = offset, offset + got
         if got != n or self._window[0] != OP_CHUNK:
             return None
-        _start, _end, size, _crc = _CHUNK_HEAD.unpack_from(self._window, _RECORD_HEAD.size)
+        _start, _end, size, _crc = CHUNK_HEAD.unpack_from(self._window, RECORD_HEAD.size)
         name_len, data_len = struct.unpack_from("<IQ", self._window, _NAME_AT)
         if name_len != 0 or data_len != size or size > MAX_CHUNK_BYTES:
             return None
@@ -107,7 +107,7 @@ class StoredChunks:
     def _walk(
         self, pos: int, end: int, channels: dict[int, ChannelInfo], where: str
     ) -> Iterator[tuple[int, int, int, memoryview]]:
-        head, message_head = _RECORD_HEAD.size, _MESSAGE_HEAD.size
+        head, message_head = RECORD_HEAD.size, MESSAGE_HEAD.size
         window = self._window
         out, at = memoryview(self._out), 0
         index = 0
@@ -115,12 +115,12 @@ class StoredChunks:
             if pos + head + message_head > self._top and self._top < end:
                 self._fill(pos, min(WINDOW_BYTES, end - pos), where)
             base = self._base
-            opcode, length = _RECORD_HEAD.unpack_from(window, pos - base)
+            opcode, length = RECORD_HEAD.unpack_from(window, pos - base)
             body = pos + head
             if body + length > end or (opcode == OP_MESSAGE and length < message_head):
                 break  # reported below: the records do not tile the chunk
             if opcode == OP_MESSAGE:
-                channel, _seq, log_time, _pub = _MESSAGE_HEAD.unpack_from(window, body - base)
+                channel, _seq, log_time, _pub = MESSAGE_HEAD.unpack_from(window, body - base)
                 info = channels.get(channel)
                 if info is not None:
                     if log_time > MAX_LOG_TIME_NS:
@@ -136,7 +136,7 @@ class StoredChunks:
                     self._payload(payload, body + message_head, where)
                     at += want
                     yield index, channel, log_time, payload
-            elif opcode == OP_CHANNEL and length >= _CHANNEL_HEAD.size:
+            elif opcode == OP_CHANNEL and length >= CHANNEL_HEAD.size:
                 self._channel(body, length, channels, where)
             pos = body + length
             index += 1
@@ -160,20 +160,20 @@ class StoredChunks:
     def _channel(
         self, body: int, length: int, channels: dict[int, ChannelInfo], where: str
     ) -> None:
-        """Check a Channel record in the chunk (`_check_channel`) from the window, or from
+        """Check a Channel record in the chunk (`check_channel`) from the window, or from
         just its id and topic read from the file (never more than the record holds)."""
         rel = body - self._base
-        if body + _CHANNEL_HEAD.size > self._top:
-            self._fill(body, _CHANNEL_HEAD.size, where)
+        if body + CHANNEL_HEAD.size > self._top:
+            self._fill(body, CHANNEL_HEAD.size, where)
             rel = 0
-        cid, _schema, topic_len = _CHANNEL_HEAD.unpack_from(self._window, rel)
-        if cid not in channels or _CHANNEL_HEAD.size + topic_len > length:
+        cid, _schema, topic_len = CHANNEL_HEAD.unpack_from(self._window, rel)
+        if cid not in channels or CHANNEL_HEAD.size + topic_len > length:
             return
-        need = _CHANNEL_HEAD.size + topic_len
+        need = CHANNEL_HEAD.size + topic_len
         if body + need <= self._top:
-            _check_channel(memoryview(self._window), body - self._base, length, channels, where)
+            check_channel(memoryview(self._window), body - self._base, length, channels, where)
             return
         part = os.pread(self._fd, need, body)
         if len(part) != need:
             raise LogReadError(f"{where} runs past the end of the file")
-        _check_channel(part, 0, length, channels, where)
+        check_channel(part, 0, length, channels, where)
