@@ -91,8 +91,12 @@ class _Handler(SimpleHTTPRequestHandler):
             self.connection.sendfile(handle, start, end - start)
 
 
-def _serve(root: Path, kind: str) -> None:
-    """Serve `root` on an ephemeral loopback port; print the port; run until killed."""
+def _serve(root: Path, kind: str, parent_pid: int) -> None:
+    """Serve `root` on an ephemeral loopback port; print the port; run until killed, or
+    until the benchmark `parent_pid` dies (killed runs left orphan servers behind)."""
+    from syncaudit.workers import die_with_parent
+
+    die_with_parent(parent_pid)
     if kind == "threaded":
         handler = type("H", (_Handler,), {})
         handler.__init__ = lambda self, *a, **k: _Handler.__init__(  # type: ignore[method-assign]
@@ -127,7 +131,16 @@ class Server:
     def __init__(self, root: Path, kind: str) -> None:
         self.kind = kind
         self.process = subprocess.Popen(
-            [sys.executable, __file__, "--serve", str(root), "--server", kind],
+            [
+                sys.executable,
+                __file__,
+                "--serve",
+                str(root),
+                "--server",
+                kind,
+                "--parent-pid",
+                str(os.getpid()),
+            ],
             stdout=subprocess.PIPE,
             text=True,
         )
@@ -471,9 +484,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument("--serve", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve is not None:
-        _serve(args.serve, args.server)
+        _serve(args.serve, args.server, args.parent_pid or os.getppid())
         return 0
     if args.quick:
         log = SAMPLE

@@ -21,8 +21,10 @@ from typing import Any
 from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
 from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
+from syncaudit.collect import ExtractPlan, default_jobs, iter_items
 from syncaudit.errors import NoDataError, SyncauditError
-from syncaudit.lidar.scan import LidarScan, scan_lidar
+from syncaudit.lidar.scan import LidarScan, LidarScanner
+from syncaudit.lidar.stream import packet_family
 from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
@@ -175,20 +177,26 @@ def lidar_warnings(row: LidarRow) -> list[str]:
     return warnings
 
 
-def inspect_log(path: str | Path, rig: Rig | None = None, *, partial: bool = False) -> InfoReport:
+def inspect_log(
+    path: str | Path, rig: Rig | None = None, *, partial: bool = False, jobs: int | None = None
+) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
     Raises the error that makes `audit` fail on the LiDAR topic, unless `partial`: then
-    the report is returned with `error` and `exit_code` set.
+    the report is returned with `error` and `exit_code` set. `jobs` worker processes read
+    the LiDAR and shared camera topics where the log allows, as `audit` does (default:
+    one per core).
     """
     with open_log(path) as log:
-        report, failure = _inspect(log, rig)
+        report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
     if failure is not None and not partial:
         raise failure
     return report
 
 
-def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditError | None]:
+def _inspect(
+    log: LogReader, rig: Rig | None, jobs: int
+) -> tuple[InfoReport, SyncauditError | None]:
     summary = log.summary
     duration = summary.duration_s
     report = InfoReport(
@@ -225,13 +233,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         try:
             if topic not in log.topics:
                 raise NoDataError(f"LiDAR topic {topic} (from the rig) is not in the log")
-            scan = scan_lidar(
-                log,
-                topic,
-                zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
-                azimuth_increases=rig.lidar.azimuth_increases if rig else True,
-                ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
-            )
+            scan = _scan_lidar(log, topic, rig, jobs)
             if scan.packets == 0:
                 raise NoDataError(f"LiDAR topic {topic} holds no packets")
         except SyncauditError as exc:
@@ -252,7 +254,7 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
         failure = first_problem
     cameras = _cameras(log, rig, report)
     try:
-        census = shared_topic_census(log, cameras)
+        census = shared_topic_census(log, cameras, jobs=jobs)
     except SyncauditError as exc:  # info goes on: the LiDAR decides its exit code
         report.warnings.append(f"topics cameras share could not be counted: {exc}")
         census = SharedCensus([], [])
@@ -270,6 +272,20 @@ def _inspect(log: LogReader, rig: Rig | None) -> tuple[InfoReport, SyncauditErro
     if not report.cameras:
         report.warnings.append("no camera topic found: only the LiDAR side can be audited")
     return report, failure
+
+
+def _scan_lidar(log: LogReader, topic: str, rig: Rig | None, jobs: int) -> LidarScan:
+    """`scan_lidar` of one topic, read as `audit` reads it: chunk-parallel where the log
+    allows, one scan message at a time, so `info` and `audit` count alike."""
+    family, meta = packet_family(log, topic, rig.lidar.metadata_topic if rig else None)
+    scanner = LidarScanner.create(
+        topic,
+        zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
+        azimuth_increases=rig.lidar.azimuth_increases if rig else True,
+    )
+    for _kind, _topic, samples in iter_items(log, ExtractPlan(topic, family, meta), jobs):
+        scanner.feed(samples)
+    return scanner.finish()
 
 
 def _cameras(log: LogReader, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:

@@ -92,33 +92,49 @@ def test_forked_workers_get_the_task_once(monkeypatch: pytest.MonkeyPatch) -> No
     assert collect._INHERITED_TASKS == {}
 
 
-@pytest.mark.parametrize(("enabled", "caller_froze"), [(True, False), (True, True), (False, False)])
-def test_cycle_collector_paused_while_workers_read(
-    monkeypatch: pytest.MonkeyPatch, enabled: bool, caller_froze: bool
-) -> None:
-    """The parent's collector is off while the pool runs, and as the caller had it after;
-    what the read made is no young-generation pass's work."""
-    monkeypatch.setattr(collect, "GROUP_BYTES", 1)
+@pytest.mark.parametrize(("jobs", "caller_froze"), [(2, False), (2, True), (1, False)])
+def test_what_the_read_made_is_no_young_pass_work(jobs: int, caller_froze: bool) -> None:
+    """After the read the collector's young generation is (nearly) empty: what the read
+    made went to the oldest generation, or to the caller's frozen heap (the CLI's)."""
     rig = load_rig(Path(f"{LOG}.rig.yaml"))
-    during: list[bool] = []
-    was = gc.isenabled()
     try:
-        gc.enable() if enabled else gc.disable()
         if caller_froze:  # as the CLI does once its imports are done
             gc.freeze()
         with open_log(LOG) as log:
             plan, _ = _plan(log, rig, list(rig.cameras))
-            items = list(
-                collect.iter_items(log, plan, 2, meanwhile=lambda: during.append(gc.isenabled()))
-            )
-            young = gc.get_count()[0]  # objects made since the read's end (or a pass)
-        after = gc.isenabled()
+            items = list(collect.iter_items(log, plan, jobs))
+            young = gc.get_count()[0]  # objects made since the read's end
+        frozen = gc.get_freeze_count()
     finally:
         if caller_froze:
             gc.unfreeze()
-        gc.enable() if was else gc.disable()
-    assert during == [False]
-    assert after is enabled
-    if enabled:  # the read's rows were frozen with the heap, not left to young passes
-        assert young < 50
     assert len(items) > 100
+    assert young < 50
+    assert (frozen > len(items)) is caller_froze
+
+
+def test_no_garbage_collection_while_a_log_is_read() -> None:
+    """The collector is paused while items stream (parallel or serial) and on again after,
+    also when the caller stops early; a caller's own disabled collector stays disabled."""
+    import gc
+    import types
+
+    rig = load_rig(Path(f"{LOG}.rig.yaml"))
+    with open_log(LOG) as log:
+        plan, _ = _plan(log, rig, list(rig.cameras))
+        for jobs in (1, 2):
+            states = [gc.isenabled() for _ in collect.iter_items(log, plan, jobs)]
+            assert states and not any(states)
+            assert gc.isenabled()
+        items = collect.iter_items(log, plan, 2)
+        assert isinstance(items, types.GeneratorType)
+        next(items)
+        assert not gc.isenabled()
+        items.close()
+        assert gc.isenabled()
+        gc.disable()
+        try:
+            assert len(list(collect.iter_items(log, plan, 1))) > 100
+            assert not gc.isenabled()
+        finally:
+            gc.enable()

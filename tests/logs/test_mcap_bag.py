@@ -132,3 +132,32 @@ def test_split_bag_with_a_cut_last_file(
     assert _json(results[0]) == _json(results[1])
     monkeypatch.setattr(McapBag, "read_units", lambda self, topics: None)
     assert _json(audit_log(folder, rig, jobs=1)) == _json(results[0])
+
+
+def test_blank_metadata_fields_read_by_the_mcap_path_or_refused_when_compressed(
+    bare: tuple[Path, dict[str, object]], tmp_path: Path
+) -> None:
+    """A folder whose metadata.yaml leaves `storage_identifier` blank (some rosbag2
+    versions) is read through its MCAP files with a warning naming the quirk; with a
+    rosbag2 compression mode as well (rosbags, which refuses blank fields, would read it)
+    it is one LogOpenError line."""
+    import yaml
+
+    from syncaudit.errors import LogOpenError
+
+    folder = tmp_path / "bag"
+    _to_bag(bare[0], folder, 2)
+    meta_path = folder / "metadata.yaml"
+    doc = yaml.safe_load(meta_path.read_text())
+    info = doc["rosbag2_bagfile_information"]
+    info["storage_identifier"] = ""
+    meta_path.write_text(yaml.safe_dump(doc))
+    with open_log(folder) as log:
+        assert isinstance(log, McapBag)
+        assert any("names storage" in w.message for w in log.warnings)
+        assert log.summary.message_count == sum(t.count or 0 for t in log.topics.values())
+    info["compression_mode"] = "FILE"
+    info["compression_format"] = "zstd"
+    meta_path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(LogOpenError, match=r"blank fields .* split into 2 files or compressed"):
+        open_log(folder)

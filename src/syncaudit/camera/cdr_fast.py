@@ -198,6 +198,102 @@ def _r1_image_meta(data: bytes | memoryview) -> SimpleNamespace:
     )
 
 
+# CDR (ROS 2) likewise, one unpack per run of fixed fields, in either byte order; CDR
+# aligns each primitive to its size counted from after the 4-byte encapsulation header,
+# so a run after a string starts at the next multiple of 4 and an f64 or u64 at the next
+# multiple of 8 (relative). A message that does not fit falls back to `_Cursor`.
+_CDR_FORMATS = {
+    order: (
+        struct.Struct(order + "iII"),  # header stamp sec, nsec, frame_id length
+        struct.Struct(order + "I"),  # a string's length
+        struct.Struct(order + "IiI"),  # frame_sequence, exposure_start
+        struct.Struct(order + "I" + "iI" * 5),  # frame_sequence, five times
+        struct.Struct(order + "d"),
+        struct.Struct(order + "Qh2xI"),  # camera_time, brightness, exposure_time
+    )
+    for order in "<>"
+}
+
+
+def _align(pos: int, size: int) -> int:
+    """`pos` moved to the next multiple of `size` counted from byte 4 (after the header)."""
+    return pos + (-(pos - 4) % size)
+
+
+def _cdr_string(data: bytes | memoryview, pos: int, length_of: struct.Struct) -> tuple[str, int]:
+    """A NUL-terminated CDR string whose length field is at `pos` (4-aligned): (text, end)."""
+    (length,) = length_of.unpack_from(data, pos)
+    end = pos + 4 + length
+    if length < 1 or end > len(data):
+        raise _TruncatedError("string")
+    return bytes(data[pos + 4 : end - 1]).decode(errors="replace"), end
+
+
+def _cdr_header(data: bytes | memoryview, order: str) -> tuple[SimpleNamespace, int]:
+    """The std_msgs/Header of a CDR message and the byte after it."""
+    head = _CDR_FORMATS[order][0]
+    sec, nsec, length = head.unpack_from(data, 4)
+    end = 16 + length
+    if length < 1 or end > len(data):
+        raise _TruncatedError("frame_id")
+    frame_id = bytes(data[16 : end - 1]).decode(errors="replace")
+    return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=frame_id), end
+
+
+def _cdr_camera_exposure(data: bytes | memoryview, order: str) -> SimpleNamespace:
+    _head, length_of, run, _trigger, f64, _meta = _CDR_FORMATS[order]
+    header, pos = _cdr_header(data, order)
+    camera, pos = _cdr_string(data, _align(pos, 4), length_of)
+    pos = _align(pos, 4)
+    sequence, sec, nsec = run.unpack_from(data, pos)
+    (duration,) = f64.unpack_from(data, _align(pos + run.size, 8))
+    return SimpleNamespace(
+        header=header,
+        camera=camera,
+        frame_sequence=sequence,
+        exposure_start=SimpleNamespace(sec=sec, nanosec=nsec),
+        exposure_duration=duration,
+    )
+
+
+def _cdr_trigger_event(data: bytes | memoryview, order: str) -> SimpleNamespace:
+    _head, length_of, _exposure, run, f64, _meta = _CDR_FORMATS[order]
+    header, pos = _cdr_header(data, order)
+    camera, pos = _cdr_string(data, _align(pos, 4), length_of)
+    pos = _align(pos, 4)
+    sequence, *t = run.unpack_from(data, pos)
+    (delay,) = f64.unpack_from(data, _align(pos + run.size, 8))
+    return SimpleNamespace(
+        header=header,
+        camera=camera,
+        frame_sequence=sequence,
+        lidar_packet_time=SimpleNamespace(sec=t[0], nanosec=t[1]),
+        lidar_driver_time=SimpleNamespace(sec=t[2], nanosec=t[3]),
+        camera_driver_time=SimpleNamespace(sec=t[4], nanosec=t[5]),
+        camera_sensor_time=SimpleNamespace(sec=t[6], nanosec=t[7]),
+        exposure_start_time=SimpleNamespace(sec=t[8], nanosec=t[9]),
+        applied_delay=delay,
+    )
+
+
+def _cdr_image_meta(data: bytes | memoryview, order: str) -> SimpleNamespace:
+    header, pos = _cdr_header(data, order)
+    camera_time, brightness, exposure_time = _CDR_FORMATS[order][5].unpack_from(
+        data, _align(pos, 8)
+    )
+    return SimpleNamespace(
+        header=header, camera_time=camera_time, brightness=brightness, exposure_time=exposure_time
+    )
+
+
+CDR_READERS = {
+    "syncaudit_msgs/msg/CameraExposure": _cdr_camera_exposure,
+    "syncaudit_msgs/msg/TriggerEvent": _cdr_trigger_event,
+    "flir_camera_msgs/msg/ImageMetaData": _cdr_image_meta,
+}
+"""The FAST_READERS' types read from CDR bytes in one pass (the same fields)."""
+
+
 ROS1_READERS = {
     "syncaudit_msgs/msg/CameraExposure": _r1_camera_exposure,
     "syncaudit_msgs/msg/TriggerEvent": _r1_trigger_event,
@@ -238,6 +334,12 @@ def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNa
         return SimpleNamespace(
             damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
         )
+    if not ros1:
+        try:
+            order = "<" if bytes(data[0:2]) in _CDR_LE_IDS else ">"
+            return CDR_READERS[msgtype](data, order)
+        except (struct.error, _TruncatedError):
+            pass  # damaged: the cursor below says where
     try:
         return FAST_READERS[msgtype](_Cursor(data, ros1=ros1))
     except _TruncatedError as exc:

@@ -1,8 +1,8 @@
 """Which camera each message of a topic several cameras share goes to, counted for `info`.
 
 `info` shows a topic shared by several cameras (one driver node for a multi-camera board)
-as those cameras, with the messages each gets. The count runs the audit's own extraction
-(`collect.extract`) and routing (`camera.routing.CameraRouter`) over the shared topics
+as those cameras, with the messages each gets. The count runs the audit's own reading
+(`collect.iter_items`) and routing (`camera.routing.CameraRouter`) over the shared topics
 only, so `info` and `audit` cannot disagree on which camera a message belongs to.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from syncaudit.camera.routing import CameraRouter, SharedTopicCount
-from syncaudit.collect import ExtractPlan, extract
+from syncaudit.collect import ExtractPlan, iter_items
 from syncaudit.errors import LogReadError
 from syncaudit.logs import LogReader
 from syncaudit.rig import CameraConfig
@@ -27,10 +27,13 @@ class SharedCensus:
     warnings: list[str]
 
 
-def shared_topic_census(log: LogReader, cameras: list[CameraConfig]) -> SharedCensus:
+def shared_topic_census(
+    log: LogReader, cameras: list[CameraConfig], *, jobs: int = 1
+) -> SharedCensus:
     """Count, per topic several of `cameras` read, the messages each camera gets.
 
-    Reads only those topics (image payloads are never decoded: the header is enough).
+    Reads only those topics, as the audit reads them (`collect.iter_items`: `jobs` worker
+    processes where the log allows; of an image, only its header's first bytes).
     A topic whose every message is damaged is reported as a warning, as far as counted.
     """
     router = CameraRouter.for_cameras(cameras, log.topics)
@@ -45,11 +48,8 @@ def shared_topic_census(log: LogReader, cameras: list[CameraConfig]) -> SharedCe
         exposures={t: ("", _stamp(router, t)) for k, t in shared if k == "exposure"},
         triggers={t: "" for k, t in shared if k == "trigger"},
     )
-    for msg in log.messages(sorted({t for _, t in shared})):
-        item = extract(plan, msg, log)
-        if item is not None:
-            kind, topic, payload = item
-            router.feed(kind, topic, payload)
+    for kind, topic, payload in iter_items(log, plan, jobs):
+        router.feed(kind, topic, payload)
     try:
         warnings = router.finish()
     except LogReadError as exc:

@@ -13,8 +13,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from syncaudit.camera.cdr_fast import read_fast
 from syncaudit.camera.extract import CAMERA_FIELD_TYPES, header_frame_id
-from syncaudit.logs import LogReader, TopicInfo
+from syncaudit.logs import LogReader, RawMessage, TopicInfo
 from syncaudit.rig import CameraConfig
 
 __all__ = [
@@ -203,6 +204,16 @@ class CameraProbe:
     in `SHARED_WINDOW_NS`, where there were several."""
 
 
+def _camera_fields(log: LogReader, msg: RawMessage) -> object:
+    """A syncaudit camera message's fields: by struct where it fits its layout (no type
+    registry to build from the log's schemas), else through rosbags (which raises on
+    damaged bytes, as the probe always has)."""
+    fields = read_fast(msg.data, msg.msgtype, msg.encoding)
+    if fields is None or hasattr(fields, "damaged"):
+        return log.deserialize(msg)
+    return fields
+
+
 def probe_camera_topics(log: LogReader, topics: Iterable[str]) -> CameraProbe:
     """From the first second of each camera topic: `camera` fields and image frame ids.
 
@@ -231,7 +242,7 @@ def probe_camera_topics(log: LogReader, topics: Iterable[str]) -> CameraProbe:
                     break
                 continue
             if msg.msgtype in CAMERA_FIELD_TYPES:
-                name = str(getattr(log.deserialize(msg), "camera", ""))
+                name = str(getattr(_camera_fields(log, msg), "camera", ""))
             else:
                 name = header_frame_id(msg)
             names = seen.setdefault(msg.topic, [])

@@ -78,23 +78,37 @@ def iter_packet_chunks(
     ouster_metadata_topic: str | None = None,
 ) -> Iterator[PacketChunk]:
     """Decode every packet on `topic` in log order, a scan (or batch) at a time."""
+    family, meta = packet_family(log, topic, ouster_metadata_topic)
+    messages = log.messages([topic], start_ns, stop_ns)
+    if meta is not None:
+        yield from _ouster_chunks(messages, meta)
+        return
+    for index, msg in enumerate(messages):
+        chunk = decode_scan(family, msg, index)
+        if chunk is not None:
+            yield chunk
+
+
+def packet_family(
+    log: LogReader, topic: str, ouster_metadata_topic: str | None = None
+) -> tuple[str, ouster.OusterMetadata | None]:
+    """The vendor family of a LiDAR topic's packets, and for Ouster its sensor metadata
+    (from `ouster_metadata_topic`, else the metadata topic found beside the packets).
+
+    Raises NoDataError (no such topic, no Ouster metadata) or DecodeError (not a packet type).
+    """
     info = log.topics.get(topic)
     if info is None:
         raise NoDataError(f"LiDAR topic {topic} is not in the log")
     family = SCAN_TYPES.get(info.msgtype)
     if family is None:
         raise DecodeError(f"{topic}: {info.msgtype} is not a LiDAR packet type syncaudit knows")
-    messages = log.messages([topic], start_ns, stop_ns)
-    if family == "ouster":
-        meta_topic = ouster_metadata_topic or find_ouster_metadata_topic(log, topic)
-        if meta_topic is None:
-            raise NoDataError(f"{topic}: Ouster packets need the sensor metadata topic; none found")
-        yield from _ouster_chunks(messages, read_ouster_metadata(log, meta_topic))
-        return
-    for index, msg in enumerate(messages):
-        chunk = decode_scan(family, msg, index)
-        if chunk is not None:
-            yield chunk
+    if family != "ouster":
+        return family, None
+    meta_topic = ouster_metadata_topic or find_ouster_metadata_topic(log, topic)
+    if meta_topic is None:
+        raise NoDataError(f"{topic}: Ouster packets need the sensor metadata topic; none found")
+    return family, read_ouster_metadata(log, meta_topic)
 
 
 def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:

@@ -24,7 +24,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from syncaudit.errors import LogReadError
-from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.model import ChannelInfo
 
 if TYPE_CHECKING:
     import zstandard
@@ -32,10 +32,10 @@ if TYPE_CHECKING:
 OP_CHANNEL = 0x04
 OP_MESSAGE = 0x05
 OP_CHUNK = 0x06
-_RECORD_HEAD = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
-_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
-_CHANNEL_HEAD = struct.Struct("<HHI")  # id, schema id, topic length
+RECORD_HEAD = struct.Struct("<BQ")
+CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
+MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
+CHANNEL_HEAD = struct.Struct("<HHI")  # id, schema id, topic length
 
 MAX_LOG_TIME_NS = 2**63 - 1
 """Log times are u64 in MCAP; past int64 they cannot be a time (year 2262) and break numpy."""
@@ -200,7 +200,7 @@ class ChunkReader:
         """The decompressed records of the chunk record at `offset`, valid until the next
         `read` (when reusing its buffer)."""
         where = chunk_where(self.path, offset)
-        if offset < 0 or length < _RECORD_HEAD.size or offset + length > self._size:
+        if offset < 0 or length < RECORD_HEAD.size or offset + length > self._size:
             raise LogReadError(f"{where} runs past the end of the file")
         if self.reuse and self._stored_uncompressed(offset, length):
             size, crc, records = self._read_in_place(offset, length, where)
@@ -217,10 +217,20 @@ class ChunkReader:
             raise LogReadError(f"{where} is corrupt: size or CRC of its records does not match")
         return records
 
+    @property
+    def fileno(self) -> int:
+        """The open file's descriptor."""
+        return self._file.fileno()
+
+    @property
+    def size(self) -> int:
+        """The file's size in bytes (when opened)."""
+        return self._size
+
     def _stored_uncompressed(self, offset: int, length: int) -> bool:
         """Whether the chunk record at `offset` names no compression (from its first bytes;
         a damaged head says no, and the buffered read then reports the damage)."""
-        name_at = _RECORD_HEAD.size + _CHUNK_HEAD.size
+        name_at = RECORD_HEAD.size + CHUNK_HEAD.size
         head = os.pread(self._file.fileno(), min(length, name_at + 4), offset)
         if len(head) < name_at + 4 or head[0] != OP_CHUNK:
             return False
@@ -272,12 +282,12 @@ class ChunkReader:
         import zstandard
 
         try:
-            opcode, _length = _RECORD_HEAD.unpack_from(view, 0)
+            opcode, _length = RECORD_HEAD.unpack_from(view, 0)
             if opcode != OP_CHUNK:
                 raise LogReadError(f"{where}: no chunk record there")
             pos = 9
-            _start, _end, size, crc = _CHUNK_HEAD.unpack_from(view, pos)
-            pos += _CHUNK_HEAD.size
+            _start, _end, size, crc = CHUNK_HEAD.unpack_from(view, pos)
+            pos += CHUNK_HEAD.size
             (name_len,) = struct.unpack_from("<I", view, pos)
             if pos + 4 + name_len > len(view):
                 raise LogReadError(f"{where} is corrupt: its compression name runs past it")
@@ -370,66 +380,52 @@ def iter_chunk_messages(
     view = memoryview(records)
     infos = channels if isinstance(channels, dict) else None
     pos, index, end = 0, 0, len(records)
-    head = _RECORD_HEAD.size
+    head = RECORD_HEAD.size
     while pos + head <= end:
-        opcode, length = _RECORD_HEAD.unpack_from(records, pos)
+        opcode, length = RECORD_HEAD.unpack_from(records, pos)
         body = pos + head
-        if body + length > end or (opcode == OP_MESSAGE and length < _MESSAGE_HEAD.size):
+        if body + length > end or (opcode == OP_MESSAGE and length < MESSAGE_HEAD.size):
             break  # reported below: the records do not tile the chunk
         if opcode == OP_MESSAGE:
-            channel, _seq, log_time, _pub = _MESSAGE_HEAD.unpack_from(records, body)
+            channel, _seq, log_time, _pub = MESSAGE_HEAD.unpack_from(records, body)
             if channel in channels:
                 if log_time > MAX_LOG_TIME_NS:
                     topic = infos[channel].topic if infos is not None else f"channel {channel}"
-                    raise LogReadError(
-                        f"{where}: message {index} on {topic} has log time {log_time} ns, "
-                        "past the int64 range (year 2262): corrupt time"
-                    )
-                yield index, channel, log_time, view[body + _MESSAGE_HEAD.size : body + length]
-        elif opcode == OP_CHANNEL and infos is not None and length >= _CHANNEL_HEAD.size:
-            _check_channel(records, body, length, infos, where)
+                    raise log_time_error(where, index, topic, log_time)
+                yield index, channel, log_time, view[body + MESSAGE_HEAD.size : body + length]
+        elif opcode == OP_CHANNEL and infos is not None and length >= CHANNEL_HEAD.size:
+            check_channel(records, body, length, infos, where)
         pos = body + length
         index += 1
     if pos != end:
-        raise LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
+        raise overrun_error(where)
 
 
-def _check_channel(
+def log_time_error(where: str, index: int, topic: str, log_time: int) -> LogReadError:
+    """The error for a message whose log time is past int64 (a corrupt time)."""
+    return LogReadError(
+        f"{where}: message {index} on {topic} has log time {log_time} ns, "
+        "past the int64 range (year 2262): corrupt time"
+    )
+
+
+def overrun_error(where: str) -> LogReadError:
+    """The error for chunk records that do not tile their chunk."""
+    return LogReadError(f"{where}: chunk records overrun the chunk (corrupt chunk)")
+
+
+def check_channel(
     records: bytes | memoryview, body: int, length: int, infos: dict[int, ChannelInfo], where: str
 ) -> None:
     """Refuse a Channel record that redefines a wanted channel id with another topic."""
-    cid, _schema, topic_len = _CHANNEL_HEAD.unpack_from(records, body)
+    cid, _schema, topic_len = CHANNEL_HEAD.unpack_from(records, body)
     info = infos.get(cid)
-    if info is None or _CHANNEL_HEAD.size + topic_len > length:
+    if info is None or CHANNEL_HEAD.size + topic_len > length:
         return
-    start = body + _CHANNEL_HEAD.size
+    start = body + CHANNEL_HEAD.size
     topic = bytes(records[start : start + topic_len]).decode("utf-8", "replace")
     if topic != info.topic:
         raise LogReadError(
             f"{where}: malformed MCAP: channel id {cid} is declared twice, for {info.topic!r} "
             f"and {topic!r} (duplicate channel ids mix two topics' messages)"
         )
-
-
-class McapChunkUnitReader:
-    """Per-worker reader of 'mcap-chunk' units of one MCAP file."""
-
-    def __init__(self, source: str, *, check_crc: bool = False) -> None:
-        self.source = source
-        self._reader = ChunkReader(source, check_crc=check_crc)
-
-    def messages(
-        self, unit: ReadUnit, channels: dict[int, ChannelInfo]
-    ) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
-        """(log time, record index, channel id, payload) of the unit's wanted messages.
-
-        Payloads are views into a buffer reused by the next unit: use them before that.
-        """
-        records = self._reader.read(unit.offset, unit.length)
-        where = chunk_where(self.source, unit.offset)
-        for index, cid, log_time, data in iter_chunk_messages(records, channels, where=where):
-            yield log_time, index, cid, data
-
-    def close(self) -> None:
-        """Close the file."""
-        self._reader.close()

@@ -37,9 +37,11 @@ from mcap.summary import Summary
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
 from syncaudit.logs.base import LogReader
+from syncaudit.logs.magic import MCAP_MAGIC
 from syncaudit.logs.mcap_chunks import (
     MAX_CHUNK_BYTES,
     MAX_LOG_TIME_NS,
+    RECORD_HEAD,
     ChunkReader,
     check_declared_size,
     chunk_where,
@@ -53,8 +55,7 @@ from syncaudit.logs.typesys import TypeRegistry, normalise_type_name, one_line, 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
 
-MAGIC = b"\x89MCAP0\r\n"
-_RECORD_HEAD = struct.Struct("<BQ")
+MAGIC = MCAP_MAGIC
 HEADER_CHECKS = 4096
 """Chunk headers checked against their index at open (4096 chunks: ~16 GB of 4 MB chunks)."""
 MAX_CHUNK_RECORD_BYTES = MAX_CHUNK_BYTES + MAX_CHUNK_BYTES // 64 + 2**20
@@ -121,16 +122,16 @@ class McapLog(LogReader):
     def _check_header(self) -> None:
         """Refuse a file whose first record is not a complete MCAP Header: nothing to read."""
         self._file.seek(len(MAGIC))
-        head = self._file.read(_RECORD_HEAD.size)
-        if len(head) < _RECORD_HEAD.size:
+        head = self._file.read(RECORD_HEAD.size)
+        if len(head) < RECORD_HEAD.size:
             raise LogOpenError(f"{self.path}: MCAP file cut off before its header record")
-        opcode, length = _RECORD_HEAD.unpack(head)
+        opcode, length = RECORD_HEAD.unpack(head)
         if opcode != Opcode.HEADER:
             raise LogOpenError(
                 f"{self.path}: not a valid MCAP file: first record is "
                 f"{_opcode_name(opcode)}, not a header"
             )
-        if len(MAGIC) + _RECORD_HEAD.size + length > self._size:
+        if len(MAGIC) + RECORD_HEAD.size + length > self._size:
             raise LogOpenError(f"{self.path}: MCAP file cut off inside its header record")
 
     def _load_index(self) -> Summary | None:
@@ -194,9 +195,9 @@ class McapLog(LogReader):
         section = self._file.read(end - summary_start)
         topics: dict[int, str] = {}
         pos = 0
-        while pos + _RECORD_HEAD.size <= len(section):
-            opcode, length = _RECORD_HEAD.unpack_from(section, pos)
-            body = pos + _RECORD_HEAD.size
+        while pos + RECORD_HEAD.size <= len(section):
+            opcode, length = RECORD_HEAD.unpack_from(section, pos)
+            body = pos + RECORD_HEAD.size
             if body + length > len(section):
                 return  # damaged summary: the mcap reader reports it
             if opcode == Opcode.CHANNEL:
@@ -344,18 +345,18 @@ class McapLog(LogReader):
         handle.seek(len(MAGIC))
         while True:
             offset = handle.tell()
-            head = handle.read(_RECORD_HEAD.size)
-            if len(head) < _RECORD_HEAD.size:
+            head = handle.read(RECORD_HEAD.size)
+            if len(head) < RECORD_HEAD.size:
                 self._cut = (
                     f"at byte {offset}" if not head else f"in a record header at byte {offset}"
                 )
                 return
-            opcode, length = _RECORD_HEAD.unpack(head)
+            opcode, length = RECORD_HEAD.unpack(head)
             if opcode == Opcode.FOOTER:
-                if offset + _RECORD_HEAD.size + length + len(MAGIC) > self._size:
+                if offset + RECORD_HEAD.size + length + len(MAGIC) > self._size:
                     self._cut = f"inside its footer at byte {offset} (after all data)"
                 return
-            whole = offset + _RECORD_HEAD.size + length <= self._size
+            whole = offset + RECORD_HEAD.size + length <= self._size
             if opcode == Opcode.CHUNK:
                 for index, rec in enumerate(self._chunk_records(handle, offset, length)):
                     if isinstance(rec, Message):
@@ -368,7 +369,7 @@ class McapLog(LogReader):
                 name = _opcode_name(opcode)
                 self._cut = f"inside a {name} record starting at byte {offset}"
                 return
-            handle.seek(offset + _RECORD_HEAD.size + length)
+            handle.seek(offset + RECORD_HEAD.size + length)
 
     def _chunk_records(self, handle: BinaryIO, offset: int, length: int) -> list[Any]:
         """Records of the chunk at `offset` (handle just past its record header).
@@ -376,7 +377,7 @@ class McapLog(LogReader):
         A chunk that runs past the end of the file gives the complete records decodable
         from its bytes; a damaged whole chunk raises LogReadError.
         """
-        available = self._size - offset - _RECORD_HEAD.size
+        available = self._size - offset - RECORD_HEAD.size
         whole = length <= available
         where = chunk_where(str(self.path), offset)
         if length > MAX_CHUNK_RECORD_BYTES:  # read into memory below: bound it first
@@ -577,7 +578,7 @@ class McapLog(LogReader):
         for span in self._scan.chunks:
             if not span.channels & wanted:
                 continue
-            full = _RECORD_HEAD.size + span.length
+            full = RECORD_HEAD.size + span.length
             whole = span.offset + full <= self._size
             kind = "mcap-chunk" if whole else "mcap-cut-chunk"
             length = full if whole else self._size - span.offset
@@ -626,7 +627,7 @@ class McapLog(LogReader):
                 if isinstance(item, Message):
                     yield item
                     continue
-                handle.seek(offset + _RECORD_HEAD.size)
+                handle.seek(offset + RECORD_HEAD.size)
                 for index, rec in enumerate(self._chunk_records(handle, offset, item.length)):
                     if isinstance(rec, Message) and _in_range(rec.log_time, start_ns, stop_ns):
                         heapq.heappush(heap, (rec.log_time, offset, index, rec))
@@ -724,9 +725,9 @@ def _parse_records(data: bytes, where: str, *, tolerant: bool) -> list[Any]:
     """
     records: list[Any] = []
     pos = 0
-    while pos + _RECORD_HEAD.size <= len(data):
-        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-        body_start = pos + _RECORD_HEAD.size
+    while pos + RECORD_HEAD.size <= len(data):
+        opcode, length = RECORD_HEAD.unpack_from(data, pos)
+        body_start = pos + RECORD_HEAD.size
         if body_start + length > len(data):
             break
         stream = ReadDataStream(io.BytesIO(data[body_start : body_start + length]))
@@ -764,8 +765,8 @@ class McapCutChunkUnitReader:
         where = chunk_where(self.source, unit.offset)
         if unit.length > MAX_CHUNK_RECORD_BYTES:
             raise LogReadError(f"{where} is {unit.length} bytes long: over the chunk limit")
-        self._file.seek(unit.offset + _RECORD_HEAD.size)
-        body = self._file.read(max(unit.length - _RECORD_HEAD.size, 0))
+        self._file.seek(unit.offset + RECORD_HEAD.size)
+        body = self._file.read(max(unit.length - RECORD_HEAD.size, 0))
         for index, rec in enumerate(_salvage_chunk(body, where)):
             if isinstance(rec, Message):
                 info = channels.get(rec.channel_id)

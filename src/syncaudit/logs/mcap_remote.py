@@ -34,6 +34,7 @@ from syncaudit.logs.base import LogReader
 from syncaudit.logs.mcap_chunks import (
     MAX_LOG_TIME_NS,
     OP_CHUNK,
+    RECORD_HEAD,
     ChunkReader,
     check_declared_size,
     chunk_where,
@@ -71,7 +72,6 @@ GAP_BYTES = 64 << 10
 PARENT_CACHE_BYTES = 64 << 20
 """Chunks the parent's own `messages()` fetched (topic probes, /tf_static) that it keeps,
 so that the workers' runs do not fetch them again."""
-_RECORD_HEAD = struct.Struct("<BQ")
 _FOOTER_SUMMARY_START = 28
 """Bytes from the end of the file to the footer's summary_start field (u64)."""
 
@@ -205,7 +205,7 @@ class RemoteChunkReader(ChunkReader):
         """The decompressed records of the chunk record at `offset` (fetched whole, and
         kept in the tracker up to `PARENT_CACHE_BYTES`: the workers' runs then skip it)."""
         where = chunk_where(self.path, offset)
-        if offset < 0 or length < _RECORD_HEAD.size or length > MAX_CHUNK_RECORD_BYTES:
+        if offset < 0 or length < RECORD_HEAD.size or length > MAX_CHUNK_RECORD_BYTES:
             raise LogReadError(f"{where}: chunk record of {length} bytes cannot be read")
         tracker = self._tracker
         data = bytearray(length)
@@ -379,7 +379,7 @@ class RemoteChunksUnitReader:
         self._counter = self._tracker.counter if self._tracker is not None else None
         self._decoder = RemoteChunkReader(self._object, None, check_crc=check_crc)
         self._input = bytearray()
-        self._head = bytearray(_RECORD_HEAD.size)
+        self._head = bytearray(RECORD_HEAD.size)
 
     def messages(
         self, unit: ReadUnit, channels: dict[int, ChannelInfo]
@@ -400,7 +400,7 @@ class RemoteChunksUnitReader:
                     raise LogReadError(f"{where}: the chunk index points at no chunk record")
                 if opcode != OP_CHUNK:  # a message index between two chunks of the run
                     _skip(stream, length)
-                    pos += _RECORD_HEAD.size + length
+                    pos += RECORD_HEAD.size + length
                     continue
                 records = self._chunk(stream, length, where, ordinal)
                 base = ordinal << 32
@@ -408,18 +408,18 @@ class RemoteChunksUnitReader:
                     records, channels, where=where
                 ):
                     yield log_time, base | index, cid, data
-                pos += _RECORD_HEAD.size + length
+                pos += RECORD_HEAD.size + length
                 ordinal += 1
         finally:
             stream.close()
 
     def _record_head(self, stream: RunStream, pos: int, end: int, where: str) -> tuple[int, int]:
         """(opcode, length) of the record at `pos`, which must end within the run."""
-        if end - pos < _RECORD_HEAD.size:
+        if end - pos < RECORD_HEAD.size:
             raise LogReadError(f"{where}: a record is cut by the end of the indexed chunks")
         stream.readinto(memoryview(self._head))
-        opcode, length = _RECORD_HEAD.unpack(self._head)
-        if pos + _RECORD_HEAD.size + length > end:
+        opcode, length = RECORD_HEAD.unpack(self._head)
+        if pos + RECORD_HEAD.size + length > end:
             raise LogReadError(
                 f"{where}: record of {length} bytes runs past the indexed chunk "
                 "(corrupt chunk index or record)"
@@ -428,14 +428,14 @@ class RemoteChunksUnitReader:
 
     def _chunk(self, stream: RunStream, length: int, where: str, ordinal: int) -> memoryview:
         """Stream the rest of a chunk record into memory and decode it."""
-        total = _RECORD_HEAD.size + length
+        total = RECORD_HEAD.size + length
         if total > MAX_CHUNK_RECORD_BYTES:
             raise LogReadError(f"{where} is {total} bytes long: over the chunk limit")
         if len(self._input) < total:
             self._input = bytearray(total)
         view = memoryview(self._input)[:total]
-        view[: _RECORD_HEAD.size] = self._head
-        stream.readinto(view[_RECORD_HEAD.size :])
+        view[: RECORD_HEAD.size] = self._head
+        stream.readinto(view[RECORD_HEAD.size :])
         return self._decoder.decode(view, where, slot=ordinal)
 
     def close(self) -> None:

@@ -2,20 +2,12 @@
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-from collections.abc import Callable
 from pathlib import Path
 
 from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
-from syncaudit.logs.mcap_log import MAGIC as MCAP_MAGIC
-from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.magic import MCAP_MAGIC, ROSBAG1_MAGIC, ROSBAG_ANY_MAGIC, SQLITE_MAGIC
 from syncaudit.logs.typesys import one_line
-
-ROSBAG1_MAGIC = b"#ROSBAG V2.0"
-ROSBAG_ANY_MAGIC = b"#ROSBAG V"
-SQLITE_MAGIC = b"SQLite format 3\x00"
 
 __all__ = ["MCAP_MAGIC", "ROSBAG1_MAGIC", "SQLITE_MAGIC", "open_log"]
 
@@ -36,38 +28,22 @@ def _bag_folder(path: Path) -> LogReader:
         from syncaudit.logs.sqlite_log import open_sqlite_log
 
         return open_sqlite_log(path, meta)
-    opener = _mcap_bag_opener()
-    if opener is not None and not meta.compression_mode:
-        log = opener(path, meta.files)  # the chunk-parallel MCAP path, across every file
+    if not meta.compression_mode:
+        from syncaudit.logs.mcap_bag import open_mcap_bag
+
+        log = open_mcap_bag(path, meta.files)  # chunk-parallel, across every file
         for warning in meta.warnings:
             log.warn(warning.code, warning.message)
         return log
-    # TODO(lead): until the mcapio branch's `mcap_bag.open_mcap_bag` is merged, and for
-    # MCAP bags with rosbag2 compression modes, rosbags reads MCAP folders. rosbags refuses
-    # a blank storage_identifier or serialization_format: such a bag's single MCAP file is
-    # read directly instead (it names its own channels' encodings).
+    # rosbag2's file/message compression modes: rosbags reads the bag, but refuses one with
+    # a blank storage_identifier or serialization_format.
     if meta.warnings:
-        if len(meta.files) != 1 or meta.compression_mode:
-            raise LogOpenError(
-                f"{path}: metadata.yaml has blank fields ({meta.warnings[0].message}) and "
-                f"the bag is split into {len(meta.files)} files or compressed; pass its "
-                ".mcap files one by one"
-            )
-        mcap = McapLog(meta.files[0])
-        for warning in meta.warnings:
-            mcap.warn(warning.code, warning.message)
-        return mcap
+        raise LogOpenError(
+            f"{path}: metadata.yaml has blank fields ({meta.warnings[0].message}) and "
+            f"the bag is split into {len(meta.files)} files or compressed; pass its "
+            ".mcap files one by one"
+        )
     return _rosbags_log(path, ros1=False)
-
-
-def _mcap_bag_opener() -> Callable[[Path, list[Path]], LogReader] | None:
-    """`open_mcap_bag(folder, files)` of the mcapio engineer's module, once it is merged."""
-    if importlib.util.find_spec("syncaudit.logs.mcap_bag") is None:
-        return None
-    opener: Callable[[Path, list[Path]], LogReader] = importlib.import_module(
-        "syncaudit.logs.mcap_bag"
-    ).open_mcap_bag
-    return opener
 
 
 def open_log(path: str | Path) -> LogReader:
@@ -101,6 +77,8 @@ def open_log(path: str | Path) -> LogReader:
     if not head:
         raise LogOpenError(f"{path}: file is empty")
     if head.startswith(MCAP_MAGIC):
+        from syncaudit.logs.mcap_log import McapLog
+
         return McapLog(path)
     if head.startswith(ROSBAG1_MAGIC):
         from syncaudit.logs.rosbag1_log import Rosbag1Log

@@ -41,10 +41,11 @@ from syncaudit.logs.lz4_frame import (
     Pieces,
     decode_frame,
 )
+from syncaudit.logs.magic import ROSBAG1_MAGIC
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
 
-MAGIC = b"#ROSBAG V2.0\n"
+MAGIC = ROSBAG1_MAGIC
 OP_MSG_DATA = 0x02
 OP_BAG_HEADER = 0x03
 OP_INDEX_DATA = 0x04

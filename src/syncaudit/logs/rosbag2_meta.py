@@ -20,12 +20,10 @@ from typing import Any
 import yaml
 
 from syncaudit.errors import LogOpenError
+from syncaudit.logs.magic import MCAP_MAGIC, SQLITE_MAGIC, ZSTD_MAGIC
 from syncaudit.logs.model import LogWarning
 from syncaudit.logs.typesys import one_line
 
-SQLITE_MAGIC = b"SQLite format 3\x00"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 STORAGES = ("sqlite3", "mcap")
 MAX_VERSION = 9
 

@@ -35,6 +35,7 @@ import apsw
 import zstandard
 
 from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.logs.magic import ZSTD_MAGIC
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import one_line
 
@@ -50,7 +51,6 @@ units into tasks of GROUP_BYTES (24 MB) by their cost."""
 INLINE_BYTES = 16 * 1024
 """Wanted payloads up to this size are read with their rows; bigger ones through blob I/O,
 whose opening (~3 us) costs less than a second copy of them."""
-ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 """A zstd frame: the payload of a bag with compression_mode 'message' (a CDR payload begins
 with its encapsulation header 00 0x 00 00, never with 0x28). Told by the payload, so a
 worker needs nothing but the unit; rosbags decides by the metadata's compression_mode."""

@@ -22,7 +22,7 @@ from typing import Protocol
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 UNIT_READERS: dict[str, str] = {
-    "mcap-chunk": "syncaudit.logs.mcap_chunks:McapChunkUnitReader",
+    "mcap-chunk": "syncaudit.logs.mcap_units:McapChunkUnitReader",
     "mcap-cut-chunk": "syncaudit.logs.mcap_log:McapCutChunkUnitReader",
     "mcap-remote-chunks": "syncaudit.logs.mcap_remote:RemoteChunksUnitReader",
     "rosbag1-chunk": "syncaudit.logs.rosbag1:Rosbag1ChunkReader",

@@ -20,12 +20,13 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError, UsageError
+from syncaudit.logs.magic import MCAP_MAGIC
 from syncaudit.remote.ranges import FetchStats as FetchStats  # re-exported
 from syncaudit.remote.ranges import public_url as public_url  # re-exported
 
 URL = re.compile(r"^(s3|s3a|gs|gcs|az|abfs|abfss|http|https)://", re.IGNORECASE)
 EXTRAS = {"s3": "s3", "s3a": "s3", "gs": "gcs", "gcs": "gcs", "az": "azure", "abfs": "azure"}
-MAGIC = b"\x89MCAP0\r\n"
+MAGIC = MCAP_MAGIC
 TAIL_BYTES = 64 << 10
 """First read of an MCAP's end: the footer, and for small logs the whole summary."""
 HEAD_BYTES = 64 << 10

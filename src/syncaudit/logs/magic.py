@@ -1,0 +1,12 @@
+"""The bytes each container (and zstd data) starts with: how a log's format is told."""
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+"""MCAP: at the start and at the end of the file."""
+ROSBAG_ANY_MAGIC = b"#ROSBAG V"
+"""A ROS 1 bag of any format version (the version follows, then a newline)."""
+ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
+"""A ROS 1 bag of format 2.0, the one syncaudit reads."""
+SQLITE_MAGIC = b"SQLite format 3\x00"
+"""An SQLite 3 database (a ROS 2 `.db3` bag)."""
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+"""A zstd frame (a rosbag2 file- or message-compressed payload)."""
