@@ -535,9 +535,10 @@ def _log_name(size_gb: float, multiple: int) -> str:
 
 
 def prepare_logs(
-    cache: Path, size_gb: float, scratch: Path, timeout_s: float
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The 1x log (at least `size_gb`) and the 2x log (twice its duration)."""
+    cache: Path, size_gb: float, scratch: Path, timeout_s: float, *, two_needed: bool = True
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The 1x log (at least `size_gb`) and the 2x log (twice its duration; None where not
+    `two_needed`, so a 1x-only run generates no 4 GB log)."""
     one_name = _log_name(size_gb, 1)
     if meta_path(cache / one_name).exists():
         duration = float(json.loads(meta_path(cache / one_name).read_text())["duration_s"])
@@ -545,6 +546,8 @@ def prepare_logs(
         rate = calibrate_rate(cache, scratch, timeout_s)
         duration = round(size_gb * 1e9 / rate * SIZE_MARGIN, 1)
     one = ensure_log(cache, one_name, duration, scratch, timeout_s)
+    if not two_needed:
+        return one, None
     two = ensure_log(cache, _log_name(size_gb, 2), 2 * one["duration_s"], scratch, timeout_s)
     return one, two
 
@@ -1408,14 +1411,23 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
         f"{os.cpu_count()} cores, {_memory_gib():.1f} GiB RAM, Python {platform.python_version()}, "
         f"load average {os.getloadavg()[0]:.2f} (1 min; others' work on the machine skews times)"
     )
-    one_meta, two_meta = prepare_logs(cache, size_gb, scratch, args.timeout_s)
-    one, two = log_facts(Path(one_meta["log"])), log_facts(Path(two_meta["log"]))
+    sizes = {s.strip() for s in args.sizes.split(",") if s.strip()}
+    one_only = args.only_containers and "2x" not in sizes
+    one_meta, two_meta = prepare_logs(
+        cache, size_gb, scratch, args.timeout_s, two_needed=not one_only
+    )
+    one = log_facts(Path(one_meta["log"]))
     _log(
         f"rig: {LIDAR_MODEL} (VelodyneScan, random returns), {len(CAMERAS)} cameras "
         f"(CompressedImage {IMAGE_BYTES / 1e3:.0f} KB JPEG-like, exposure, trigger, flir meta)"
     )
     _log(describe_log("1x", one_meta, one))
-    _log(describe_log("2x", two_meta, two))
+    if two_meta is None:
+        logs = {"1x": one}
+    else:
+        two = log_facts(Path(two_meta["log"]))
+        _log(describe_log("2x", two_meta, two))
+        logs = {"1x": one, "2x": two}
 
     kinds = [k.strip() for k in args.containers.split(",") if k.strip()]
     if args.skip_bz2:
@@ -1427,7 +1439,7 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
         )
     if args.only_containers:
         warm_bytecode(*([args.baseline_src] if args.baseline_src is not None else []))
-        return _bench_containers(args, cache, {"1x": one, "2x": two}, scratch, kinds)
+        return _bench_containers(args, cache, logs, scratch, kinds)
 
     bin_dir: Path | None = None
     peer_note = "skipped (--skip-peers)"
@@ -1547,7 +1559,7 @@ def _bench(args: argparse.Namespace, size_gb: float, cache: Path, scratch: Path)
     for line in verdicts(audit, floor, limit, audit2, peers, peer_note):
         _log("  " + line)
     if not args.skip_containers:
-        _bench_containers(args, cache, {"1x": one, "2x": two}, scratch, kinds)
+        _bench_containers(args, cache, logs, scratch, kinds)
     return 0 if audit.ok else 1
 
 
