@@ -14,13 +14,8 @@ from pathlib import Path
 import pytest
 
 from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
-from syncaudit.camera.extract import (
-    CameraTableBuilder,
-    DamagedRow,
-    exposure_row,
-    image_row,
-    trigger_row,
-)
+from syncaudit.camera.extract import CameraTableBuilder, exposure_row, image_row, trigger_row
+from syncaudit.camera.rowstore import DamagedRow
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage, open_log
 from syncaudit.rig import CameraConfig, load_rig
@@ -136,7 +131,7 @@ def test_builder_skips_damaged_rows_with_one_warning_per_topic(
     image = messages["sensor_msgs/msg/Image"]
     good = image_row(image)
     builder = CameraTableBuilder(cam)
-    builder.images = [good, DamagedRow("/img", 2_000_000_000, "7 bytes"), good]
+    builder.images.extend([good, DamagedRow("/img", 2_000_000_000, "7 bytes"), good])
     builder.images.append(DamagedRow("/img", 3_000_000_000, "0 bytes"))
     tables = builder.build()
     assert len(tables.images) == 2
@@ -144,7 +139,8 @@ def test_builder_skips_damaged_rows_with_one_warning_per_topic(
         "camera front: 2 damaged messages skipped on /img "
         "(first at log time 2.000000000 s: 7 bytes)",
     )
-    builder.images = [DamagedRow("/img", 2_000_000_000, "7 bytes")]
+    builder = CameraTableBuilder(cam)
+    builder.images.append(DamagedRow("/img", 2_000_000_000, "7 bytes"))
     with pytest.raises(LogReadError, match="camera front: all 1 messages on /img are damaged"):
         builder.build()
 

@@ -6,8 +6,9 @@ from typing import Any
 
 import pytest
 
-from syncaudit.camera.extract import CameraTableBuilder, DamagedRow
+from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.routing import CameraRouter
+from syncaudit.camera.rowstore import DamagedRow
 from syncaudit.errors import LogReadError
 from syncaudit.rig import CameraConfig
 
@@ -69,7 +70,7 @@ def test_unnamed_images_are_left_out_and_the_cameras_told_why() -> None:
     (warning,) = router.finish()
     assert "/shared/image" in warning and "2 messages carry no header.frame_id" in warning
     for builder in builders:
-        assert builder.images == []
+        assert len(builder.images) == 0
         assert "carry no header.frame_id" in builder.shared_topic_notes[0]
 
 
@@ -85,7 +86,7 @@ def test_a_camera_without_frame_id_on_a_shared_topic_is_told() -> None:
     router, (a, b) = _router("a_optical", None)
     router.feed("image", "/shared/image", _image("a_optical"))
     router.finish()
-    assert len(a.images) == 1 and b.images == []
+    assert len(a.images) == 1 and len(b.images) == 0
     assert "gives the camera no frame_id" in b.shared_topic_notes[0]
 
 

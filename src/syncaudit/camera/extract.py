@@ -18,8 +18,9 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
+from syncaudit.camera.rowstore import DamagedRow, Row, RowStore
 from syncaudit.camera.sequences import SequenceCounter, field_counter, header_seq_counter
 from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
 from syncaudit.errors import LogReadError
@@ -42,15 +43,6 @@ MAX_DURATION_S = 3600.0
 """Exposures or delays longer than this (or not finite) are damaged values, not timing."""
 
 Deserialize = Callable[[RawMessage], Any]
-
-
-@dataclass(frozen=True, slots=True)
-class DamagedRow:
-    """A camera message that could not be read: skipped, counted and reported."""
-
-    topic: str
-    log_time_ns: int
-    reason: str
 
 
 ImageRow = tuple[int, int, int | None, str]
@@ -295,9 +287,9 @@ class CameraTableBuilder:
     """Collects one camera's rows as they stream by, then builds its tables."""
 
     camera: CameraConfig
-    images: list[ImageRow | DamagedRow] = field(default_factory=list)
-    exposures: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
-    triggers: list[tuple[Any, ...] | DamagedRow] = field(default_factory=list)
+    images: RowStore = field(default_factory=lambda: RowStore(_image_table))
+    exposures: RowStore = field(default_factory=lambda: RowStore(_frame_table))
+    triggers: RowStore = field(default_factory=lambda: RowStore(_trigger_table))
     shared_topic_notes: list[str] = field(default_factory=list)
     topic_readers: dict[str, tuple[str, tuple[str, ...]]] = field(default_factory=dict)
     """Kind ('image', 'exposure', 'trigger') -> (topic it reads, the cameras reading it)."""
@@ -316,45 +308,34 @@ class CameraTableBuilder:
         """
         import numpy as np  # deferred: worker processes extract rows without numpy
 
-        from syncaudit.columns.table import Table, int_column, str_column
+        from syncaudit.columns.table import str_column
 
         cam = self.camera
-        image_rows, image_warning = _readable(cam.name, self.images)
-        exposure_rows, exposure_warning = _readable(cam.name, self.exposures)
-        trigger_rows, trigger_warning = _readable(cam.name, self.triggers)
+        images, image_warning = _readable(cam.name, self.images)
+        exposures, exposure_warning = _readable(cam.name, self.exposures)
+        triggers, trigger_warning = _readable(cam.name, self.triggers)
         warnings = tuple(w for w in (image_warning, exposure_warning, trigger_warning) if w)
-        images = Table(
-            {
-                "header_stamp_ns": np.array([r[0] for r in image_rows], dtype=np.int64),
-                "log_time_ns": np.array([r[1] for r in image_rows], dtype=np.int64),
-                "frame_sequence": int_column(r[2] for r in image_rows),
-                "frame_id": str_column([r[3] for r in image_rows]),
-            },
-            len(image_rows),
-        )
-        if exposure_rows:
-            frames = _restamped(_table(exposure_rows, FRAME_COLUMNS), cam.stamp)
+        exposure_source = str(exposures["source"][0]) if len(exposures) else None
+        trigger_source = str(triggers["source"][0]) if len(triggers) else None
+        if len(exposures):
+            frames = _restamped(exposures, cam.stamp)
         else:
             frames = _frames_from_images(images, cam)
         # Rows from a shared topic carry what the message names; the table is this camera's.
         frames = frames.with_columns({"camera": str_column([cam.name] * len(frames))})
         frames = frames.take(np.argsort(frames["log_time_ns"], kind="stable"))
-        triggers = _table(trigger_rows, TRIGGER_COLUMNS)
         triggers = triggers.with_columns({"camera": str_column([cam.name] * len(triggers))})
         return CameraTables(
             cam.name,
             images,
             frames,
             triggers,
-            exposure_rows[0][_SOURCE] if exposure_rows else None,
-            trigger_rows[0][_SOURCE] if trigger_rows else None,
+            exposure_source,
+            trigger_source,
             warnings,
             tuple(self.shared_topic_notes),
-            self.sequence_counter(
-                "exposure" if exposure_rows else "image",
-                exposure_rows[0][_SOURCE] if exposure_rows else None,
-            ),
-            self.sequence_counter("trigger", trigger_rows[0][_SOURCE] if trigger_rows else None),
+            self.sequence_counter("exposure" if len(exposures) else "image", exposure_source),
+            self.sequence_counter("trigger", trigger_source),
         )
 
 
@@ -409,39 +390,70 @@ def _restamped(frames: Table, semantics: str) -> Table:
     )
 
 
-_Row = TypeVar("_Row", bound=tuple[Any, ...])
-
-
-def _readable(camera: str, rows: list[_Row | DamagedRow]) -> tuple[list[_Row], str | None]:
-    """The readable rows of one topic, and a warning counting the damaged ones.
+def _readable(camera: str, rows: RowStore) -> tuple[Table, str | None]:
+    """The readable rows of one topic as a table, and a warning counting the damaged ones.
 
     Raises LogReadError where every row is damaged: nothing of that topic can be judged.
     """
-    good = [r for r in rows if not isinstance(r, DamagedRow)]
-    bad = [r for r in rows if isinstance(r, DamagedRow)]
+    table = rows.table()
+    bad = rows.damaged
     if not bad:
-        return good, None
+        return table, None
     first = bad[0]
     where = f"first at log time {first.log_time_ns / 1e9:.9f} s: {first.reason}"
-    if not good:
+    if not rows.readable:
         raise LogReadError(
             f"camera {camera}: all {len(bad)} messages on {first.topic} are damaged ({where})"
         )
     noun = "message" if len(bad) == 1 else "messages"
-    return good, f"camera {camera}: {len(bad)} damaged {noun} skipped on {first.topic} ({where})"
+    return table, f"camera {camera}: {len(bad)} damaged {noun} skipped on {first.topic} ({where})"
+
+
+def _image_table(rows: list[Row]) -> Table:
+    """Image rows (ImageRow) as their table."""
+    import numpy as np
+
+    from syncaudit.columns.table import Table, int_column
+
+    return Table(
+        {
+            "header_stamp_ns": np.array([r[0] for r in rows], dtype=np.int64),
+            "log_time_ns": np.array([r[1] for r in rows], dtype=np.int64),
+            "frame_sequence": int_column(r[2] for r in rows),
+            "frame_id": _strings([r[3] for r in rows]),
+        },
+        len(rows),
+    )
+
+
+def _frame_table(rows: list[Row]) -> Table:
+    return _table(rows, FRAME_COLUMNS)
+
+
+def _trigger_table(rows: list[Row]) -> Table:
+    return _table(rows, TRIGGER_COLUMNS)
+
+
+def _strings(values: list[Any]) -> Any:
+    """A string column whose equal values share one str object (names and frame ids repeat
+    for every frame: one object each, not one per row)."""
+    from syncaudit.columns.table import str_column
+
+    seen: dict[Any, Any] = {}
+    return str_column([seen.setdefault(v, v) for v in values])
 
 
 def _table(rows: list[tuple[Any, ...]], columns: dict[str, str]) -> Table:
     """A typed table from row tuples, built column by column (see columns.table)."""
     import numpy as np
 
-    from syncaudit.columns.table import Table, int_column, str_column
+    from syncaudit.columns.table import Table, int_column
 
     values = list(zip(*rows, strict=True)) if rows else [()] * len(columns)
     out: dict[str, Any] = {}
     for (name, dtype), column in zip(columns.items(), values, strict=True):
         if dtype == "string":
-            out[name] = str_column(list(column))
+            out[name] = _strings(list(column))
         elif dtype == "Int64":
             out[name] = int_column(column)
         else:

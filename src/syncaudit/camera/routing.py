@@ -23,7 +23,8 @@ from collections.abc import Container
 from dataclasses import dataclass, field
 from typing import Any
 
-from syncaudit.camera.extract import CameraTableBuilder, DamagedRow
+from syncaudit.camera.extract import CameraTableBuilder
+from syncaudit.camera.rowstore import DamagedRow, RowStore
 from syncaudit.errors import LogReadError
 from syncaudit.rig import CameraConfig
 
@@ -64,8 +65,8 @@ class SharedTopicCount:
     damaged: int
 
 
-def _rows_of(builder: CameraTableBuilder, kind: str) -> list[Any]:
-    rows: list[Any] = {
+def _rows_of(builder: CameraTableBuilder, kind: str) -> RowStore:
+    rows: RowStore = {
         "image": builder.images,
         "exposure": builder.exposures,
         "trigger": builder.triggers,
@@ -188,7 +189,7 @@ class CameraRouter:
     builders: dict[str, CameraTableBuilder] = field(default_factory=dict)
     """Camera name -> its builder."""
     _owners: dict[tuple[str, str], list[CameraTableBuilder]] = field(default_factory=dict)
-    _single: dict[tuple[str, str], list[Any]] = field(default_factory=dict)
+    _single: dict[tuple[str, str], RowStore] = field(default_factory=dict)
     _shared: dict[tuple[str, str], _SharedTopic] = field(default_factory=dict)
 
     @classmethod
