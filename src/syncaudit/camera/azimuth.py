@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from syncaudit.camera.tf_fast import read_tf_message
 from syncaudit.logs import LogReader
 from syncaudit.rig import CameraConfig, LidarConfig
 
@@ -47,7 +48,7 @@ def tf_static_yaws(log: LogReader) -> dict[str, float]:
     yaws: dict[str, float] = {}
     topics = [t.name for t in log.topics.values() if t.msgtype in TF_TYPES and "static" in t.name]
     for msg in log.messages(topics):
-        tf: Any = log.deserialize(msg)
+        tf: Any = read_tf_message(msg.data, msg.encoding) or log.deserialize(msg)
         for transform in tf.transforms:
             child = str(transform.child_frame_id)
             axis = (0.0, 0.0, 1.0) if "optical" in child else (1.0, 0.0, 0.0)
