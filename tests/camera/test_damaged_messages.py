@@ -12,7 +12,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from mcap.records import Channel, Message, Schema
 
+from mcap_copy import copy_mcap
 from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
 from syncaudit.camera.extract import CameraTableBuilder, exposure_row, image_row, trigger_row
 from syncaudit.camera.rowstore import DamagedRow
@@ -147,34 +149,20 @@ def test_builder_skips_damaged_rows_with_one_warning_per_topic(
 
 def test_audit_of_a_log_with_cut_exposures_goes_on(tmp_path: Path) -> None:
     """End to end: every third CameraExposure of one camera cut to 7 bytes."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
-
     from syncaudit.audit import audit_log
 
     src = SAMPLE
     dst = tmp_path / "cut.mcap"
-    cut = 0
-    with src.open("rb") as f_in, dst.open("wb") as f_out:
-        writer = Writer(f_out)
-        writer.start()
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in make_reader(f_in).iter_messages():
-            assert schema is not None
-            if schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(
-                    schema.name, schema.encoding, schema.data
-                )
-            if channel.id not in channels:
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id]
-                )
-            data = message.data
-            if channel.topic == "/cameras/front/exposure" and message.sequence % 3 == 0:
-                data, cut = data[:7], cut + 1
-            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time)
-        writer.finish()
+    cuts: list[int] = []
+
+    def every_third_front_exposure(_schema: Schema, channel: Channel, message: Message) -> bytes:
+        if channel.topic == "/cameras/front/exposure" and message.sequence % 3 == 0:
+            cuts.append(message.log_time)
+            return message.data[:7]
+        return message.data
+
+    copy_mcap(src, dst, change=every_third_front_exposure)
+    cut = len(cuts)
     assert cut > 5
     rig = load_rig(Path(f"{SAMPLE}.rig.yaml"))
     whole = audit_log(src, rig, jobs=1)

@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
+from mcap.records import Channel, Message, Schema
 
+from mcap_copy import copy_mcap
 from syncaudit.camera import topics
 from syncaudit.camera.extract import CAMERA_FIELD_TYPES
 from syncaudit.errors import LogReadError
@@ -61,31 +61,15 @@ def test_probe_reads_camera_fields_without_the_type_registry(
 
 def test_a_damaged_camera_message_still_fails_the_probe(shared_log: Path, tmp_path: Path) -> None:
     """The first TriggerEvent cut short: rosbags' error, as before the struct path."""
-    damaged = tmp_path / "damaged.mcap"
-    cut = False
-    with shared_log.open("rb") as f_in, damaged.open("wb") as f_out:
-        reader = make_reader(f_in)
-        writer = Writer(f_out, compression=CompressionType.ZSTD)
-        writer.start(profile=reader.get_header().profile, library="test")
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            assert schema is not None
-            if schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(
-                    schema.name, schema.encoding, schema.data
-                )
-            if channel.id not in channels:
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id], channel.metadata
-                )
-            data = message.data
-            if not cut and schema.name in CAMERA_FIELD_TYPES:
-                data, cut = data[:30], True
-            writer.add_message(
-                channels[channel.id], message.log_time, data, message.publish_time, message.sequence
-            )
-        writer.finish()  # type: ignore[no-untyped-call]
+    cut: list[int] = []
+
+    def first_cut(schema: Schema, _channel: Channel, message: Message) -> bytes:
+        if not cut and schema.name in CAMERA_FIELD_TYPES:
+            cut.append(message.log_time)
+            return message.data[:30]
+        return message.data
+
+    damaged = copy_mcap(shared_log, tmp_path / "damaged.mcap", change=first_cut)
     assert cut
     with pytest.raises(LogReadError, match="does not match its definition"):
         _probe(damaged)

@@ -8,9 +8,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 import pytest
-from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
 
+from mcap_copy import copy_mcap
 from syncaudit import collect
 from syncaudit.audit import audit_log
 from syncaudit.inspect_log import inspect_log
@@ -20,37 +19,6 @@ from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_
 
 REPO = Path(__file__).resolve().parents[2]
 OUSTER_BAG = REPO.parent / "shared" / "data" / "lidar" / "ouster_os1_512x10" / "512x10_raw.bag"
-
-
-def _rechunked(src: Path, dst: Path) -> Path:
-    """`src` copied by the mcap library into 50 kB chunks."""
-    with src.open("rb") as f_in, dst.open("wb") as f_out:
-        reader = make_reader(f_in)
-        writer = Writer(f_out, chunk_size=50_000, compression=CompressionType.ZSTD)
-        writer.start(profile=reader.get_header().profile, library="test")
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if schema is not None and schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(
-                    schema.name, schema.encoding, schema.data
-                )
-            if channel.id not in channels:
-                channels[channel.id] = writer.register_channel(
-                    channel.topic,
-                    channel.message_encoding,
-                    schemas.get(schema.id if schema else 0, 0),
-                    channel.metadata,
-                )
-            writer.add_message(
-                channels[channel.id],
-                message.log_time,
-                message.data,
-                message.publish_time,
-                message.sequence,
-            )
-        writer.finish()  # type: ignore[no-untyped-call]
-    return dst
 
 
 @pytest.mark.parametrize("log_format", ["mcap", "bag"])
@@ -72,7 +40,7 @@ def test_info_is_the_same_with_one_process_or_several(
         ),
     )
     if log_format == "mcap":  # the simulator writes one chunk: copy into small ones
-        out = _rechunked(out, tmp_path / "log.mcap")
+        out = copy_mcap(out, tmp_path / "log.mcap", chunk_size=50_000)
     monkeypatch.setattr(collect, "GROUP_BYTES", 200_000)  # several tasks: jobs=2 uses the pool
     with open_log(out) as log:
         units = log.read_units(frozenset(log.topics))

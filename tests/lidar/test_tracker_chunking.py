@@ -7,41 +7,18 @@ came one scan at a time, all at once or split anywhere: the unwrapped angle is e
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from sample_chunks import split_samples
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.revolutions import RevolutionTracker
 from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
 from syncaudit.lidar.stream import iter_packet_chunks
 from syncaudit.logs import open_log
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
-
-
-def _split(samples: PacketSamples, at_packet: int) -> tuple[PacketSamples, PacketSamples]:
-    """The packets before `at_packet` and from it on, as two chunks."""
-    cut = int(np.searchsorted(samples.sample_packet, at_packet))
-    head = replace(
-        samples,
-        sensor_time_ns=samples.sensor_time_ns[:at_packet],
-        driver_stamp_ns=samples.driver_stamp_ns[:at_packet],
-        sample_time_ns=samples.sample_time_ns[:cut],
-        sample_azimuth_deg=samples.sample_azimuth_deg[:cut],
-        sample_packet=samples.sample_packet[:cut],
-        outlier_blocks=0,
-    )
-    tail = replace(
-        samples,
-        sensor_time_ns=samples.sensor_time_ns[at_packet:],
-        driver_stamp_ns=samples.driver_stamp_ns[at_packet:],
-        sample_time_ns=samples.sample_time_ns[cut:],
-        sample_azimuth_deg=samples.sample_azimuth_deg[cut:],
-        sample_packet=samples.sample_packet[cut:] - at_packet,
-    )
-    return head, tail
 
 
 def _track(
@@ -72,7 +49,7 @@ def _check_invariance(per_scan: list[PacketSamples]) -> None:
     cuts = np.sort(rng.choice(np.arange(1, whole.n_packets), size=25, replace=False))
     pieces, rest, done = [], whole, 0
     for cut in cuts.tolist():
-        head, rest = _split(rest, cut - done)
+        head, rest = split_samples(rest, cut - done)
         pieces.append(head)
         done = cut
     pieces.append(rest)

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from sample_chunks import split_samples
 from syncaudit.lidar import revolutions as rv
 from syncaudit.lidar.revolutions import RevolutionTracker
 from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
@@ -103,29 +104,6 @@ def _per_scan(path: Path, topic: str | None = None) -> list[PacketSamples]:
         return [packet_samples(c.timing, c.driver_stamp_ns) for c in iter_packet_chunks(log, topic)]
 
 
-def _split(samples: PacketSamples, at_packet: int) -> tuple[PacketSamples, PacketSamples]:
-    """The packets before `at_packet` and from it on, as two chunks."""
-    cut = int(np.searchsorted(samples.sample_packet, at_packet))
-    head = replace(
-        samples,
-        sensor_time_ns=samples.sensor_time_ns[:at_packet],
-        driver_stamp_ns=samples.driver_stamp_ns[:at_packet],
-        sample_time_ns=samples.sample_time_ns[:cut],
-        sample_azimuth_deg=samples.sample_azimuth_deg[:cut],
-        sample_packet=samples.sample_packet[:cut],
-        outlier_blocks=0,
-    )
-    tail = replace(
-        samples,
-        sensor_time_ns=samples.sensor_time_ns[at_packet:],
-        driver_stamp_ns=samples.driver_stamp_ns[at_packet:],
-        sample_time_ns=samples.sample_time_ns[cut:],
-        sample_azimuth_deg=samples.sample_azimuth_deg[cut:],
-        sample_packet=samples.sample_packet[cut:] - at_packet,
-    )
-    return head, tail
-
-
 def _without_packets(samples: PacketSamples, drop: NDArray[np.bool_]) -> PacketSamples:
     """The chunk without the packets marked in `drop` (gaps in the cadence)."""
     keep = ~drop
@@ -160,7 +138,7 @@ def test_real_recordings(
     # One packet per chunk: every batch-level shortcut on its smallest input.
     singles, rest = [], whole
     for _ in range(whole.n_packets - 1):
-        head, rest = _split(rest, 1)
+        head, rest = split_samples(rest, 1)
         singles.append(head)
     singles.append(rest)
     _compare(singles, monkeypatch, expect_revolutions=True)
@@ -181,7 +159,7 @@ def test_real_recordings_with_gaps(
     _compare([gappy], monkeypatch, expect_revolutions=True)
     pieces, rest, done = [], gappy, 0
     for cut in np.sort(rng.choice(np.arange(1, gappy.n_packets), 12, replace=False)).tolist():
-        head, rest = _split(rest, cut - done)
+        head, rest = split_samples(rest, cut - done)
         pieces.append(head)
         done = cut
     _compare([*pieces, rest], monkeypatch, expect_revolutions=True)
@@ -257,7 +235,7 @@ def test_hand_made_edge_cases(monkeypatch: pytest.MonkeyPatch) -> None:
     for name, chunk in cases.items():
         pieces = [chunk]
         for at in (1_400, 700, 300, 1):
-            head, rest = _split(pieces.pop(), at)
+            head, rest = split_samples(pieces.pop(), at)
             pieces += [head, rest]
         try:
             _compare([chunk], monkeypatch, expect_revolutions=True)

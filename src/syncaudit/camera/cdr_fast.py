@@ -160,10 +160,10 @@ def _r1_header(data: bytes | memoryview) -> tuple[SimpleNamespace, int]:
     return SimpleNamespace(seq=seq, stamp=stamp, frame_id=frame_id), end
 
 
-def _r1_camera_exposure(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
-    camera, pos = _r1_string(data, pos)
-    sequence, sec, nsec, duration = _R1_EXPOSURE.unpack_from(data, pos)
+def _exposure_fields(
+    header: SimpleNamespace, camera: str, sequence: int, sec: int, nsec: int, duration: float
+) -> SimpleNamespace:
+    """A CameraExposure's fields, as either serialization's one-pass reader found them."""
     return SimpleNamespace(
         header=header,
         camera=camera,
@@ -173,10 +173,10 @@ def _r1_camera_exposure(data: bytes | memoryview) -> SimpleNamespace:
     )
 
 
-def _r1_trigger_event(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
-    camera, pos = _r1_string(data, pos)
-    sequence, *t, delay = _R1_TRIGGER.unpack_from(data, pos)
+def _trigger_fields(
+    header: SimpleNamespace, camera: str, sequence: int, t: list[int], delay: float
+) -> SimpleNamespace:
+    """A TriggerEvent's fields; `t` the five times' (sec, nanosec) in field order."""
     return SimpleNamespace(
         header=header,
         camera=camera,
@@ -190,12 +190,31 @@ def _r1_trigger_event(data: bytes | memoryview) -> SimpleNamespace:
     )
 
 
-def _r1_image_meta(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
-    camera_time, brightness, exposure_time = _R1_META.unpack_from(data, pos)
+def _meta_fields(
+    header: SimpleNamespace, camera_time: int, brightness: int, exposure_time: int
+) -> SimpleNamespace:
+    """An ImageMetaData's fields."""
     return SimpleNamespace(
         header=header, camera_time=camera_time, brightness=brightness, exposure_time=exposure_time
     )
+
+
+def _r1_camera_exposure(data: bytes | memoryview) -> SimpleNamespace:
+    header, pos = _r1_header(data)
+    camera, pos = _r1_string(data, pos)
+    return _exposure_fields(header, camera, *_R1_EXPOSURE.unpack_from(data, pos))
+
+
+def _r1_trigger_event(data: bytes | memoryview) -> SimpleNamespace:
+    header, pos = _r1_header(data)
+    camera, pos = _r1_string(data, pos)
+    sequence, *t, delay = _R1_TRIGGER.unpack_from(data, pos)
+    return _trigger_fields(header, camera, sequence, t, delay)
+
+
+def _r1_image_meta(data: bytes | memoryview) -> SimpleNamespace:
+    header, pos = _r1_header(data)
+    return _meta_fields(header, *_R1_META.unpack_from(data, pos))
 
 
 # CDR (ROS 2) likewise, one unpack per run of fixed fields, in either byte order; CDR
@@ -241,49 +260,28 @@ def _cdr_header(data: bytes | memoryview, order: str) -> tuple[SimpleNamespace, 
 
 
 def _cdr_camera_exposure(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    _head, length_of, run, _trigger, f64, _meta = _CDR_FORMATS[order]
+    _head, length_of, run, _trigger_run, f64, _meta_run = _CDR_FORMATS[order]
     header, pos = _cdr_header(data, order)
     camera, pos = _cdr_string(data, _align(pos, 4), length_of)
     pos = _align(pos, 4)
     sequence, sec, nsec = run.unpack_from(data, pos)
     (duration,) = f64.unpack_from(data, _align(pos + run.size, 8))
-    return SimpleNamespace(
-        header=header,
-        camera=camera,
-        frame_sequence=sequence,
-        exposure_start=SimpleNamespace(sec=sec, nanosec=nsec),
-        exposure_duration=duration,
-    )
+    return _exposure_fields(header, camera, sequence, sec, nsec, duration)
 
 
 def _cdr_trigger_event(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    _head, length_of, _exposure, run, f64, _meta = _CDR_FORMATS[order]
+    _head, length_of, _exposure_run, run, f64, _meta_run = _CDR_FORMATS[order]
     header, pos = _cdr_header(data, order)
     camera, pos = _cdr_string(data, _align(pos, 4), length_of)
     pos = _align(pos, 4)
     sequence, *t = run.unpack_from(data, pos)
     (delay,) = f64.unpack_from(data, _align(pos + run.size, 8))
-    return SimpleNamespace(
-        header=header,
-        camera=camera,
-        frame_sequence=sequence,
-        lidar_packet_time=SimpleNamespace(sec=t[0], nanosec=t[1]),
-        lidar_driver_time=SimpleNamespace(sec=t[2], nanosec=t[3]),
-        camera_driver_time=SimpleNamespace(sec=t[4], nanosec=t[5]),
-        camera_sensor_time=SimpleNamespace(sec=t[6], nanosec=t[7]),
-        exposure_start_time=SimpleNamespace(sec=t[8], nanosec=t[9]),
-        applied_delay=delay,
-    )
+    return _trigger_fields(header, camera, sequence, t, delay)
 
 
 def _cdr_image_meta(data: bytes | memoryview, order: str) -> SimpleNamespace:
     header, pos = _cdr_header(data, order)
-    camera_time, brightness, exposure_time = _CDR_FORMATS[order][5].unpack_from(
-        data, _align(pos, 8)
-    )
-    return SimpleNamespace(
-        header=header, camera_time=camera_time, brightness=brightness, exposure_time=exposure_time
-    )
+    return _meta_fields(header, *_CDR_FORMATS[order][5].unpack_from(data, _align(pos, 8)))
 
 
 CDR_READERS = {
