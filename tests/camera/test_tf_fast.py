@@ -104,3 +104,23 @@ def test_every_padding_both_byte_orders_and_every_cut() -> None:
         assert all(read_tf_message(data[:cut], "ros1") is None for cut in range(len(data)))
     assert read_tf_message(b"\x00\x01\x00\x00\xff\xff\xff\xff", "cdr") is None  # huge count
     assert read_tf_message(b"\x00" * 64, "protobuf") is None
+
+
+def test_random_damage_never_raises() -> None:
+    """Flipped bytes (counts, lengths, strings) give a namespace or None, never an error."""
+    import random
+
+    rng = random.Random(7)
+    for path, encoding in ((SAMPLES[0], "cdr"), (SAMPLES[2], "ros1")):
+        original, store, msgtype = _tf_message(path, encoding)
+        data = bytes(
+            store.serialize_cdr(original, msgtype)
+            if encoding == "cdr"
+            else store.serialize_ros1(original, msgtype)
+        )
+        for _ in range(2000):
+            mutant = bytearray(data)
+            for _ in range(rng.randint(1, 4)):
+                mutant[rng.randrange(len(mutant))] = rng.randrange(256)
+            got = read_tf_message(bytes(mutant[: rng.randint(0, len(mutant))]), encoding)
+            assert got is None or isinstance(got.transforms, list)
