@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from syncaudit.camera.tf_fast import read_tf_message
+from syncaudit.camera.cdr_fast import read_tf_message
 from syncaudit.logs import LogReader
 from syncaudit.rig import CameraConfig, LidarConfig
 

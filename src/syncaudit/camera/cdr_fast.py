@@ -1,4 +1,5 @@
-"""Struct readers for the small per-frame messages whose layout syncaudit knows.
+"""Struct readers for the small per-frame messages whose layout syncaudit knows, and for
+/tf_static's TFMessage (`read_tf_message`).
 
 rosbags deserialises any message but costs ~30 us each; these fixed-layout CDR messages
 (ROS 2) arrive once per camera frame, so the audit reads their fields with `struct` in
@@ -150,13 +151,15 @@ def _r1_string(data: bytes | memoryview, pos: int) -> tuple[str, int]:
     return bytes(data[pos + 4 : end]).decode(errors="replace"), end
 
 
-def _r1_header(data: bytes | memoryview) -> tuple[SimpleNamespace, int]:
-    seq, sec, nsec, length = _R1_HEADER.unpack_from(data, 0)
-    end = 16 + length
+def _r1_header(data: bytes | memoryview, pos: int = 0) -> tuple[SimpleNamespace, int]:
+    """The std_msgs/Header at `pos` of a ROS 1 message and the byte after it."""
+    seq, sec, nsec, length = _R1_HEADER.unpack_from(data, pos)
+    start = pos + _R1_HEADER.size
+    end = start + length
     if end > len(data):
         raise _TruncatedError("frame_id")
     stamp = SimpleNamespace(sec=sec, nanosec=nsec)
-    frame_id = bytes(data[16:end]).decode(errors="replace")
+    frame_id = bytes(data[start:end]).decode(errors="replace")
     return SimpleNamespace(seq=seq, stamp=stamp, frame_id=frame_id), end
 
 
@@ -248,14 +251,16 @@ def _cdr_string(data: bytes | memoryview, pos: int, length_of: struct.Struct) ->
     return bytes(data[pos + 4 : end - 1]).decode(errors="replace"), end
 
 
-def _cdr_header(data: bytes | memoryview, order: str) -> tuple[SimpleNamespace, int]:
-    """The std_msgs/Header of a CDR message and the byte after it."""
+def _cdr_header(data: bytes | memoryview, order: str, pos: int = 4) -> tuple[SimpleNamespace, int]:
+    """The std_msgs/Header at (the 4-aligned) `pos` of a CDR message and the byte after it."""
     head = _CDR_FORMATS[order][0]
-    sec, nsec, length = head.unpack_from(data, 4)
-    end = 16 + length
+    pos = _align(pos, 4)
+    sec, nsec, length = head.unpack_from(data, pos)
+    start = pos + head.size
+    end = start + length
     if length < 1 or end > len(data):
         raise _TruncatedError("frame_id")
-    frame_id = bytes(data[16 : end - 1]).decode(errors="replace")
+    frame_id = bytes(data[start : end - 1]).decode(errors="replace")
     return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=frame_id), end
 
 
@@ -344,3 +349,69 @@ def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNa
         return SimpleNamespace(
             damaged=f"truncated {name} ({len(data)} bytes): {exc} is missing or cut"
         )
+
+
+# tf2_msgs/TFMessage, for the camera mounts in /tf_static: a guessed rig then needs no type
+# registry built from the log's schemas (deserialising one TFMessage through rosbags costs
+# ~0.1 s: the registry and rosbags' code generator). Bytes that do not fit give None, and
+# the caller asks rosbags, which says what is wrong.
+_CDR_TRANSFORM = {order: struct.Struct(order + "7d") for order in "<>"}
+_R1_TRANSFORM = struct.Struct("<7d")  # translation x, y, z; rotation x, y, z, w
+_MIN_CDR_TRANSFORM = 8 + 4 + 1 + 3 + 4 + 1 + 3 + 56
+"""Fewest bytes one TransformStamped takes in CDR (empty strings, padding): a count
+claiming more than fit in the message is refused before any loop."""
+_MIN_R1_TRANSFORM = 16 + 4 + 56
+
+
+def read_tf_message(data: bytes | memoryview, encoding: str) -> SimpleNamespace | None:
+    """A TFMessage's `transforms`, each with `header`, `child_frame_id` and
+    `transform.translation` / `transform.rotation` (x, y, z, w); None where the bytes do
+    not fit (or the encoding is not cdr/ros1)."""
+    try:
+        if encoding == "ros1":
+            return _r1_tf_message(data)
+        if encoding == "cdr" and len(data) >= 8 and bytes(data[0:2]) in _CDR_IDS:
+            return _cdr_tf_message(data, "<" if bytes(data[0:2]) in _CDR_LE_IDS else ">")
+    except (struct.error, _TruncatedError):
+        return None
+    return None
+
+
+def _transform(header: SimpleNamespace, child: str, values: tuple[float, ...]) -> SimpleNamespace:
+    tx, ty, tz, qx, qy, qz, qw = values
+    return SimpleNamespace(
+        header=header,
+        child_frame_id=child,
+        transform=SimpleNamespace(
+            translation=SimpleNamespace(x=tx, y=ty, z=tz),
+            rotation=SimpleNamespace(x=qx, y=qy, z=qz, w=qw),
+        ),
+    )
+
+
+def _cdr_tf_message(data: bytes | memoryview, order: str) -> SimpleNamespace:
+    length_of, values = _CDR_FORMATS[order][1], _CDR_TRANSFORM[order]
+    (count,) = length_of.unpack_from(data, 4)
+    if count * _MIN_CDR_TRANSFORM > len(data):
+        raise _TruncatedError("transforms")
+    pos, transforms = 8, []
+    for _ in range(count):
+        header, pos = _cdr_header(data, order, pos)
+        child, pos = _cdr_string(data, _align(pos, 4), length_of)
+        pos = _align(pos, 8)
+        transforms.append(_transform(header, child, values.unpack_from(data, pos)))
+        pos += values.size
+    return SimpleNamespace(transforms=transforms)
+
+
+def _r1_tf_message(data: bytes | memoryview) -> SimpleNamespace:
+    (count,) = _R1_LENGTH.unpack_from(data, 0)
+    if count * _MIN_R1_TRANSFORM > len(data):
+        raise _TruncatedError("transforms")
+    pos, transforms = 4, []
+    for _ in range(count):
+        header, pos = _r1_header(data, pos)
+        child, pos = _r1_string(data, pos)
+        transforms.append(_transform(header, child, _R1_TRANSFORM.unpack_from(data, pos)))
+        pos += _R1_TRANSFORM.size
+    return SimpleNamespace(transforms=transforms)

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from syncaudit.camera.azimuth import tf_static_yaws
-from syncaudit.camera.tf_fast import read_tf_message
+from syncaudit.camera.cdr_fast import read_tf_message
 from syncaudit.logs import open_log
 
 REPO = Path(__file__).resolve().parents[2]
