@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -42,9 +41,6 @@ _HEADER_BYTES = 12
 MAX_DURATION_S = 3600.0
 """Exposures or delays longer than this (or not finite) are damaged values, not timing."""
 
-Deserialize = Callable[[RawMessage], Any]
-
-
 ImageRow = tuple[int, int, int | None, str]
 """(header stamp ns, log time ns, ROS 1 seq or None, header frame_id)."""
 
@@ -52,8 +48,6 @@ CAMERA_FIELD_TYPES = frozenset(
     {"syncaudit_msgs/msg/TriggerEvent", "syncaudit_msgs/msg/CameraExposure"}
 )
 """Types whose `camera` field names the rig camera a message belongs to."""
-_SOURCE = -2
-"""Index of the `source` (message type) column in frame and trigger rows."""
 
 
 def header_stamp_ns(msg: RawMessage) -> int:
