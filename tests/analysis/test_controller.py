@@ -10,7 +10,6 @@ from syncaudit.analysis.controller import (
     ControllerConfig,
     DelayController,
     FrameObservation,
-    RingBuffer,
     eq2_delay_ns,
     eq6_variance,
 )
@@ -39,22 +38,6 @@ class Plant:
         t1, t2, t3, t4 = (int(v + self.rng.normal(0.0, self.jitter_ns)) for v in LATENCIES_NS)
         t_l = delay_ns + t1 + t2 + t3 + t4 + self.bias_ns + exposure_ns // 2
         return FrameObservation(t1, t2, t3, t4, exposure_ns, t_l - T_ROTATE_NS, T_ROTATE_NS)
-
-
-def test_ring_buffer_matches_numpy() -> None:
-    rng = np.random.default_rng(3)
-    values = rng.integers(-5_000_000, 5_000_000, size=57)
-    ring = RingBuffer(8)
-    for i, v in enumerate(values):
-        ring.push(int(v))
-        window = values[max(0, i - 7) : i + 1]
-        np.testing.assert_array_equal(ring.values(), window)
-        assert ring.sum == int(window.sum())
-        assert ring.sum_sq == int((window.astype(object) ** 2).sum())
-        assert ring.mean() == pytest.approx(float(window.mean()), rel=1e-12)
-    ring.clear()
-    assert len(ring) == 0
-    assert np.isnan(ring.mean())
 
 
 def test_equations_against_numpy() -> None:

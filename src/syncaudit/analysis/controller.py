@@ -20,12 +20,9 @@ nothing about the new one, and acting on them again would overshoot.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Literal
 
-import numpy as np
-from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
@@ -107,57 +104,6 @@ class Adjustment:
     new_delay_ns: int
     reason: Literal["mean", "variance", "mean+variance", "initial"]
     stats: WindowStats
-
-
-class RingBuffer:
-    """The last `capacity` integers, with exact running sum and sum of squares."""
-
-    def __init__(self, capacity: int) -> None:
-        if capacity < 1:
-            raise ValueError("capacity must be >= 1")
-        self.capacity = capacity
-        self._data = [0] * capacity  # Python ints: exact, and ~5x faster per push than numpy
-        self._next = 0
-        self._size = 0
-        self.sum = 0
-        self.sum_sq = 0
-
-    def __len__(self) -> int:
-        return self._size
-
-    def push(self, value: int) -> None:
-        """Append `value`, evicting the oldest when full."""
-        value = int(value)
-        if self._size == self.capacity:
-            old = self._data[self._next]
-            self.sum -= old
-            self.sum_sq -= old * old
-        else:
-            self._size += 1
-        self._data[self._next] = value
-        self._next = (self._next + 1) % self.capacity
-        self.sum += value
-        self.sum_sq += value * value
-
-    def clear(self) -> None:
-        """Forget every value."""
-        self._next = 0
-        self._size = 0
-        self.sum = 0
-        self.sum_sq = 0
-
-    def values(self) -> NDArray[np.int64]:
-        """The held values, oldest first (a copy)."""
-        if self._size < self.capacity:
-            return np.array(self._data[: self._size], dtype=np.int64)
-        return np.array(self._data[self._next :] + self._data[: self._next], dtype=np.int64)
-
-    def __iter__(self) -> Iterator[int]:
-        return iter(int(v) for v in self.values())
-
-    def mean(self) -> float:
-        """Mean of the held values; NaN when empty."""
-        return self.sum / self._size if self._size else float("nan")
 
 
 def eq5_mean_abs(sum_abs: int, n: int) -> float:
