@@ -21,10 +21,9 @@ from typing import Any
 from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
 from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
-from syncaudit.collect import ExtractPlan, default_jobs, iter_items
+from syncaudit.collect import default_jobs
 from syncaudit.errors import NoDataError, SyncauditError
-from syncaudit.lidar.scan import LidarScan, LidarScanner
-from syncaudit.lidar.stream import packet_family
+from syncaudit.lidar.scan import LidarScan, scan_lidar
 from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
@@ -233,7 +232,14 @@ def _inspect(
         try:
             if topic not in log.topics:
                 raise NoDataError(f"LiDAR topic {topic} (from the rig) is not in the log")
-            scan = _scan_lidar(log, topic, rig, jobs)
+            scan = scan_lidar(
+                log,
+                topic,
+                zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
+                azimuth_increases=rig.lidar.azimuth_increases if rig else True,
+                ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
+                jobs=jobs,
+            )
             if scan.packets == 0:
                 raise NoDataError(f"LiDAR topic {topic} holds no packets")
         except SyncauditError as exc:
@@ -272,20 +278,6 @@ def _inspect(
     if not report.cameras:
         report.warnings.append("no camera topic found: only the LiDAR side can be audited")
     return report, failure
-
-
-def _scan_lidar(log: LogReader, topic: str, rig: Rig | None, jobs: int) -> LidarScan:
-    """`scan_lidar` of one topic, read as `audit` reads it: chunk-parallel where the log
-    allows, one scan message at a time, so `info` and `audit` count alike."""
-    family, meta = packet_family(log, topic, rig.lidar.metadata_topic if rig else None)
-    scanner = LidarScanner.create(
-        topic,
-        zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
-        azimuth_increases=rig.lidar.azimuth_increases if rig else True,
-    )
-    for _kind, _topic, samples in iter_items(log, ExtractPlan(topic, family, meta), jobs):
-        scanner.feed(samples)
-    return scanner.finish()
 
 
 def _cameras(log: LogReader, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:

@@ -9,8 +9,8 @@ import numpy as np
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.lidar.clock import ClockEstimator, ClockReport
 from syncaudit.lidar.revolutions import RevolutionTracker
-from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
-from syncaudit.lidar.stream import iter_packet_chunks
+from syncaudit.lidar.samples import PacketSamples, concat_samples
+from syncaudit.lidar.stream import packet_family
 from syncaudit.logs import LogReader
 
 
@@ -178,10 +178,14 @@ def scan_lidar(
     target_azimuth_deg: tuple[float, ...] = (),
     clock_tolerance_ns: int = 50_000_000,
     ouster_metadata_topic: str | None = None,
-    start_ns: int | None = None,
-    stop_ns: int | None = None,
+    jobs: int = 1,
 ) -> LidarScan:
-    """Stream the topic once and reduce it to revolutions and clock statistics."""
+    """Read the topic once, as the audit reads it (`collect.iter_items`: `jobs` worker
+    processes where the log allows, one scan message at a time), and reduce it to
+    revolutions and clock statistics."""
+    from syncaudit.collect import ExtractPlan, iter_items
+
+    family, meta = packet_family(log, topic, ouster_metadata_topic)
     scanner = LidarScanner.create(
         topic,
         zero_azimuth_deg=zero_azimuth_deg,
@@ -189,6 +193,6 @@ def scan_lidar(
         target_azimuth_deg=target_azimuth_deg,
         clock_tolerance_ns=clock_tolerance_ns,
     )
-    for chunk in iter_packet_chunks(log, topic, start_ns, stop_ns, ouster_metadata_topic):
-        scanner.feed(packet_samples(chunk.timing, chunk.driver_stamp_ns))
+    for _kind, _topic, samples in iter_items(log, ExtractPlan(topic, family, meta), jobs):
+        scanner.feed(samples)
     return scanner.finish()
