@@ -959,7 +959,7 @@ def container_path(cache: Path, one: Path, kind: str) -> Path:
 def _write_rosbag2(src: Path, dst: Path, parts: int, storage: str, stem: str) -> None:
     """The bare MCAP's messages as a rosbag2 folder (rosbags' writer), split into `parts`
     files by time as rosbag2 does (each file declares its channels anew), named `stem_N`."""
-    from syncaudit.logs.mcap_log import McapLog
+    from syncaudit.logs.mcap.reader import McapLog
     from syncaudit.logs.typesys import TypeRegistry
     from syncaudit.writers.rosbag2_split import SplitBagWriter
 

@@ -28,8 +28,8 @@ import yaml
 
 from syncaudit.logs import open_log
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.rosbag1 import Rosbag1ChunkReader
-from syncaudit.logs.sqlite_rows import SqliteRowsReader
+from syncaudit.logs.ros1.format import Rosbag1ChunkReader
+from syncaudit.logs.ros2.sqlite_rows import SqliteRowsReader
 
 Stats = tuple[int, int]  # messages, payload bytes
 

@@ -54,8 +54,8 @@ IMPORTS = (
     "pandas",
     "syncaudit.rig",
     "syncaudit.logs",
-    "syncaudit.collect",
-    "syncaudit.audit",
+    "syncaudit.audit.collect",
+    "syncaudit.audit.run",
     "syncaudit.analysis.sync",
     "syncaudit.report.console",
 )

@@ -158,7 +158,7 @@ def gate(
 
 def baseline_s(paths: list[Path]) -> list[float]:
     """Audit time of each log (jobs=1) in this warm process: its read, decode and analysis."""
-    from syncaudit.audit import audit_log
+    from syncaudit.audit.run import audit_log
     from syncaudit.rig import load_rig
 
     audit_log(paths[0], load_rig(str(paths[0]) + ".rig.yaml"), jobs=1)  # warm imports
@@ -172,7 +172,7 @@ def baseline_s(paths: list[Path]) -> list[float]:
 
 def warm_audit_s(paths: list[Path], jobs: int) -> float:
     """Wall time of `audit_log(jobs=jobs)` of each log in turn in this (warm) process."""
-    from syncaudit.audit import audit_log
+    from syncaudit.audit.run import audit_log
     from syncaudit.rig import load_rig
 
     start = time.perf_counter()

@@ -201,7 +201,7 @@ def _cpu_s() -> float:
 
 def compare(log: Path, args: argparse.Namespace) -> dict[str, Any]:
     """Local and remote audits of `log`, interleaved; the figures."""
-    from syncaudit.audit import audit_log
+    from syncaudit.audit.run import audit_log
     from syncaudit.remote.ranges import tracking
     from syncaudit.rig import load_rig
 

@@ -28,7 +28,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from browser import CHROMIUM, CHROMIUM_FLAGS
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.report.html import (
     camera_plots,
     latency_plots,

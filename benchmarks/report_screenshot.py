@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
 from browser import screenshot  # noqa: E402
-from syncaudit.audit import audit_log  # noqa: E402
+from syncaudit.audit.run import audit_log  # noqa: E402
 from syncaudit.report.html import audit_sections, page, time_origin_ns  # noqa: E402
 from syncaudit.rig import load_rig  # noqa: E402
 

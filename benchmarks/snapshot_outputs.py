@@ -61,8 +61,14 @@ def main() -> int:
         else:
             shutil.copy(source, logs / name)
     for fmt, name in CONTAINERS.items():
-        run(["simulate", "sync", name, "--duration", "6", "--seed", "3", "--format", fmt], out / f"simulate-{fmt}.txt", logs)
-    subjects = sorted(p.name for p in logs.iterdir() if not p.name.endswith((".json", ".yaml", ".sh")))
+        run(
+            ["simulate", "sync", name, "--duration", "6", "--seed", "3", "--format", fmt],
+            out / f"simulate-{fmt}.txt",
+            logs,
+        )
+    subjects = sorted(
+        p.name for p in logs.iterdir() if not p.name.endswith((".json", ".yaml", ".sh"))
+    )
     for name in subjects:
         rig = logs / f"{name}.rig.yaml"
         if not rig.exists():
@@ -83,7 +89,11 @@ def main() -> int:
     gate_inputs = [n for n in subjects if n.startswith("sim")]
     run(["gate", "--init", "-o", "policy.yaml", *gate_inputs], out / "gate-init.txt", logs)
     shutil.copy(logs / "policy.yaml", out / "gate-policy.yaml")
-    run(["gate", "--policy", "policy.yaml", "--no-db", "--json-out", "gate.json", *subjects], out / "gate.txt", logs)
+    run(
+        ["gate", "--policy", "policy.yaml", "--no-db", "--json-out", "gate.json", *subjects],
+        out / "gate.txt",
+        logs,
+    )
     shutil.copy(logs / "gate.json", out / "gate.json")
     if not args.quick:
         run(["simulate", "calib", "calib.mcap", "--seed", "1"], out / "simulate-calib.txt", logs)

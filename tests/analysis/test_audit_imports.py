@@ -1,6 +1,6 @@
 """What an audit imports, and when: the start-up a reader worker pool waits for stays small.
 
-`syncaudit.audit` itself leaves out the analysis (imported while workers read) and rich
+`syncaudit.audit.run` itself leaves out the analysis (imported while workers read) and rich
 (the CLI imports it, through `meanwhile`, only to print tables); `meanwhile` runs once.
 """
 
@@ -14,13 +14,13 @@ SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_came
 
 SCRIPT = """
 import sys
-import syncaudit.audit
+import syncaudit.audit.run
 from syncaudit.rig import load_rig
 
 later = ("syncaudit.analysis.controller", "syncaudit.analysis.sync", "rich", "numpy.ma")
 print(sorted(m for m in later if m in sys.modules))
 calls = []
-result = syncaudit.audit.audit_log(
+result = syncaudit.audit.run.audit_log(
     sys.argv[1], load_rig(sys.argv[1] + ".rig.yaml"), jobs=1,
     meanwhile=lambda: calls.append("syncaudit.analysis.sync" in sys.modules),
 )

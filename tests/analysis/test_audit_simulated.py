@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from syncaudit.analysis.stats import error_mean, error_variance
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import LightModel, SyncSimConfig, simulate_sync_log
 

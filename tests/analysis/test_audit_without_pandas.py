@@ -11,7 +11,7 @@ SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_came
 
 SCRIPT = """
 import json, sys
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.rig import load_rig
 
 result = audit_log(sys.argv[1], load_rig(sys.argv[1] + ".rig.yaml"), jobs=1)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.rig import Rig
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log

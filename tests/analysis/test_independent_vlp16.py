@@ -35,7 +35,7 @@ import numpy as np
 import pytest
 from mcap_ros2.writer import Writer
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.rig import Rig
 
 HEADER_DEFS = """

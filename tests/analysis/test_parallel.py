@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit import collect
-from syncaudit.audit import audit_log
-from syncaudit.logs import open_log, sqlite_rows
+from syncaudit.audit import collect
+from syncaudit.audit.run import audit_log
+from syncaudit.logs import open_log
+from syncaudit.logs.ros2 import sqlite_rows
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
@@ -52,7 +53,7 @@ def test_parallel_items_in_log_order(
 
 
 def _plan(log: object, rig: object) -> collect.ExtractPlan:
-    from syncaudit.audit import _plan as audit_plan
+    from syncaudit.audit.run import _plan as audit_plan
 
     plan, _ = audit_plan(log, rig, list(rig.cameras))  # type: ignore[arg-type, attr-defined]
     return plan

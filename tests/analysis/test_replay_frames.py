@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.rig import load_rig
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "vlp16_three_cameras.mcap"

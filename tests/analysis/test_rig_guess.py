@@ -9,13 +9,13 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.rig_guess import starter_rig_yaml
+from syncaudit.audit.run import audit_log
 from syncaudit.camera.azimuth import X_AXIS_AZIMUTH_DEG, x_axis_azimuth_deg
-from syncaudit.camera.topics import detect_cameras, header_frame_id
+from syncaudit.camera.camera_topics import detect_cameras, header_frame_id
 from syncaudit.cli import app
 from syncaudit.logs import RawMessage, TopicInfo, open_log
 from syncaudit.rig import LidarConfig, load_rig
-from syncaudit.rig_guess import starter_rig_yaml
 from syncaudit.simulate import LidarModel
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import _X_AXIS_AZIMUTH_DEG as SIMULATED_X_AXIS

@@ -16,7 +16,7 @@ import pytest
 from rosbags.convert import convert
 
 from syncaudit.analysis.pairing import pair_triggers, sequence_problem
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.columns.table import MISSING, Table, int_column
 from syncaudit.logs import open_log
 from syncaudit.simulate.rig_file import rig_from_truth

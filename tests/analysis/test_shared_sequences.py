@@ -27,7 +27,7 @@ from syncaudit.analysis.pairing import (
     pair_frames,
     sequence_problem,
 )
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.camera.sequences import field_counter, header_seq_counter, incomparable
 from syncaudit.columns.table import Table, int_column
 from syncaudit.simulate.rig_file import rig_from_truth

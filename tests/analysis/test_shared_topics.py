@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from syncaudit.audit import AuditResult, audit_log
-from syncaudit.camera.topics import frame_camera_name
+from syncaudit.audit.rig_guess import guess_rig
+from syncaudit.audit.run import AuditResult, audit_log
+from syncaudit.camera.camera_topics import frame_camera_name
 from syncaudit.errors import ConfigError
 from syncaudit.logs import open_log
 from syncaudit.rig import Rig
-from syncaudit.rig_guess import guess_rig
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.rig import Rig
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, LatencyDist, SyncSimConfig, simulate_sync_log

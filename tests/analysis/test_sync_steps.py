@@ -12,7 +12,7 @@ from syncaudit.analysis.offset import host_offset_ns
 from syncaudit.analysis.pairing import PHASE_FROM_TRACKER, PHASE_FROM_TRIGGER, pair_revolutions
 from syncaudit.analysis.stamps import MISSING_NS, delta_ns, nullable, stamps_ns
 from syncaudit.analysis.sync import _errors, _t_l_ns
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.table import Table, int_column
 from syncaudit.rig import load_rig

@@ -15,7 +15,7 @@ from typing import Any, get_args
 import numpy as np
 import pytest
 
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.simulate import LidarModel
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from syncaudit.analysis.sync import _judgement
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.cli import app
 from syncaudit.logs import open_log
 from syncaudit.rig import Rig, Thresholds

@@ -40,7 +40,7 @@ from syncaudit.calib import (
     render_calibration_html,
     se3,
 )
-from syncaudit.calib.config import (
+from syncaudit.calib.settings import (
     AlignmentLimits,
     CalibSceneConfig,
     calib_scene_config,

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.io import decode_xyz, pointcloud2_dtype
 from syncaudit.calib.registration import prepare
-from syncaudit.calib.scene import Box, Pole, Scene
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.turnchain import verify_turn
 from syncaudit.errors import LogReadError, NoDataError
+from syncaudit.simulate.scene import Box, Pole, Scene
 
 
 def test_rotation_round_trips() -> None:

@@ -149,7 +149,7 @@ def test_builder_skips_damaged_rows_with_one_warning_per_topic(
 
 def test_audit_of_a_log_with_cut_exposures_goes_on(tmp_path: Path) -> None:
     """End to end: every third CameraExposure of one camera cut to 7 bytes."""
-    from syncaudit.audit import audit_log
+    from syncaudit.audit.run import audit_log
 
     src = SAMPLE
     dst = tmp_path / "cut.mcap"

@@ -15,11 +15,11 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.inspect import InfoReport, inspect_log
+from syncaudit.audit.rig_guess import guess_rig
+from syncaudit.audit.run import audit_log
 from syncaudit.cli import app
-from syncaudit.inspect_log import InfoReport, inspect_log
 from syncaudit.logs import open_log
-from syncaudit.rig_guess import guess_rig
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 

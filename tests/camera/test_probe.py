@@ -11,7 +11,7 @@ import pytest
 from mcap.records import Channel, Message, Schema
 
 from mcap_copy import copy_mcap
-from syncaudit.camera import topics
+from syncaudit.camera import camera_topics as topics
 from syncaudit.camera.extract import CAMERA_FIELD_TYPES
 from syncaudit.errors import LogReadError
 from syncaudit.logs import open_log

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.camera import rowstore
 from syncaudit.camera.extract import CameraTableBuilder, image_row
 from syncaudit.camera.rowstore import DamagedRow

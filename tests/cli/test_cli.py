@@ -180,7 +180,7 @@ def test_usage_errors_exit_64_naming_the_option(
 
 def test_every_error_class_maps_to_its_documented_code(monkeypatch: pytest.MonkeyPatch) -> None:
     """Rows of the table that need a library failure (4, 70) reached through the CLI's wrapper."""
-    import syncaudit.inspect_log
+    import syncaudit.audit.inspect
     from syncaudit import errors
 
     for cls in (
@@ -199,7 +199,7 @@ def test_every_error_class_maps_to_its_documented_code(monkeypatch: pytest.Monke
         def boom(*_args: object, _cls: type[Exception] = cls, **_kwargs: object) -> None:
             raise _cls("x.mcap: boom")
 
-        monkeypatch.setattr(syncaudit.inspect_log, "inspect_log", boom)
+        monkeypatch.setattr(syncaudit.audit.inspect, "inspect_log", boom)
         result = runner.invoke(app, ["info", "x.mcap"])
         code = getattr(cls, "exit_code", errors.EXIT_INTERNAL)
         message = _one_line_error(result, code)

@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 
 from mcap_copy import copy_mcap
-from syncaudit import collect
-from syncaudit.audit import audit_log
-from syncaudit.inspect_log import inspect_log
+from syncaudit.audit import collect
+from syncaudit.audit.inspect import inspect_log
+from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
-from syncaudit.logs.units import group_units
+from syncaudit.logs.unit_readers import group_units
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
 REPO = Path(__file__).resolve().parents[2]

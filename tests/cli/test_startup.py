@@ -72,7 +72,7 @@ seen = []
 real_run = common.run
 def spy(job, **kw):
     return real_run(lambda: (seen.append(gc.get_threshold()[0]), job())[1], **kw)
-for module in ("syncaudit.cli.audit", "syncaudit.cli.info"):
+for module in ("syncaudit.cli.audit_command", "syncaudit.cli.info_command"):
     setattr(sys.modules[module], "run", spy)
 real_exit = common.os._exit
 def report(code):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.calib.config import CalibConfig, load_config
+from syncaudit.calib.settings import CalibConfig, load_config
 from syncaudit.config import MAX_CONFIG_BYTES, load_mapping
 from syncaudit.errors import ConfigError
 from syncaudit.rig import load_rig

@@ -131,7 +131,7 @@ def test_the_bar_is_drawn_with_each_logs_state_before_its_status_line(
     import rich.progress
     from rich.console import Console
 
-    from syncaudit.fleet import cli as fleet_cli
+    from syncaudit.cli import fleet_commands as fleet_cli
 
     out = io.StringIO()
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)

@@ -15,9 +15,9 @@ from pathlib import Path
 import mutators as mu
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.inspect import inspect_log
+from syncaudit.audit.run import audit_log
 from syncaudit.errors import ConfigError, DecodeError, SyncauditError, UnknownTypeError
-from syncaudit.inspect_log import inspect_log
 from syncaudit.lidar.stream import decode_scan
 from syncaudit.logs import RawMessage, open_log
 from syncaudit.rig import Rig, load_rig
@@ -135,7 +135,7 @@ def test_a_rig_of_thousands_of_cameras_is_refused_at_once(rig: Rig) -> None:
     """Item 9: past MAX_CAMERAS the rig is a ConfigError before any message is read."""
     import time
 
-    from syncaudit.rig_vs_log import MAX_CAMERAS
+    from syncaudit.audit.rig_check import MAX_CAMERAS
 
     cams = [
         rig.cameras[i % 3].model_copy(update={"name": f"cam{i}"}) for i in range(MAX_CAMERAS + 1)

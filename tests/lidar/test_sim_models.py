@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.lidar.hesai import HESAI_LAYOUTS, pandar_scan_packets
 from syncaudit.lidar.scan import scan_lidar
 from syncaudit.logs import open_log

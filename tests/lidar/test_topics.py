@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 from rosbags.rosbag1 import Reader, Writer
 
-from syncaudit.audit import audit_log
-from syncaudit.inspect_log import inspect_log
-from syncaudit.lidar.topics import guess_lidar_topic, guess_lidar_topics
+from syncaudit.audit.inspect import inspect_log
+from syncaudit.audit.run import audit_log
+from syncaudit.lidar.packet_topics import guess_lidar_topic, guess_lidar_topics
 from syncaudit.logs import open_log
 
 OUSTER_BAG = Path("ouster_os1_512x10") / "512x10_raw.bag"

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit import collect
-from syncaudit.audit import _plan
+from syncaudit.audit import collect
+from syncaudit.audit.run import _plan
 from syncaudit.logs import open_log
 from syncaudit.rig import load_rig
 
@@ -58,8 +58,8 @@ def test_importing_the_audit_does_not_import_pandas_or_rosbags() -> None:
     """The library API is importable without the analysis' pandas or rosbags' type system
     (imported where first needed)."""
     code = (
-        "import sys, syncaudit.audit, syncaudit.collect\n"
-        "from syncaudit.audit import audit_log, AuditResult\n"
+        "import sys, syncaudit.audit.run, syncaudit.audit.collect\n"
+        "from syncaudit.audit.run import audit_log, AuditResult\n"
         "print(sorted(m for m in ('pandas', 'rosbags.typesys') if m in sys.modules))"
     )
     done = subprocess.run(

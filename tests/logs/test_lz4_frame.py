@@ -12,7 +12,7 @@ import lz4.frame
 import pytest
 
 from lz4_layouts import LZ4_LAYOUTS
-from syncaudit.logs.lz4_frame import (
+from syncaudit.logs.ros1.lz4_frame import (
     FileSpan,
     FrameError,
     FrameSource,

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit import collect
-from syncaudit.audit import audit_log
+from syncaudit.audit import collect
+from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
-from syncaudit.logs.mcap_bag import McapBag, open_mcap_bag
-from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.mcap.reader import McapLog
+from syncaudit.logs.ros2.mcap_storage import McapBag, open_mcap_bag
 from syncaudit.logs.typesys import TypeRegistry
-from syncaudit.logs.units import group_units
+from syncaudit.logs.unit_readers import group_units
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 from syncaudit.writers.rosbag2_split import SplitBagWriter

@@ -10,10 +10,10 @@ from mcap.writer import CompressionType, Writer
 
 from syncaudit.errors import LogReadError
 from syncaudit.logs import open_log
-from syncaudit.logs.mcap_chunks import ChunkReader, iter_chunk_messages
-from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.mcap.chunks import ChunkReader, iter_chunk_messages
+from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.model import ReadUnit
-from syncaudit.logs.units import group_units
+from syncaudit.logs.unit_readers import group_units
 
 
 def _write(path: Path, probe: Any, compression: CompressionType, n: int = 300) -> None:

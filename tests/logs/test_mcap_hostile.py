@@ -15,8 +15,8 @@ from mcap.writer import CompressionType, IndexType, Writer
 
 from syncaudit.errors import LogReadError
 from syncaudit.logs import open_log
-from syncaudit.logs.mcap_chunks import iter_chunk_messages
-from syncaudit.logs.mcap_units import McapChunkUnitReader
+from syncaudit.logs.mcap.chunk_reader import McapChunkUnitReader
+from syncaudit.logs.mcap.chunks import iter_chunk_messages
 from syncaudit.logs.model import ChannelInfo
 
 LINEAR: dict[str, Any] = {

@@ -15,10 +15,11 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from syncaudit.errors import LogReadError
-from syncaudit.logs import mcap_stored, open_log
-from syncaudit.logs.mcap_chunks import ChunkReader
-from syncaudit.logs.mcap_stored import WINDOW_BYTES
-from syncaudit.logs.mcap_units import McapChunkUnitReader
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap import stored as mcap_stored
+from syncaudit.logs.mcap.chunk_reader import McapChunkUnitReader
+from syncaudit.logs.mcap.chunks import ChunkReader
+from syncaudit.logs.mcap.stored import WINDOW_BYTES
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 PREFIX = 256
@@ -123,7 +124,7 @@ def test_any_chunking(tmp_path: Path, chunk_size: int) -> None:
 
 def test_record_indexes_are_the_chunk_walk(tmp_path: Path) -> None:
     """Index in unit counts every record of the chunk, as `iter_chunk_messages` does."""
-    from syncaudit.logs.mcap_chunks import iter_chunk_messages
+    from syncaudit.logs.mcap.chunks import iter_chunk_messages
 
     path = tmp_path / "plain.mcap"
     _write(path)
@@ -305,7 +306,7 @@ def test_records_across_the_window_edge(tmp_path: Path, k: int, first_wanted: bo
     """The second record's header starts `k` bytes before the end of the chunk's first
     window (its header, message head or payload cut by the window's edge), against the
     in-memory walk of the same records."""
-    from syncaudit.logs.mcap_chunks import iter_chunk_messages
+    from syncaudit.logs.mcap.chunks import iter_chunk_messages
 
     first = (bytes(range(256)) * 16)[: WINDOW_BYTES - k - RECORDS_AT - 31]
     records = (

@@ -26,8 +26,8 @@ from lz4_layouts import LZ4_LAYOUTS
 from syncaudit.errors import LogReadError, SyncauditError
 from syncaudit.logs import open_log
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.rosbag1 import Rosbag1ChunkReader
-from syncaudit.logs.rosbag1_log import Rosbag1Log
+from syncaudit.logs.ros1.format import Rosbag1ChunkReader
+from syncaudit.logs.ros1.reader import Rosbag1Log
 
 OUSTER_BAG = "ouster_os1_512x10/512x10_raw.bag"
 Untouched = Callable[[Path], Path]
@@ -604,7 +604,7 @@ def test_mutated_lz4_frames_end_in_a_read_error_or_a_read(
 def test_check_crc_reaches_the_chunk_reader_of_the_workers(bags: dict[str, Path]) -> None:
     """`--check-crc` (the workers' `open_unit_reader(..., check_crc=True)`) switches the
     ROS 1 chunk reader to the checksum-verifying frame decoder."""
-    from syncaudit.logs.units import open_unit_reader
+    from syncaudit.logs.unit_readers import open_unit_reader
 
     for check_crc in (False, True):
         reader = open_unit_reader("rosbag1-chunk", str(bags["lz4"]), check_crc=check_crc)

@@ -25,10 +25,11 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlu
 from rosbags.typesys.store import Typestore
 
 from syncaudit.errors import LogReadError, SyncauditError
-from syncaudit.logs import open_log, sqlite_rows
+from syncaudit.logs import open_log
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.sqlite_log import SqliteLog
-from syncaudit.logs.sqlite_rows import SqliteRowsReader
+from syncaudit.logs.ros2 import sqlite_rows
+from syncaudit.logs.ros2.sqlite_reader import SqliteLog
+from syncaudit.logs.ros2.sqlite_rows import SqliteRowsReader
 
 Untouched = Callable[[Path], Path]
 Message = tuple[str, int, bytes]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.errors import LogReadError
 from syncaudit.remote.fetch import coalesce, fetch_log, public_url
 

@@ -9,12 +9,13 @@ from typing import Any
 
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.errors import LogOpenError, LogReadError
-from syncaudit.logs import mcap_remote, open_log
-from syncaudit.logs.mcap_remote import KIND, RemoteMcapLog, coalesce_units
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap import remote as mcap_remote
+from syncaudit.logs.mcap.remote import KIND, RemoteMcapLog, coalesce_units
 from syncaudit.logs.model import ReadUnit
-from syncaudit.logs.units import open_unit_reader
+from syncaudit.logs.unit_readers import open_unit_reader
 from syncaudit.remote.ranges import tracking
 from syncaudit.rig import load_rig
 
@@ -161,7 +162,7 @@ def test_an_mcap_without_index_is_refused_for_a_whole_download(
 def test_ros1_bag_by_chunk_spans_audits_as_the_local_file(
     http_root: tuple[str, ServerState], jobs: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from syncaudit.logs import rosbag1_remote
+    from syncaudit.logs.ros1 import remote as rosbag1_remote
 
     base, state = http_root
     if jobs == 2:  # runs of one chunk span each: several units for the two workers

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.errors import LogReadError
 from syncaudit.logs import open_log
 from syncaudit.remote.ranges import MAX_REDIRECTS, tracking

@@ -10,13 +10,14 @@ from typing import Any
 import pytest
 
 from logs.test_mcap_bag import _to_bag
-from syncaudit import collect
-from syncaudit.audit import audit_log
+from syncaudit.audit import collect
+from syncaudit.audit.run import audit_log
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
-from syncaudit.logs import mcap_remote, open_log
-from syncaudit.logs.mcap_remote import RemoteUnindexedError
-from syncaudit.logs.rosbag2_remote import SQLITE_REASON, RemoteMcapBag, file_url
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap import remote as mcap_remote
+from syncaudit.logs.mcap.remote import RemoteUnindexedError
+from syncaudit.logs.ros2.remote import SQLITE_REASON, RemoteMcapBag, file_url
 from syncaudit.remote.ranges import tracking
 from syncaudit.rig import Rig
 from syncaudit.simulate.rig_file import rig_from_truth

@@ -79,9 +79,9 @@ def test_gate_on_an_s3_prefix(s3_endpoint: str, tmp_path: Path) -> None:
 
 def test_a_ros2_mcap_bag_prefix_on_s3_is_read_by_ranges(s3_endpoint: str, tmp_path: Path) -> None:
     from logs.test_mcap_bag import _to_bag
-    from syncaudit.audit import audit_log
+    from syncaudit.audit.run import audit_log
     from syncaudit.logs import open_log
-    from syncaudit.logs.rosbag2_remote import RemoteMcapBag
+    from syncaudit.logs.ros2.remote import RemoteMcapBag
     from syncaudit.remote.ranges import tracking
     from syncaudit.simulate.rig_file import rig_from_truth
     from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log

@@ -10,9 +10,11 @@ from typing import Any
 
 import pytest
 
-from syncaudit import collect
-from syncaudit.audit import audit_log
-from syncaudit.logs import mcap_remote, open_log, rosbag1_remote
+from syncaudit.audit import collect
+from syncaudit.audit.run import audit_log
+from syncaudit.logs import open_log
+from syncaudit.logs.mcap import remote as mcap_remote
+from syncaudit.logs.ros1 import remote as rosbag1_remote
 from syncaudit.remote.ranges import signed_url, tracking
 from syncaudit.rig import load_rig
 

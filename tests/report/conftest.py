@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from syncaudit.audit import AuditResult, audit_log
+from syncaudit.audit.run import AuditResult, audit_log
 from syncaudit.calib.result import CalibrationResult, StopPointsOut, TopViewOut, TransformOut
 from syncaudit.rig import load_rig
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from browser import Session, needs_chromium, render, screenshot
-from syncaudit.audit import AuditResult
+from syncaudit.audit.run import AuditResult
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.report.html import (
     frame_time_ns,

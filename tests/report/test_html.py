@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from typer.testing import CliRunner
 
-from syncaudit.audit import AuditResult
+from syncaudit.audit.run import AuditResult
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.cli import app
 from syncaudit.report.html import render_audit_html, render_report_html

@@ -15,7 +15,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from syncaudit.audit import AuditResult
+from syncaudit.audit.run import AuditResult
 from syncaudit.cli import app
 from syncaudit.writers.parquet import cameras_path, write_parquet
 

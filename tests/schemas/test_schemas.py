@@ -7,7 +7,7 @@ from pathlib import Path
 
 import jsonschema
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.rig import load_rig, rig_json_schema
 
 SCHEMAS = Path(__file__).resolve().parents[2] / "schemas"

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from syncaudit.audit import audit_log
+from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
 from syncaudit.rig import load_rig
 from syncaudit.writers.pairings import PAIRING_TYPE, pairing_topic, write_pairings

@@ -4,7 +4,9 @@ The registration stack (small_gicp, gtsam) is the optional extra `syncaudit[cali
 imported only when `calibrate_log` runs, so the simulator and the report work without it.
 """
 
-from syncaudit.calib.config import (
+from syncaudit.calib.pipeline import calibrate_log
+from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.settings import (
     AlignmentLimits,
     CalibConfig,
     CalibSceneConfig,
@@ -20,9 +22,7 @@ from syncaudit.calib.config import (
     mount_preset,
     rig_preset,
 )
-from syncaudit.calib.pipeline import calibrate_log
-from syncaudit.calib.report import html_section, render_calibration, render_calibration_html
-from syncaudit.calib.result import CalibrationResult
+from syncaudit.report.calib_section import html_section, render_calibration, render_calibration_html
 
 __all__ = [
     "AlignmentLimits",

@@ -6,9 +6,9 @@ import dataclasses
 
 from syncaudit.calib import consensus, se3
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.pairs import align_pair
 from syncaudit.calib.registration import Alignment
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 
 _MAX_DISAGREEMENT_M = 0.3

@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 from pydantic import Field, model_validator
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import ConfigModel, load_config
 from syncaudit.calib.io import StaticTransform
+from syncaudit.calib.settings import ConfigModel, load_config
 from syncaudit.errors import NoDataError
 
 F64 = NDArray[np.float64]

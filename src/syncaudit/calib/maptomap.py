@@ -10,10 +10,10 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
 from syncaudit.calib import posegraph, se3
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.pairs import unless_slid
 from syncaudit.calib.registration import Alignment, Cloud, align, prepare
 from syncaudit.calib.result import AlignmentOut, ExtrinsicOut, MapPairOut, TransformOut
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 from syncaudit.calib.stopgraph import poses_at
 

@@ -12,8 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import selection, topview
-from syncaudit.calib.config import CalibConfig
+from syncaudit.calib import selection, top_view_points
 from syncaudit.calib.result import (
     CalibrationResult,
     DegeneracyOut,
@@ -25,6 +24,7 @@ from syncaudit.calib.result import (
     TransformOut,
     VehicleStopOut,
 )
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 from syncaudit.calib.stopgraph import poses_at
 
@@ -148,7 +148,7 @@ def top_views(
             mount, via = recorded.base_from_frame[lidar.frame_id], "the recorded extrinsic"
         scans = {k: lidar.scans[lidar.stop_scan[k]].points_m for k in poses}
         frame = f"{recorded.base_frame} at stop {anchor}, {lidar.frame_id} placed by {via}"
-        out.append(topview.top_view(scans, poses, mount, frame))
+        out.append(top_view_points.top_view(scans, poses, mount, frame))
     return out
 
 

@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import posegraph, se3, selection
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.registration import Alignment, Conditioning, align, prepare, visible_fraction
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 
 F64 = NDArray[np.float64]

@@ -46,7 +46,6 @@ from pathlib import Path
 import numpy as np
 
 from syncaudit.calib import io, posegraph
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.crosscheck import cross_check
 from syncaudit.calib.degeneracy import degenerate_scene
 from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
@@ -64,6 +63,7 @@ from syncaudit.calib.outcome import (
 from syncaudit.calib.pairs import align_pairs
 from syncaudit.calib.registration import backend
 from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 from syncaudit.calib.stopgraph import graph_lidars
 from syncaudit.calib.stops import find_stops, provisional_reference

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import PoseGraphConfig
+from syncaudit.calib.settings import PoseGraphConfig
 from syncaudit.errors import ConfigError
 
 F64 = NDArray[np.float64]

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import AlignmentLimits
+from syncaudit.calib.settings import AlignmentLimits
 from syncaudit.errors import ConfigError
 
 F64 = NDArray[np.float64]

@@ -6,11 +6,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import posegraph, se3, selection
-from syncaudit.calib.config import CalibConfig
+from syncaudit.calib.lidar_summary import summarize_lidar
 from syncaudit.calib.links import accepted_edges, components, firm_edges
 from syncaudit.calib.pairs import align_pair
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
-from syncaudit.calib.summary import summarize_lidar
 
 F64 = NDArray[np.float64]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from syncaudit.calib import selection
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.registration import Cloud, backend
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 from syncaudit.errors import NoDataError
 

@@ -9,9 +9,9 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
 from syncaudit.calib import io, se3, selection
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.ground import remove_ground
 from syncaudit.calib.registration import Cloud, evaluate, gicp, prepare, yaw_search
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState, vehicle_points
 
 F64 = NDArray[np.float64]

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from syncaudit.audit.collect import ExtractPlan, iter_items
 from syncaudit.camera.routing import CameraRouter, SharedTopicCount
-from syncaudit.collect import ExtractPlan, iter_items
 from syncaudit.errors import LogReadError
 from syncaudit.logs import LogReader
 from syncaudit.rig import CameraConfig

@@ -3,7 +3,7 @@
 One module per command (group); `common` holds the app, the run wrapper (errors -> one
 line + exit code), consoles, the OutputSet helper and the options several commands share.
 
-Adding a command: write `cli/<name>.py` with `@app.command()` (or a sub-app added with
+Adding a command: write `cli/<name>_command.py` with `@app.command()` (or a sub-app added with
 `app.add_typer`), import the library inside the command's body (`syncaudit --help` must
 stay fast), run the body through `run(job)`, route every file it writes through
 `output_set(...)` (checked before any work, committed together), print through `emit`,
@@ -12,10 +12,24 @@ and import the module below.
 
 from __future__ import annotations
 
-from syncaudit.cli import audit, calib, info, rig, simulate
+from syncaudit.cli import (
+    audit_command,
+    calib_command,
+    info_command,
+    rig_command,
+    simulate_command,
+)
 from syncaudit.cli.common import app, main
-from syncaudit.fleet.cli import register as register_fleet
+from syncaudit.cli.fleet_commands import register as register_fleet
 
-register_fleet(app)  # syncaudit gate, syncaudit fleet report (src/syncaudit/fleet/cli.py)
+register_fleet(app)  # syncaudit gate, syncaudit fleet report (src/syncaudit/cli/fleet_commands.py)
 
-__all__ = ["app", "audit", "calib", "info", "main", "rig", "simulate"]
+__all__ = [
+    "app",
+    "audit_command",
+    "calib_command",
+    "info_command",
+    "main",
+    "rig_command",
+    "simulate_command",
+]

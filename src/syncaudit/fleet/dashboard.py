@@ -20,7 +20,7 @@ from typing import Any
 
 from syncaudit.errors import OutputError
 from syncaudit.fleet.database import ResultsDB
-from syncaudit.fleet.outputs import OVERWRITE_HINT
+from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
 from syncaudit.writers.outputs import OutputSet
 
 EXPORT_QUERY = """

@@ -47,7 +47,7 @@ def preload() -> None:
     """Import what every audit needs, once, before workers are forked."""
     import syncaudit.analysis.replay
     import syncaudit.analysis.sync
-    import syncaudit.audit
+    import syncaudit.audit.run
     import syncaudit.report.html  # noqa: F401
 
 

@@ -15,19 +15,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from syncaudit import __version__
-from syncaudit.collect import default_jobs
+from syncaudit.audit.collect import default_jobs
 from syncaudit.errors import GateFailedError, LogReadError, OutputError, SyncauditError
 from syncaudit.fleet.checks import evaluate, verdict
 from syncaudit.fleet.database import ResultsDB
 from syncaudit.fleet.executor import DEFAULT_MAX_TRIES, DEFAULT_TIMEOUT_S, Executor, LocalExecutor
-from syncaudit.fleet.html import render_error_page, report_file_name, report_name
+from syncaudit.fleet.gate_outputs import GateOutputs
 from syncaudit.fleet.inputs import LogJob, discover, file_fingerprint, fingerprint
 from syncaudit.fleet.job import JobOptions, LogOutcome
-from syncaudit.fleet.outputs import GateOutputs
+from syncaudit.fleet.log_pages import render_error_page, report_file_name, report_name
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
+from syncaudit.fleet.remote_job import run_any_log_job
 from syncaudit.remote.fetch import is_url, public_url
-from syncaudit.remote.job import run_any_log_job
 
 DB_BATCH_LOGS = 32
 DB_BATCH_S = 5.0

@@ -104,8 +104,8 @@ def wants_calibration(options: JobOptions, job: LogJob) -> bool:
 
 
 def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
-    from syncaudit.audit import audit_log
-    from syncaudit.collect import lidar_family
+    from syncaudit.audit.collect import lidar_family
+    from syncaudit.audit.run import audit_log
     from syncaudit.logs import open_log
     from syncaudit.rig import load_rig
 
@@ -144,7 +144,7 @@ def _report_html(
 ) -> str:
     """The log's report page: its audit and/or calibration, then the policy checks."""
     from syncaudit.fleet.checks import evaluate
-    from syncaudit.fleet.html import checks_section
+    from syncaudit.fleet.log_pages import checks_section
     from syncaudit.report.html import audit_sections, page, time_origin_ns
 
     checks = evaluate(outcome, options.policy, job.vehicle) if options.policy else []
@@ -163,8 +163,8 @@ def _report_html(
 def _calibrate_into(outcome: LogOutcome, job: LogJob) -> CalibrationResult | None:
     """Calibrate with the default configuration; a failure is kept, not raised."""
     try:
-        from syncaudit.calib.config import CalibConfig
         from syncaudit.calib.pipeline import calibrate_log
+        from syncaudit.calib.settings import CalibConfig
 
         result = calibrate_log(Path(job.path), CalibConfig())
     except SyncauditError as exc:

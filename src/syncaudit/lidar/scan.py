@@ -183,7 +183,7 @@ def scan_lidar(
     """Read the topic once, as the audit reads it (`collect.iter_items`: `jobs` worker
     processes where the log allows, one scan message at a time), and reduce it to
     revolutions and clock statistics."""
-    from syncaudit.collect import ExtractPlan, iter_items
+    from syncaudit.audit.collect import ExtractPlan, iter_items
 
     family, meta = packet_family(log, topic, ouster_metadata_topic)
     scanner = LidarScanner.create(

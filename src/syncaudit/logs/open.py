@@ -14,22 +14,22 @@ __all__ = ["MCAP_MAGIC", "ROSBAG1_MAGIC", "SQLITE_MAGIC", "open_log"]
 
 def _rosbags_log(path: Path, ros1: bool) -> LogReader:
     """A bag through rosbags, imported only for bags (~40 ms an MCAP audit need not pay)."""
-    from syncaudit.logs.rosbags_log import RosbagsLog
+    from syncaudit.logs.rosbags_reader import RosbagsLog
 
     return RosbagsLog(path, ros1=ros1)
 
 
 def _bag_folder(path: Path) -> LogReader:
     """A rosbag2 folder: its metadata.yaml read here (quirks resolved), then by storage."""
-    from syncaudit.logs.rosbag2_meta import read_metadata
+    from syncaudit.logs.ros2.metadata import read_metadata
 
     meta = read_metadata(path)
     if meta.storage == "sqlite3":
-        from syncaudit.logs.sqlite_log import open_sqlite_log
+        from syncaudit.logs.ros2.sqlite_reader import open_sqlite_log
 
         return open_sqlite_log(path, meta)
     if not meta.compression_mode:
-        from syncaudit.logs.mcap_bag import open_mcap_bag
+        from syncaudit.logs.ros2.mcap_storage import open_mcap_bag
 
         log = open_mcap_bag(path, meta.files)  # chunk-parallel, across every file
         for warning in meta.warnings:
@@ -54,7 +54,7 @@ def open_log(path: str | Path) -> LogReader:
     An indexed MCAP or ROS 1 bag may also be a URL (http(s)://, or s3:// etc. via fsspec).
     """
     if isinstance(path, str) and "://" in path:
-        from syncaudit.logs.mcap_remote import open_remote_log
+        from syncaudit.logs.mcap.remote import open_remote_log
 
         return open_remote_log(path)
     path = Path(path)
@@ -77,18 +77,18 @@ def open_log(path: str | Path) -> LogReader:
     if not head:
         raise LogOpenError(f"{path}: file is empty")
     if head.startswith(MCAP_MAGIC):
-        from syncaudit.logs.mcap_log import McapLog
+        from syncaudit.logs.mcap.reader import McapLog
 
         return McapLog(path)
     if head.startswith(ROSBAG1_MAGIC):
-        from syncaudit.logs.rosbag1_log import Rosbag1Log
+        from syncaudit.logs.ros1.reader import Rosbag1Log
 
         return Rosbag1Log(path)
     if head.startswith(ROSBAG_ANY_MAGIC):
         version = head[len(ROSBAG_ANY_MAGIC) :].split(b"\n")[0].decode("ascii", "replace")
         raise LogOpenError(f"{path}: ROS 1 bag format version {version} is not supported (2.0 is)")
     if head.startswith(SQLITE_MAGIC):
-        from syncaudit.logs.sqlite_log import open_sqlite_log
+        from syncaudit.logs.ros2.sqlite_reader import open_sqlite_log
 
         return open_sqlite_log(path)
     raise LogOpenError(

@@ -251,7 +251,7 @@ def calibration_figures(result: CalibrationResult) -> str:
 
 def calibration_section(result: CalibrationResult) -> str:
     """The calibration's part of a report page: its tables and figures."""
-    from syncaudit.calib.report import html_section
+    from syncaudit.report.calib_section import html_section
 
     section = html_section(result)
     if 'class="row calib-figures"' not in section:

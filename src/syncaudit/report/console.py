@@ -5,8 +5,8 @@ from __future__ import annotations
 from rich.console import Console
 from rich.table import Table
 
-from syncaudit.audit import AuditResult
-from syncaudit.inspect_log import InfoReport
+from syncaudit.audit.inspect import InfoReport
+from syncaudit.audit.run import AuditResult
 
 
 def _num(value: float | None, fmt: str = "{:.1f}", missing: str = "-") -> str:

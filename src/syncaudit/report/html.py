@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.audit import AuditResult, CameraAudit
+from syncaudit.audit.run import AuditResult, CameraAudit
 from syncaudit.report.plot import (
     COLOURS,
     Band,

@@ -10,7 +10,7 @@ unorganised (Velodyne layout) or organised beam x column with zeros for no retur
 (ouster-ros layout); /tf_static holds base_link -> lidar or base_link -> sensor kit ->
 lidar; an optional odometry (nav_msgs/Odometry and/or /tf odom -> base_link) carries
 scale error, yaw drift and noise. Scans are ray-cast against
-an exact scene (`syncaudit.calib.scene`) with Gaussian range noise, and written as real
+an exact scene (`syncaudit.simulate.scene`) with Gaussian range noise, and written as real
 `sensor_msgs/msg/PointCloud2` messages to an MCAP log (or any format `open_writer`
 supports), with the *recorded* (perturbed) extrinsics on `/tf_static`. The truth -- true
 and recorded extrinsics, true stop poses, the scene -- goes to `<out>.truth.json`.
@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import CalibSceneConfig, LidarSimConfig
-from syncaudit.calib.scene import Scene, beam_pattern, build_scene, simulate_scan
+from syncaudit.calib.settings import CalibSceneConfig, LidarSimConfig
+from syncaudit.simulate.scene import Scene, beam_pattern, build_scene, simulate_scan
 from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
 from syncaudit.writers.outputs import OutputSet
 

@@ -6,7 +6,7 @@ import io
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from syncaudit.audit import AuditResult
+    from syncaudit.audit.run import AuditResult
 
 FRAME_TABLE_COLUMNS: tuple[str, ...] = (
     "camera",

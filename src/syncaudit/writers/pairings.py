@@ -8,7 +8,7 @@ from typing import Any
 
 import pandas as pd
 
-from syncaudit.audit import AuditResult
+from syncaudit.audit.run import AuditResult
 from syncaudit.writers.log_writer import open_writer
 from syncaudit.writers.outputs import OutputSet
 

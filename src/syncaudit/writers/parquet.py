@@ -24,7 +24,7 @@ from syncaudit.errors import OutputError
 if TYPE_CHECKING:
     import pandas as pd
 
-    from syncaudit.audit import AuditResult
+    from syncaudit.audit.run import AuditResult
 
 INSTALL_HINT = "--parquet needs pyarrow: pip install 'syncaudit[parquet]'"
 
@@ -51,7 +51,7 @@ def _pyarrow() -> Any:
 
 
 def _metadata(result: AuditResult, table: str) -> dict[bytes, bytes]:
-    from syncaudit.audit import SCHEMA_VERSION
+    from syncaudit.audit.run import SCHEMA_VERSION
 
     meta = {
         "table": table,

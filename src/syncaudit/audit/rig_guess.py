@@ -13,16 +13,16 @@ import json
 import math
 from pathlib import Path
 
+from syncaudit.audit.collect import lidar_family
 from syncaudit.camera.azimuth import (
     X_AXIS_AZIMUTH_DEG,
     camera_azimuth,
     needs_tf_static,
     tf_static_yaws,
 )
-from syncaudit.camera.topics import detect_cameras, probe_camera_topics, topic_role
-from syncaudit.collect import lidar_family
+from syncaudit.camera.camera_topics import detect_cameras, probe_camera_topics, topic_role
 from syncaudit.errors import NoDataError
-from syncaudit.lidar.topics import guess_lidar_topics
+from syncaudit.lidar.packet_topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 

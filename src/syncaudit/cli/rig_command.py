@@ -27,7 +27,7 @@ def rig(
 
     def job() -> None:
         with output_set(overwrite=overwrite, inputs=(log,), targets=(out,)) as outputs:
-            from syncaudit.rig_guess import starter_rig_yaml
+            from syncaudit.audit.rig_guess import starter_rig_yaml
 
             text = starter_rig_yaml(log)
             if out is not None:

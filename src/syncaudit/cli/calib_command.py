@@ -75,13 +75,13 @@ def calib(
             if json_out:
                 outputs.write_text(json_out, json_text(result.to_json_dict()))
             if html_out:
-                from syncaudit.calib.report import render_calibration_html
+                from syncaudit.report.calib_section import render_calibration_html
 
                 outputs.write_text(html_out, render_calibration_html(result))
         if as_json:
             print_json(result.to_json_dict())
         else:
-            from syncaudit.calib.report import render_calibration
+            from syncaudit.report.calib_section import render_calibration
 
             emit(lambda: render_calibration(result, stdout_console()))
         if gate and not result.passed:

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.config import LidarSimConfig, SceneConfig
+from syncaudit.calib.settings import LidarSimConfig, SceneConfig
 
 F64 = NDArray[np.float64]
 _EPS_M = 1e-6

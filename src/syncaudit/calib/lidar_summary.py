@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from syncaudit.calib import posegraph
-from syncaudit.calib.config import CalibConfig
 from syncaudit.calib.links import components
 from syncaudit.calib.result import AlignmentOut, PairOut, PoseGraphOut
+from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 
 

@@ -30,7 +30,7 @@ from syncaudit.lidar.samples import packet_samples
 from syncaudit.lidar.stream import SCAN_TYPES, decode_ouster_message, decode_scan
 from syncaudit.logs import LogReader, RawMessage
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.units import UnitReader, group_units, open_unit_reader
+from syncaudit.logs.unit_readers import UnitReader, group_units, open_unit_reader
 from syncaudit.workers import worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024

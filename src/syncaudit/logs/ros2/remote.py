@@ -23,10 +23,10 @@ from urllib.parse import urlsplit, urlunsplit
 import yaml
 
 from syncaudit.errors import LogOpenError, SyncauditError
-from syncaudit.logs.mcap_bag import McapBag
-from syncaudit.logs.mcap_log import McapLog
-from syncaudit.logs.mcap_remote import RemoteMcapLog, RemoteUnindexedError, UrlPath
+from syncaudit.logs.mcap.reader import McapLog
+from syncaudit.logs.mcap.remote import RemoteMcapLog, RemoteUnindexedError, UrlPath
 from syncaudit.logs.model import LogWarning, ReadUnit
+from syncaudit.logs.ros2.mcap_storage import McapBag
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.ranges import (
     Tracker,

@@ -9,20 +9,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from syncaudit.audit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
+from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
+from syncaudit.audit.rig_check import check_rig_against_log
+from syncaudit.audit.rig_guess import guess_rig
 from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.routing import CameraRouter
-from syncaudit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.table import MISSING
 from syncaudit.errors import NoDataError
-from syncaudit.inspect_log import LidarRow, lidar_row, lidar_warnings
 from syncaudit.lidar.scan import LidarScan, LidarScanner
 from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
-from syncaudit.rig_guess import guess_rig
-from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:

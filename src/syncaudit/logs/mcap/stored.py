@@ -27,7 +27,7 @@ import struct
 from collections.abc import Iterator
 
 from syncaudit.errors import LogReadError
-from syncaudit.logs.mcap_chunks import (
+from syncaudit.logs.mcap.chunks import (
     CHANNEL_HEAD,
     CHUNK_HEAD,
     MAX_CHUNK_BYTES,

@@ -24,7 +24,7 @@ def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> 
     """
 
     def job() -> None:
-        from syncaudit.inspect_log import inspect_log
+        from syncaudit.audit.inspect import inspect_log
         from syncaudit.rig import load_rig
 
         report = inspect_log(log, load_rig(rig) if rig else None, partial=True)
@@ -45,5 +45,5 @@ def _import_info() -> None:
     """The modules `info` needs, imported while the collector is paused (see `run`), numpy
     with one OpenBLAS thread (the reading's parallelism is its worker processes)."""
     one_blas_thread()
-    import syncaudit.inspect_log
+    import syncaudit.audit.inspect
     import syncaudit.rig  # noqa: F401

@@ -38,7 +38,7 @@ from mcap.summary import Summary
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.magic import MCAP_MAGIC
-from syncaudit.logs.mcap_chunks import (
+from syncaudit.logs.mcap.chunks import (
     MAX_CHUNK_BYTES,
     MAX_LOG_TIME_NS,
     RECORD_HEAD,

@@ -18,17 +18,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from syncaudit.audit.collect import default_jobs
+from syncaudit.audit.rig_check import check_rig_against_log
+from syncaudit.audit.rig_guess import guess_cameras
+from syncaudit.camera.camera_topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
-from syncaudit.camera.topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
-from syncaudit.collect import default_jobs
 from syncaudit.errors import NoDataError, SyncauditError
+from syncaudit.lidar.packet_topics import guess_lidar_topics
 from syncaudit.lidar.scan import LidarScan, scan_lidar
-from syncaudit.lidar.topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, Rig
-from syncaudit.rig_guess import guess_cameras
-from syncaudit.rig_vs_log import check_rig_against_log
 from syncaudit.units import json_ready
 
 CHECKPOINTS_BY_TYPE: dict[str, tuple[int, ...]] = {

@@ -24,10 +24,10 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from syncaudit.errors import OutputError
-from syncaudit.fleet.html import render_index
 from syncaudit.fleet.junit import render_junit
+from syncaudit.fleet.log_pages import render_index
 from syncaudit.fleet.record import JudgedLog
-from syncaudit.fleet.summary import render_json, render_markdown
+from syncaudit.fleet.run_summary import render_json, render_markdown
 from syncaudit.writers.outputs import OutputSet
 
 OVERWRITE_HINT = "use --overwrite to replace it"

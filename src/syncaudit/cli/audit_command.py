@@ -92,7 +92,7 @@ def audit(
         ) as outputs:
             if pairings is not None:
                 outputs.add(pairings, kind="dir" if pairings.suffix == "" else "file")
-            from syncaudit.audit import audit_log
+            from syncaudit.audit.run import audit_log
             from syncaudit.rig import load_rig
 
             result = audit_log(
@@ -142,7 +142,7 @@ def _import_audit() -> None:
     numpy with one OpenBLAS thread (the audit's parallelism is its reader processes)."""
     one_blas_thread()
     # Import statements, not importlib: `python -X importtime` names only those.
-    import syncaudit.audit
+    import syncaudit.audit.run
     import syncaudit.rig  # noqa: F401
 
 

@@ -31,7 +31,7 @@ from mcap.summary import Summary
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
 from syncaudit.logs.base import LogReader
-from syncaudit.logs.mcap_chunks import (
+from syncaudit.logs.mcap.chunks import (
     MAX_LOG_TIME_NS,
     OP_CHUNK,
     RECORD_HEAD,
@@ -40,7 +40,7 @@ from syncaudit.logs.mcap_chunks import (
     chunk_where,
     iter_chunk_messages,
 )
-from syncaudit.logs.mcap_log import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog, _Scan
+from syncaudit.logs.mcap.reader import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog, _Scan
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.ranges import (
@@ -507,16 +507,16 @@ def open_remote_log(url: str) -> LogReader:
     if path.endswith(".mcap"):
         return RemoteMcapLog(url)
     if path.endswith(".bag"):
-        from syncaudit.logs.rosbag1_remote import RemoteRosbag1Log
+        from syncaudit.logs.ros1.remote import RemoteRosbag1Log
 
         return RemoteRosbag1Log(url)
     if path.endswith(".db3"):
-        from syncaudit.logs.rosbag2_remote import SQLITE_REASON
+        from syncaudit.logs.ros2.remote import SQLITE_REASON
 
         tracker = acquire_tracker(url)  # (the caller's, if it tracks this URL)
         tracker.ranged, tracker.whole_reason = False, SQLITE_REASON
         release_tracker(tracker)
         raise RemoteUnindexedError(f"{public_url(url)}: not read by ranges: {SQLITE_REASON}")
-    from syncaudit.logs.rosbag2_remote import open_remote_bag
+    from syncaudit.logs.ros2.remote import open_remote_bag
 
     return open_remote_bag(url)

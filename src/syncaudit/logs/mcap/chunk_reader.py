@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from syncaudit.logs.mcap_chunks import ChunkReader, chunk_where, iter_chunk_messages
-from syncaudit.logs.mcap_stored import StoredChunks
+from syncaudit.logs.mcap.chunks import ChunkReader, chunk_where, iter_chunk_messages
+from syncaudit.logs.mcap.stored import StoredChunks
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 

@@ -261,10 +261,10 @@ def _init(
     inputs: list[str], output: Path, overwrite: bool, jobs: int | None, timeout: float
 ) -> None:
     from syncaudit.fleet.gate import GateOptions, make_executor
+    from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
     from syncaudit.fleet.init_policy import init_policy_yaml
     from syncaudit.fleet.inputs import discover
     from syncaudit.fleet.job import JobOptions
-    from syncaudit.fleet.outputs import OVERWRITE_HINT
     from syncaudit.fleet.policy import Policy
     from syncaudit.writers.outputs import OutputSet
 

@@ -34,15 +34,15 @@ from typing import BinaryIO
 import lz4.frame
 
 from syncaudit.errors import LogReadError
-from syncaudit.logs.lz4_frame import (
+from syncaudit.logs.magic import ROSBAG1_MAGIC
+from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.ros1.lz4_frame import (
     FileSpan,
     FrameError,
     FrameSource,
     Pieces,
     decode_frame,
 )
-from syncaudit.logs.magic import ROSBAG1_MAGIC
-from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import normalise_type_name, one_line
 
 MAGIC = ROSBAG1_MAGIC

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from syncaudit.errors import LogOpenError, LogReadError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
-from syncaudit.logs.rosbag1 import (
+from syncaudit.logs.ros1.format import (
     MAGIC,
     UNIT_KIND,
     BagCutError,

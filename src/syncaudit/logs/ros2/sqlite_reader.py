@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from syncaudit.errors import LogOpenError, LogReadError
-from syncaudit.logs import sqlite_rows
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
-from syncaudit.logs.rosbag2_meta import BagMetadata
-from syncaudit.logs.sqlite_rows import (
+from syncaudit.logs.ros2 import sqlite_rows
+from syncaudit.logs.ros2.metadata import BagMetadata
+from syncaudit.logs.ros2.sqlite_rows import (
     SqliteFile,
     SqliteRowsReader,
     connect,

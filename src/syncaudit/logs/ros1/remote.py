@@ -23,9 +23,9 @@ from collections.abc import Iterator
 from typing import BinaryIO, cast
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.mcap_remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
+from syncaudit.logs.mcap.remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.rosbag1 import (
+from syncaudit.logs.ros1.format import (
     MAGIC,
     OP_CHUNK,
     OP_CHUNK_INFO,
@@ -36,7 +36,7 @@ from syncaudit.logs.rosbag1 import (
     Rosbag1ChunkReader,
     read_bag_header,
 )
-from syncaudit.logs.rosbag1_log import Rosbag1Log
+from syncaudit.logs.ros1.reader import Rosbag1Log
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.ranges import (
     Tracker,

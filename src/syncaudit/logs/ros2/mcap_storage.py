@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
-from syncaudit.logs.mcap_log import McapLog
+from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
 from syncaudit.logs.typesys import TypeRegistry
 

@@ -22,12 +22,12 @@ from typing import Protocol
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 
 UNIT_READERS: dict[str, str] = {
-    "mcap-chunk": "syncaudit.logs.mcap_units:McapChunkUnitReader",
-    "mcap-cut-chunk": "syncaudit.logs.mcap_log:McapCutChunkUnitReader",
-    "mcap-remote-chunks": "syncaudit.logs.mcap_remote:RemoteChunksUnitReader",
-    "rosbag1-chunk": "syncaudit.logs.rosbag1:Rosbag1ChunkReader",
-    "rosbag1-remote-chunk": "syncaudit.logs.rosbag1_remote:RemoteRosbag1ChunkReader",
-    "sqlite-rows": "syncaudit.logs.sqlite_rows:SqliteRowsReader",
+    "mcap-chunk": "syncaudit.logs.mcap.chunk_reader:McapChunkUnitReader",
+    "mcap-cut-chunk": "syncaudit.logs.mcap.reader:McapCutChunkUnitReader",
+    "mcap-remote-chunks": "syncaudit.logs.mcap.remote:RemoteChunksUnitReader",
+    "rosbag1-chunk": "syncaudit.logs.ros1.format:Rosbag1ChunkReader",
+    "rosbag1-remote-chunk": "syncaudit.logs.ros1.remote:RemoteRosbag1ChunkReader",
+    "sqlite-rows": "syncaudit.logs.ros2.sqlite_rows:SqliteRowsReader",
 }
 """Unit kind -> "module:Class" of its per-worker reader."""
 
