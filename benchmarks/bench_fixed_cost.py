@@ -54,7 +54,7 @@ IMPORTS = (
     "pandas",
     "syncaudit.rig",
     "syncaudit.logs",
-    "syncaudit.audit.collect",
+    "syncaudit.logs.parallel",
     "syncaudit.audit.run",
     "syncaudit.analysis.sync",
     "syncaudit.report.console",

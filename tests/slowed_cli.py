@@ -14,7 +14,7 @@ from pathlib import Path
 
 _SCRIPT = """
 import sys, time
-import syncaudit.audit.collect as c
+import syncaudit.logs.parallel as c
 
 c.GROUP_BYTES = 1
 {tasks_per_worker}_extract = c._extract_group

@@ -66,3 +66,28 @@ def test_json_audit_does_not_import_rich() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stderr.strip().splitlines()[-1] == "[]"
+
+
+PACKAGE_API = """
+import sys
+import syncaudit.audit
+print(sorted(m for m in ("syncaudit.audit.run", "syncaudit.audit.inspect") if m in sys.modules))
+from syncaudit.audit import audit_log, guess_rig, inspect_log
+print(audit_log.__module__, inspect_log.__module__, guess_rig.__module__)
+try:
+    syncaudit.audit.no_such_name
+except AttributeError as exc:
+    print(exc)
+"""
+
+
+def test_the_package_exports_the_api_when_first_used() -> None:
+    """`from syncaudit.audit import audit_log` works (the README's library use); importing
+    the package alone imports none of its steps."""
+    done = subprocess.run(
+        [sys.executable, "-c", PACKAGE_API], capture_output=True, text=True, check=True
+    )
+    before, homes, missing = done.stdout.splitlines()
+    assert before == "[]"
+    assert homes == "syncaudit.audit.run syncaudit.audit.inspect syncaudit.audit.rig_guess"
+    assert "no_such_name" in missing

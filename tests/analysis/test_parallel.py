@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.audit import collect
+from syncaudit.audit.plan import ExtractPlan, Item, read_plan
 from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
+from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.ros2 import sqlite_rows
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
@@ -27,7 +28,7 @@ def test_parallel_equals_serial(
 ) -> None:
     out, truth = chunked_log
     # Small groups: many tasks, merges across every group boundary.
-    monkeypatch.setattr(collect, "GROUP_BYTES", 200_000)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 200_000)
     rig = rig_from_truth(truth)  # type: ignore[arg-type]
     serial = audit_log(out, rig, jobs=1)
     parallel = audit_log(out, rig, jobs=2)
@@ -41,25 +42,23 @@ def test_parallel_items_in_log_order(
     chunked_log: tuple[Path, dict[str, object]], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out, truth = chunked_log
-    monkeypatch.setattr(collect, "GROUP_BYTES", 100_000)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 100_000)
     rig = rig_from_truth(truth)  # type: ignore[arg-type]
     with open_log(out) as log:
         refs = log.read_units(frozenset(_plan(log, rig).topics))
         assert refs is not None and len(refs) >= 3  # one group per chunk at this size
-        serial = [(k, t) for k, t, _ in collect.iter_items(log, _plan(log, rig), jobs=1)]
-        parallel = [(k, t) for k, t, _ in collect.iter_items(log, _plan(log, rig), jobs=2)]
+        serial = [(k, t) for k, t, _ in parallel_read.iter_items(log, _plan(log, rig), jobs=1)]
+        parallel = [(k, t) for k, t, _ in parallel_read.iter_items(log, _plan(log, rig), jobs=2)]
     assert serial == parallel
     assert len(serial) > 100
 
 
-def _plan(log: object, rig: object) -> collect.ExtractPlan:
-    from syncaudit.audit.run import _plan as audit_plan
-
-    plan, _ = audit_plan(log, rig, list(rig.cameras))  # type: ignore[arg-type, attr-defined]
+def _plan(log: object, rig: object) -> ExtractPlan:
+    plan, _ = read_plan(log, rig, list(rig.cameras))  # type: ignore[arg-type, attr-defined]
     return plan
 
 
-def _comparable(item: collect.Item) -> tuple[object, ...]:
+def _comparable(item: Item) -> tuple[object, ...]:
     kind, topic, payload = item
     if kind == "lidar":
         fields = (getattr(payload, name) for name in payload.__slots__)
@@ -81,11 +80,11 @@ def test_chunk_items_equal_message_items(
         refs = log.read_units(frozenset(plan.topics))
         assert refs is not None and len(refs) >= 2  # the buffers are reused
         chunked = {
-            jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
+            jobs: [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=jobs)]
             for jobs in (1, 2)
         }
         monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
-        plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
+        plain = [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=1)]
     assert len(plain) > 100
     assert chunked[1] == plain
     assert chunked[2] == plain
@@ -101,13 +100,13 @@ def test_no_pool_for_a_log_of_one_group(
     def no_pool(*_args: object) -> None:
         raise AssertionError("a pool was started for a log of one group")
 
-    monkeypatch.setattr(collect, "worker_pool", no_pool)
+    monkeypatch.setattr(parallel_read, "worker_pool", no_pool)
     with open_log(out) as log:
         plan = _plan(log, rig)
         units = log.read_units(frozenset(plan.topics))
         assert units is not None and len(units) > 1
-        assert sum(u.cost for u in units) < collect.GROUP_BYTES  # one group
-        items = list(collect.iter_items(log, plan, jobs=2))
+        assert sum(u.cost for u in units) < parallel_read.GROUP_BYTES  # one group
+        items = list(parallel_read.iter_items(log, plan, jobs=2))
     assert len(items) > 100
 
 
@@ -122,7 +121,7 @@ def test_cut_log_read_in_parallel_equals_serial(
     units, the partly written last one read up to the cut; the items equal the serial
     read's, with jobs 1 and 2."""
     out, truth = chunked_log
-    monkeypatch.setattr(collect, "GROUP_BYTES", 200_000)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 200_000)
     rig = rig_from_truth(truth)
     with open_log(out) as log:
         units = sorted(log.read_units(frozenset(log.topics)) or [], key=lambda u: u.offset)
@@ -138,11 +137,11 @@ def test_cut_log_read_in_parallel_equals_serial(
         kinds = {u.kind for u in found}
         assert kinds == ({"mcap-chunk", "mcap-cut-chunk"} if cut == "mid-chunk" else {"mcap-chunk"})
         chunked = {
-            jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
+            jobs: [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=jobs)]
             for jobs in (1, 2)
         }
         monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
-        plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
+        plain = [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=1)]
     assert len(plain) > 100
     assert chunked[1] == plain
     assert chunked[2] == plain
@@ -165,7 +164,7 @@ def test_bag_units_through_the_registry(
     sample = REPO / "sample_logs"
     log_path = sample / log_name
     rig = load_rig(sample / f"{log_name}.rig.yaml")
-    monkeypatch.setattr(collect, "GROUP_BYTES", 50_000)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 50_000)
     monkeypatch.setattr(sqlite_rows, "WORKER_UNIT_BYTES", 1 << 19)  # several in 2.8 MB
     with open_log(log_path) as log:
         plan = _plan(log, rig)
@@ -173,11 +172,11 @@ def test_bag_units_through_the_registry(
         assert units is not None and {u.kind for u in units} == {kind}
         assert len(units) > 1
         chunked = {
-            jobs: [_comparable(i) for i in collect.iter_items(log, plan, jobs=jobs)]
+            jobs: [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=jobs)]
             for jobs in (1, 2)
         }
         monkeypatch.setattr(type(log), "read_units", lambda self, topics: None)
-        plain = [_comparable(i) for i in collect.iter_items(log, plan, jobs=1)]
+        plain = [_comparable(i) for i in parallel_read.iter_items(log, plan, jobs=1)]
     assert len(plain) > 50
     assert chunked[1] == plain
     assert chunked[2] == plain

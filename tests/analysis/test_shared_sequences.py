@@ -24,11 +24,12 @@ from syncaudit.analysis.pairing import (
     BY_TIME,
     NO_TRIGGERS,
     TriggerPairing,
+    incomparable,
     pair_frames,
     sequence_problem,
 )
 from syncaudit.audit.run import AuditResult, audit_log
-from syncaudit.camera.sequences import field_counter, header_seq_counter, incomparable
+from syncaudit.camera.sequences import field_counter, header_seq_counter
 from syncaudit.columns.table import Table, int_column
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log

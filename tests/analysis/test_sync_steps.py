@@ -112,8 +112,7 @@ def test_t_l_is_exact_integer_mid_exposure() -> None:
 
 def test_offset_snaps_trigger_packets_to_the_packet_grid() -> None:
     """Triggers naming the packet after the zero packet still give the exact offset."""
-    from syncaudit.lidar.clock import ClockReport
-    from syncaudit.lidar.scan import LidarScan
+    from syncaudit.columns.lidar import ClockReport, LidarScan
 
     revs = _revolutions(6)
     true_offset = -1_234_567_891

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from mcap_copy import copy_mcap
-from syncaudit.audit import collect
 from syncaudit.audit.inspect import inspect_log
 from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
+from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.unit_readers import group_units
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
 
@@ -41,10 +41,12 @@ def test_info_is_the_same_with_one_process_or_several(
     )
     if log_format == "mcap":  # the simulator writes one chunk: copy into small ones
         out = copy_mcap(out, tmp_path / "log.mcap", chunk_size=50_000)
-    monkeypatch.setattr(collect, "GROUP_BYTES", 200_000)  # several tasks: jobs=2 uses the pool
+    monkeypatch.setattr(
+        parallel_read, "GROUP_BYTES", 200_000
+    )  # several tasks: jobs=2 uses the pool
     with open_log(out) as log:
         units = log.read_units(frozenset(log.topics))
-        assert units is not None and len(group_units(units, collect.GROUP_BYTES)) > 2
+        assert units is not None and len(group_units(units, parallel_read.GROUP_BYTES)) > 2
     serial = inspect_log(out, jobs=1)
     parallel = inspect_log(out, jobs=2)
     assert asdict(parallel) == asdict(serial)

@@ -25,9 +25,10 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from syncaudit.columns.lidar import LidarScan
 from syncaudit.lidar.hesai import decode_hesai, hesai_returns
 from syncaudit.lidar.samples import packet_samples
-from syncaudit.lidar.scan import LidarScan, LidarScanner
+from syncaudit.lidar.scan import LidarScanner
 
 ROUND_NS = 50_000
 BLOCK_START_AFTER_TRIGGER_NS = 5_632

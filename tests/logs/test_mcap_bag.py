@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.audit import collect
 from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
+from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.ros2.mcap_storage import McapBag, open_mcap_bag
 from syncaudit.logs.typesys import TypeRegistry
@@ -78,7 +78,7 @@ def test_bag_folder_audits_like_the_bare_mcap(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     path, truth = bare
-    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)  # several tasks per file
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 300_000)  # several tasks per file
     folder = tmp_path / "bag"
     files = _to_bag(path, folder, parts, reorder=reorder)
     rig = rig_from_truth(truth)
@@ -94,7 +94,7 @@ def test_bag_folder_audits_like_the_bare_mcap(
             assert units is None  # channel ids differ between files: read serially
         else:
             assert units is not None and {u.source for u in units} == {str(f) for f in files}
-            assert len(group_units(units, collect.GROUP_BYTES)) > 1  # jobs=2 uses the pool
+            assert len(group_units(units, parallel_read.GROUP_BYTES)) > 1  # jobs=2 uses the pool
         same = [(m.topic, m.log_time_ns, bytes(m.data)) for m in bag.messages()]
         assert same == [(m.topic, m.log_time_ns, bytes(m.data)) for m in log.messages()]
     with open_log(folder) as opened:  # open_log takes the MCAP path for such folders
@@ -113,7 +113,7 @@ def test_split_bag_with_a_cut_last_file(
     inside a chunk. Every file still gives read units; the parallel read equals the serial
     one and holds every message before the cut."""
     path, truth = bare
-    monkeypatch.setattr(collect, "GROUP_BYTES", 300_000)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 300_000)
     folder = tmp_path / "bag"
     files = _to_bag(path, folder, 3)
     last = files[-1]

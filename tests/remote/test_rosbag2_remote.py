@@ -10,11 +10,11 @@ from typing import Any
 import pytest
 
 from logs.test_mcap_bag import _to_bag
-from syncaudit.audit import collect
 from syncaudit.audit.run import audit_log
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
 from syncaudit.logs import open_log
+from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.mcap import remote as mcap_remote
 from syncaudit.logs.mcap.remote import RemoteUnindexedError
 from syncaudit.logs.ros2.remote import SQLITE_REASON, RemoteMcapBag, file_url
@@ -72,7 +72,7 @@ def test_an_mcap_bag_prefix_is_read_by_ranges_and_audits_as_the_folder(
     folder, rig = split_bag
     _serve(folder, state.root)
     monkeypatch.setattr(mcap_remote, "RANGE_BYTES", 1 << 20)  # several runs per file
-    monkeypatch.setattr(collect, "GROUP_BYTES", 1 << 20)
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 1 << 20)
     url = f"{base}/bags/{folder.name}/?token=t0ken"
     with tracking(url) as tracker:
         remote = audit_log(url, rig, jobs=jobs)

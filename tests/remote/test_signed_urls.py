@@ -10,9 +10,9 @@ from typing import Any
 
 import pytest
 
-from syncaudit.audit import collect
 from syncaudit.audit.run import audit_log
 from syncaudit.logs import open_log
+from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.mcap import remote as mcap_remote
 from syncaudit.logs.ros1 import remote as rosbag1_remote
 from syncaudit.remote.ranges import signed_url, tracking
@@ -44,17 +44,17 @@ def test_workers_read_a_signed_url_that_is_never_shown(
     state.required_query = QUERY  # the server refuses the URL without its signature
     monkeypatch.setattr(mcap_remote, "RANGE_BYTES", 600_000)  # several units, two workers
     monkeypatch.setattr(rosbag1_remote, "RANGE_BYTES", 1 << 20)
-    monkeypatch.setattr(collect, "GROUP_BYTES", 1)  # a task per unit: the parallel path
+    monkeypatch.setattr(parallel_read, "GROUP_BYTES", 1)  # a task per unit: the parallel path
     monkeypatch.setattr(multiprocessing, "get_all_start_methods", lambda: [start_method])
     tasks: list[Any] = []
     submit = ProcessPoolExecutor.submit
 
     def spy(pool: ProcessPoolExecutor, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
-        if args and isinstance(args[0], collect._Task):
+        if args and isinstance(args[0], parallel_read._Task):
             tasks.append(args)  # what travels to the reader workers: (task, units)
         elif args and isinstance(args[0], str):  # a forked worker's token of its task
             assert "s3cr3t" not in args[0]
-            tasks.append((collect._INHERITED_TASKS[args[0]], *args[1:]))
+            tasks.append((parallel_read._INHERITED_TASKS[args[0]], *args[1:]))
         return submit(pool, fn, *args, **kwargs)
 
     monkeypatch.setattr(ProcessPoolExecutor, "submit", spy)

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.analysis.pairing import nearest_index
-from syncaudit.lidar.scan import LidarScan
+from syncaudit.columns.lidar import LidarScan
 
 
 def packet_period_ns(scan: LidarScan) -> float:

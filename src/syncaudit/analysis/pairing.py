@@ -16,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.analysis.stamps import MISSING_NS, delta_ns, present, stamps_ns
-from syncaudit.camera.sequences import SequenceCounter, incomparable
 from syncaudit.columns.distinct import distinct
 from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.columns.sequence_counter import SequenceCounter
 from syncaudit.columns.table import Table
 
 PAIR_TOLERANCE_NS = 50_000_000
@@ -65,6 +65,21 @@ def _trigger_time_ns(triggers: Table, *, at_trigger: bool = False) -> NDArray[np
     if at_trigger and present(sensor).any():
         return sensor
     return start if present(start).any() else sensor
+
+
+def incomparable(frames: SequenceCounter, triggers: SequenceCounter) -> str | None:
+    """Why the two counters cannot pair frames with triggers (None: they count alike).
+
+    Alike: both count one and the same camera's frames, or both are the header.seq of
+    topics the same cameras share (one publisher per topic, publishing every camera's
+    frames in the same order on each).
+    """
+    if frames.cameras == triggers.cameras:  # a field counter counts one camera only
+        return None
+    return (
+        f"the frames' numbers are {frames.describe()}, the triggers' are "
+        f"{triggers.describe()}: they do not count the same messages"
+    )
 
 
 def sequence_problem(

@@ -33,10 +33,10 @@ from syncaudit.analysis.stamps import (
     values_ns,
 )
 from syncaudit.analysis.stats import error_mean, error_variance, rolling_mean, rolling_variance
-from syncaudit.camera.extract import CAMERA_EXPOSURE, CameraTables
+from syncaudit.columns.camera import CAMERA_EXPOSURE, CameraTables
+from syncaudit.columns.frame_table import FRAME_TABLE_DTYPES
+from syncaudit.columns.lidar import ClockReport, LidarScan
 from syncaudit.columns.table import Table, str_column
-from syncaudit.lidar.clock import ClockReport
-from syncaudit.lidar.scan import LidarScan
 from syncaudit.rig import AnalysisConfig, CameraConfig, LidarConfig, Thresholds
 from syncaudit.units import finite_or_none, ns_to_us
 
@@ -379,35 +379,6 @@ def _judgement(paired: int, total: int, thresholds: Thresholds) -> str | None:
         f"only {paired} of {total} frames paired with the LiDAR (a verdict needs at least "
         f"{thresholds.min_paired_frames} and {thresholds.min_paired_fraction:.0%})"
     )
-
-
-FRAME_TABLE_DTYPES: dict[str, str] = {
-    "camera": "string",
-    "frame_sequence": "Int64",
-    "exposure_start_ns": "Int64",
-    "exposure_duration_ns": "Int64",
-    "t_l_ns": "Int64",
-    "t_estimated_ns": "Int64",
-    "error_signed_ns": "float64",
-    "t_error_ns": "float64",
-    "paired": "bool",
-    "revolution": "int64",
-    "revolution_start_ns": "Int64",
-    "header_stamp_ns": "Int64",
-    "t1_ns": "float64",
-    "t2_ns": "float64",
-    "t3_ns": "float64",
-    "t4_ns": "float64",
-    "t5_avg_ns": "float64",
-    "t_rotate_ns": "float64",
-    "packet_phase_ns": "float64",
-    "packet_phase_source": "string",
-    "t_sleep_ns": "float64",
-    "applied_delay_ns": "float64",
-    "rolling_error_mean_ns": "float64",
-    "rolling_error_var_ns2": "float64",
-}
-"""The per-frame table's columns and their DataFrame dtypes (stamps Int64 ns)."""
 
 
 def _frame_table(

@@ -18,16 +18,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from syncaudit.audit.collect import default_jobs
+from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_cameras
 from syncaudit.camera.camera_topics import EXPOSURE_TYPES, TRIGGER_TYPES, detect_cameras
 from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
+from syncaudit.columns.lidar import LidarScan
 from syncaudit.errors import NoDataError, SyncauditError
-from syncaudit.lidar.packet_topics import guess_lidar_topics
-from syncaudit.lidar.scan import LidarScan, scan_lidar
+from syncaudit.lidar.scan import scan_lidar
 from syncaudit.logs import LogReader, open_log
+from syncaudit.logs.parallel import default_jobs
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.units import json_ready
 
@@ -197,6 +198,7 @@ def _inspect(
     log: LogReader, rig: Rig | None, jobs: int
 ) -> tuple[InfoReport, SyncauditError | None]:
     summary = log.summary
+    probe = LogProbe(log)
     duration = summary.duration_s
     report = InfoReport(
         path=summary.path,
@@ -211,7 +213,7 @@ def _inspect(
         report.topics.append(TopicRow(info.name, info.msgtype, info.count, rate))
     if summary.message_count == 0:
         raise NoDataError(f"{summary.path}: the log holds no messages")
-    guess = None if rig else guess_lidar_topics(log)
+    guess = None if rig else probe.lidar_guess()
     lidar_topics = [rig.lidar.topic] if rig else guess.topics if guess else []
     if guess is not None and lidar_topics:
         report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
@@ -221,7 +223,7 @@ def _inspect(
     failure: SyncauditError | None = None
     if rig is not None:
         try:
-            rig, skipped = check_rig_against_log(log, rig)
+            rig, skipped = check_rig_against_log(probe, rig)
             report.warnings.extend(skipped)
         except SyncauditError as exc:
             failure = exc
@@ -258,7 +260,7 @@ def _inspect(
         report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
-    cameras = _cameras(log, rig, report)
+    cameras = _cameras(probe, rig, report)
     try:
         census = shared_topic_census(log, cameras, jobs=jobs)
     except SyncauditError as exc:  # info goes on: the LiDAR decides its exit code
@@ -280,15 +282,15 @@ def _inspect(
     return report, failure
 
 
-def _cameras(log: LogReader, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:
+def _cameras(probe: LogProbe, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:
     """The rig's cameras, else those the audit would guess (by topic types alone where the
     camera topics cannot be read)."""
     if rig and rig.cameras:
         return list(rig.cameras)
     try:
-        cameras, notes = guess_cameras(log)
+        cameras, notes = guess_cameras(probe)
     except SyncauditError as exc:
-        cameras = detect_cameras(log.topics)
+        cameras = detect_cameras(probe.topics)
         notes = ["cameras by topic type and name: " + ", ".join(c.name for c in cameras)]
         report.warnings.append(f"camera topics could not be read to guess the cameras: {exc}")
     report.guessed.extend(notes if cameras else [])

@@ -7,7 +7,7 @@ Two checks run before any message is read:
   (exit 4), since without it there is nothing to audit.
 - vendor: `lidar.vendor` in the rig must be what the packets are. The message type says
   so for Velodyne, Hesai and Ouster types; Nebula packets are decoded from the first
-  scan message. A contradiction is ConfigError (exit 6) naming the key.
+  scan message (`LogProbe.packet_vendor`, read once). A contradiction is ConfigError (exit 6) naming the key.
 
 And one limit: a rig lists at most `MAX_CAMERAS` cameras (ConfigError otherwise). The
 audit is linear in cameras, but each costs ~10-20 ms of table building and analysis
@@ -19,8 +19,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from syncaudit.audit.probe import LogProbe, probe_of
 from syncaudit.errors import ConfigError, UnknownTypeError
-from syncaudit.lidar.stream import SCAN_TYPES, decode_scan
 from syncaudit.logs import LogReader
 from syncaudit.rig import Rig
 
@@ -31,7 +31,7 @@ MAX_CAMERAS = 256
 """Cameras one rig may list (real rigs: up to a few dozen)."""
 
 
-def unreadable_encoding(log: LogReader, topic: str) -> str | None:
+def unreadable_encoding(log: LogReader | LogProbe, topic: str) -> str | None:
     """Why `topic` cannot be read for its encoding, or None where it can (or is absent)."""
     info = log.topics.get(topic)
     if info is None or info.encoding in READABLE_ENCODINGS:
@@ -40,38 +40,26 @@ def unreadable_encoding(log: LogReader, topic: str) -> str | None:
     return f"{topic}: message encoding {encoding} is not ROS (cdr/ros1); syncaudit cannot read it"
 
 
-def packet_vendor(log: LogReader, topic: str) -> str | None:
-    """The vendor the packets on `topic` are: by message type, or by the first Nebula scan."""
-    info = log.topics.get(topic)
-    family = SCAN_TYPES.get(info.msgtype) if info else None
-    if family != "nebula":
-        return family
-    for msg in log.messages([topic]):
-        chunk = decode_scan(family, msg, 0)
-        if chunk is not None:
-            return chunk.timing.vendor
-    return None
-
-
-def check_rig_against_log(log: LogReader, rig: Rig) -> tuple[Rig, list[str]]:
+def check_rig_against_log(log: LogReader | LogProbe, rig: Rig) -> tuple[Rig, list[str]]:
     """The rig with the camera topics the log cannot be read for removed, and warnings.
 
     Raises UnknownTypeError where the LiDAR topic's encoding is unreadable and
     ConfigError where `lidar.vendor` contradicts the packets or the rig lists more than
     `MAX_CAMERAS` cameras.
     """
+    probe = probe_of(log)
     if len(rig.cameras) > MAX_CAMERAS:
         raise ConfigError(
             f"cameras: the rig lists {len(rig.cameras)} cameras; syncaudit audits at most "
             f"{MAX_CAMERAS} per rig (each costs ~10-20 ms of analysis); split the rig"
         )
-    lidar_problem = unreadable_encoding(log, rig.lidar.topic)
+    lidar_problem = unreadable_encoding(probe, rig.lidar.topic)
     if lidar_problem is not None:
         raise UnknownTypeError(f"LiDAR topic {lidar_problem}")
     if rig.lidar.vendor is not None:
-        found = packet_vendor(log, rig.lidar.topic)
+        found = probe.packet_vendor(rig.lidar.topic)
         if found is not None and found != rig.lidar.vendor:
-            msgtype = log.topics[rig.lidar.topic].msgtype
+            msgtype = probe.topics[rig.lidar.topic].msgtype
             raise ConfigError(
                 f"lidar.vendor: the rig says {rig.lidar.vendor!r} but {rig.lidar.topic} "
                 f"carries {found} packets ({msgtype}); fix or remove the key"
@@ -82,7 +70,7 @@ def check_rig_against_log(log: LogReader, rig: Rig) -> tuple[Rig, list[str]]:
         update: dict[str, Any] = {}
         for name in CAMERA_TOPIC_FIELDS:
             topic = getattr(cam, name)
-            problem = unreadable_encoding(log, topic) if topic else None
+            problem = unreadable_encoding(probe, topic) if topic else None
             if problem is not None:
                 update[name] = None
                 warnings.append(f"camera {cam.name}: {problem}; topic skipped")

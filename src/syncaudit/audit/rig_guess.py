@@ -13,52 +13,47 @@ import json
 import math
 from pathlib import Path
 
-from syncaudit.audit.collect import lidar_family
-from syncaudit.camera.azimuth import (
-    X_AXIS_AZIMUTH_DEG,
-    camera_azimuth,
-    needs_tf_static,
-    tf_static_yaws,
-)
-from syncaudit.camera.camera_topics import detect_cameras, probe_camera_topics, topic_role
+from syncaudit.audit.probe import LogProbe, probe_of
+from syncaudit.camera.azimuth import X_AXIS_AZIMUTH_DEG, camera_azimuth, needs_tf_static
+from syncaudit.camera.camera_topics import detect_cameras
 from syncaudit.errors import NoDataError
-from syncaudit.lidar.packet_topics import guess_lidar_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 
 __all__ = ["guess_cameras", "guess_rig", "render_starter_rig", "starter_rig_yaml"]
 
 
-def guess_rig(log: LogReader) -> tuple[Rig, list[str]]:
+def guess_rig(log: LogReader | LogProbe) -> tuple[Rig, list[str]]:
     """A rig from the log alone, and what was guessed (raises NoDataError without LiDAR)."""
+    probe = probe_of(log)
     # The guess `info` shares: IMU packet topics of the same type are set aside.
-    lidar_guess = guess_lidar_topics(log)
+    lidar_guess = probe.lidar_guess()
     packet_topics = lidar_guess.topics
     if not packet_topics:
         raise NoDataError(
-            f"{log.summary.path}: no LiDAR packet topic (known packet types) in the log"
+            f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) in the log"
         )
-    cameras, camera_notes = guess_cameras(log)
+    cameras, camera_notes = guess_cameras(probe)
     guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes, *camera_notes]
     return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
 
 
-def guess_cameras(log: LogReader) -> tuple[list[CameraConfig], list[str]]:
+def guess_cameras(log: LogReader | LogProbe) -> tuple[list[CameraConfig], list[str]]:
     """The cameras of a log without a rig, and what was guessed (`audit` and `info` share it).
 
     Topic types and names give the cameras; the first second of each camera topic gives
     `camera` fields and frame ids, and an image topic of several frame ids is one camera
     per frame id.
     """
-    camera_topics = [t for t, info in log.topics.items() if topic_role(info.msgtype)]
-    probe = probe_camera_topics(log, camera_topics)
-    cameras = detect_cameras(log.topics, probe.camera_fields, probe.frame_ids, probe.shared)
+    probe = probe_of(log)
+    seen = probe.camera_topics()
+    cameras = detect_cameras(probe.topics, seen.camera_fields, seen.frame_ids, seen.shared)
     guessed = []
     if cameras:
         guessed.append(
             "cameras " + ", ".join(c.name for c in cameras) + " (by topic type and name)"
         )
-    for topic, names in sorted(probe.shared.items()):
+    for topic, names in sorted(seen.shared.items()):
         guessed.append(f"{topic} shared by {len(names)} cameras ({', '.join(names)})")
     return cameras, guessed
 
@@ -99,15 +94,16 @@ def _camera_lines(
     return lines
 
 
-def render_starter_rig(log: LogReader) -> str:
+def render_starter_rig(log: LogReader | LogProbe) -> str:
     """The starter rig of an open log as commented YAML (loads as a valid rig)."""
-    rig, _ = guess_rig(log)
+    probe = probe_of(log)
+    rig, _ = guess_rig(probe)
     lidar = rig.lidar
-    vendor = lidar_family(log.topics[lidar.topic].msgtype)
-    tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
+    vendor = probe.family(lidar.topic)
+    tf_yaws = probe.tf_yaws() if any(needs_tf_static(c) for c in rig.cameras) else {}
     x_axis = X_AXIS_AZIMUTH_DEG.get(vendor or "")
     lines = [
-        f"# Starter rig for {log.summary.path}, written by `syncaudit rig`.",
+        f"# Starter rig for {probe.log.summary.path}, written by `syncaudit rig`.",
         "# Every value below was guessed from the log; check each TODO, then run",
         "#   syncaudit audit LOG --rig THIS_FILE",
         "lidar:",

@@ -1,4 +1,10 @@
-"""`audit_log`: the whole synchronisation audit of one log (part A of the method)."""
+"""`audit_log`: the whole synchronisation audit of one log (part A of the method).
+
+The steps, each its own function: probe the log (`audit.probe`: types, first messages,
+`/tf_static`, Ouster metadata, each read once for every step), guess or check the rig,
+place the cameras, read the log once (`audit.plan` through `logs.parallel`), find the
+host-LiDAR clock offset, analyse each camera and replay its controller, assemble the result.
+"""
 
 from __future__ import annotations
 
@@ -9,30 +15,31 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from syncaudit.audit.collect import ExtractPlan, default_jobs, iter_items, lidar_family
 from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
+from syncaudit.audit.plan import read_plan
+from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_rig
-from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static, tf_static_yaws
-from syncaudit.camera.extract import CameraTableBuilder
-from syncaudit.camera.routing import CameraRouter
-from syncaudit.columns.lidar import RevolutionColumns
+from syncaudit.camera.azimuth import camera_azimuth, needs_tf_static
+from syncaudit.columns.audit_result import SCHEMA_VERSION
+from syncaudit.columns.camera import CameraTables
+from syncaudit.columns.lidar import LidarScan, RevolutionColumns
 from syncaudit.columns.table import MISSING
 from syncaudit.errors import NoDataError
-from syncaudit.lidar.scan import LidarScan, LidarScanner
-from syncaudit.lidar.stream import find_ouster_metadata_topic, read_ouster_metadata
+from syncaudit.lidar.scan import LidarScanner
 from syncaudit.logs import LogReader, open_log
+from syncaudit.logs.parallel import default_jobs, iter_items
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from syncaudit.analysis.controller import ControllerConfig
     from syncaudit.analysis.replay import ReplayResult
     from syncaudit.analysis.sync import CameraSync
-    from syncaudit.camera.extract import CameraTables
 
-SCHEMA_VERSION = 1
+__all__ = ["SCHEMA_VERSION", "AuditResult", "CameraAudit", "audit_log"]
 MIN_ZERO_CROSSINGS = 2
 """A LiDAR is judged only with a whole revolution: two zero crossings."""
 
@@ -178,45 +185,19 @@ def audit_log(
     with open_log(path) as log:
         if log.summary.message_count == 0:
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
-        guessed: list[str] = []
-        if rig is None:
-            rig, guessed = guess_rig(log)
-        elif rig.lidar.topic not in log.topics:
-            raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
+        probe = LogProbe(log)
+        rig, guessed = _rig_for(probe, rig)
         jobs = default_jobs() if jobs is None else max(1, jobs)
-        return _audit(log, rig, guessed, jobs, check_crc, meanwhile)
+        return _audit(probe, rig, guessed, jobs, check_crc, meanwhile)
 
 
-def _plan(
-    log: LogReader, rig: Rig, cameras: list[CameraConfig], check_crc: bool = False
-) -> tuple[ExtractPlan, CameraRouter]:
-    """What to read, and where each camera topic's rows go (topics may be shared)."""
-    lidar = rig.lidar
-    family = lidar_family(log.topics[lidar.topic].msgtype)
-    if family is None:
-        raise NoDataError(
-            f"{lidar.topic}: {log.topics[lidar.topic].msgtype} is not a LiDAR packet type"
-        )
-    meta = None
-    if family == "ouster":
-        meta_topic = lidar.metadata_topic or find_ouster_metadata_topic(log, lidar.topic)
-        if meta_topic is None:
-            raise NoDataError(f"{lidar.topic}: Ouster packets need the sensor metadata topic")
-        meta = read_ouster_metadata(log, meta_topic)
-    router = CameraRouter.for_cameras(cameras, log.topics)
-    images = {t: _owner(o) for t, o in router.topics("image").items()}
-    exposures: dict[str, tuple[str, str]] = {
-        t: (_owner(o), o[0].camera.stamp) for t, o in router.topics("exposure").items()
-    }
-    triggers = {t: _owner(o) for t, o in router.topics("trigger").items()}
-    plan = ExtractPlan(lidar.topic, family, meta, check_crc, images, exposures, triggers)
-    return plan, router
-
-
-def _owner(owners: list[CameraTableBuilder]) -> str:
-    """The camera the plan names for a topic's rows: "" for a shared topic, whose rows the
-    router gives to the camera each message names."""
-    return owners[0].camera.name if len(owners) == 1 else ""
+def _rig_for(probe: LogProbe, rig: Rig | None) -> tuple[Rig, list[str]]:
+    """The rig to audit with (given, else guessed from the log) and what was guessed."""
+    if rig is None:
+        return guess_rig(probe)
+    if rig.lidar.topic not in probe.topics:
+        raise NoDataError(f"LiDAR topic {rig.lidar.topic} (from the rig) is not in the log")
+    return rig, []
 
 
 def _import_analysis() -> None:
@@ -242,11 +223,11 @@ Located = tuple[CameraConfig, float, str]
 """A camera the audit can place: its config, centre azimuth and where that came from."""
 
 
-def _locate_cameras(log: LogReader, rig: Rig, warnings: list[str]) -> list[Located]:
+def _locate_cameras(probe: LogProbe, rig: Rig, warnings: list[str]) -> list[Located]:
     """Cameras with a known centre azimuth (rig, or /tf_static with the vendor's +X)."""
     # /tf_static is read (and its types built) only for cameras the rig gives no angle.
-    tf_yaws = tf_static_yaws(log) if any(needs_tf_static(c) for c in rig.cameras) else {}
-    vendor = lidar_family(log.topics[rig.lidar.topic].msgtype)
+    tf_yaws = probe.tf_yaws() if any(needs_tf_static(c) for c in rig.cameras) else {}
+    vendor = probe.family(rig.lidar.topic)
     located: list[Located] = []
     for cam in rig.cameras:
         azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws, vendor)
@@ -258,7 +239,7 @@ def _locate_cameras(log: LogReader, rig: Rig, warnings: list[str]) -> list[Locat
 
 
 def _read(
-    log: LogReader,
+    probe: LogProbe,
     rig: Rig,
     located: list[Located],
     *,
@@ -279,8 +260,9 @@ def _read(
         target_azimuth_deg=tuple(a for _, a, _ in located),
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
-    plan, router = _plan(log, rig, [c for c, _, _ in located], check_crc)
-    for kind, topic, payload in iter_items(log, plan, jobs, meanwhile=_meanwhile(meanwhile)):
+    plan, router = read_plan(probe, rig, [c for c, _, _ in located])
+    items = iter_items(probe.log, plan, jobs, check_crc=check_crc, meanwhile=_meanwhile(meanwhile))
+    for kind, topic, payload in items:
         if kind == "lidar":
             scanner.feed(payload)
         else:
@@ -334,41 +316,83 @@ def _missing(log: LogReader, cam: CameraConfig, tables: CameraTables) -> list[st
 
 
 def _audit(
-    log: LogReader,
+    probe: LogProbe,
     rig: Rig,
     guessed: list[str],
     jobs: int,
     check_crc: bool,
     meanwhile: Callable[[], object] | None = None,
 ) -> AuditResult:
-    """Locate the cameras, read the log once, find the clock offset, analyse each camera."""
-    # Camera topics in encodings that cannot be read are dropped (warned); see rig_vs_log.
-    rig, warnings = check_rig_against_log(log, rig)
-    missing: list[str] = []
-    located = _locate_cameras(log, rig, warnings)
+    """Check the rig, place the cameras, read the log once, then judge what was read."""
+    # Camera topics in encodings that cannot be read are dropped (warned); see rig_check.
+    rig, warnings = check_rig_against_log(probe, rig)
+    located = _locate_cameras(probe, rig, warnings)
     scan, all_tables = _read(
-        log, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings, meanwhile=meanwhile
+        probe, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings, meanwhile=meanwhile
     )
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     warnings.extend(scan.warnings)
-    # Imported only now: `_read` has them imported while workers read.
-    from syncaudit.analysis.controller import ControllerConfig
-    from syncaudit.analysis.replay import replay_controller
-    from syncaudit.analysis.sync import analyze_camera
+    missing = _missing_inputs(rig, scan)
+    offset = _clock_offset(scan, all_tables, warnings)
+    cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
+    warnings.extend(lidar_warnings(lidar_row(scan)))
+    warnings.extend(w.message for w in probe.log.warnings)
+    return AuditResult(
+        path=probe.log.summary.path,
+        container=probe.log.summary.container,
+        duration_s=probe.log.summary.duration_s,
+        rig=rig,
+        lidar=lidar_row(scan),
+        clock_offset_ns=offset,
+        cameras=cameras,
+        missing=missing,
+        guessed=guessed,
+        warnings=warnings,
+        start_ns=probe.log.summary.start_ns,
+        revolutions=scan.revolutions,
+    )
 
+
+def _missing_inputs(rig: Rig, scan: LidarScan) -> list[str]:
+    """What the whole rig lacks: any camera topic, a complete LiDAR revolution."""
+    missing: list[str] = []
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     if scan.revolutions.count < MIN_ZERO_CROSSINGS:
         missing.append(f"LiDAR topic {rig.lidar.topic}: {_no_revolution(lidar_row(scan))}")
-    offset = _clock_offset(scan, all_tables, warnings)
-    controller = ControllerConfig(
+    return missing
+
+
+def _controller_config(rig: Rig) -> ControllerConfig:
+    """The delay controller the rig runs, for replaying it over each camera's frames."""
+    from syncaudit.analysis.controller import ControllerConfig
+
+    return ControllerConfig(
         window_frames=rig.analysis.window_frames,
         mean_error_threshold_ns=round(rig.thresholds.error_mean_us * 1e3),
         variance_threshold_ns2=rig.thresholds.error_var_us2 * 1e6,
         mode=rig.analysis.correction,
         min_frames=rig.analysis.window_frames,
     )
-    result_cams: list[CameraAudit] = []
+
+
+def _analyse_cameras(
+    log: LogReader,
+    rig: Rig,
+    scan: LidarScan,
+    located: list[Located],
+    all_tables: list[CameraTables],
+    offset_ns: int,
+    missing: list[str],
+) -> list[CameraAudit]:
+    """Each placed camera's synchronisation and its replayed controller; what each camera's
+    log lacks is added to `missing`."""
+    # Imported only now: `_read` has them imported while workers read.
+    from syncaudit.analysis.replay import replay_controller
+    from syncaudit.analysis.sync import analyze_camera
+
+    controller = _controller_config(rig)
+    audits: list[CameraAudit] = []
     for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
         missing.extend(_missing(log, cam, tables))
         sync = analyze_camera(
@@ -377,27 +401,10 @@ def _audit(
             camera=cam,
             target_index=index,
             camera_azimuth_deg=azimuth,
-            offset_ns=offset,
+            offset_ns=offset_ns,
             lidar=rig.lidar,
             analysis=rig.analysis,
             thresholds=rig.thresholds,
         )
-        result_cams.append(
-            CameraAudit(sync, azimuth, source, replay_controller(sync.table, controller))
-        )
-    warnings.extend(lidar_warnings(lidar_row(scan)))
-    warnings.extend(w.message for w in log.warnings)
-    return AuditResult(
-        path=log.summary.path,
-        container=log.summary.container,
-        duration_s=log.summary.duration_s,
-        rig=rig,
-        lidar=lidar_row(scan),
-        clock_offset_ns=offset,
-        cameras=result_cams,
-        missing=missing,
-        guessed=guessed,
-        warnings=warnings,
-        start_ns=log.summary.start_ns,
-        revolutions=scan.revolutions,
-    )
+        audits.append(CameraAudit(sync, azimuth, source, replay_controller(sync.table, controller)))
+    return audits

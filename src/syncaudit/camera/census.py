@@ -2,18 +2,20 @@
 
 `info` shows a topic shared by several cameras (one driver node for a multi-camera board)
 as those cameras, with the messages each gets. The count runs the audit's own reading
-(`collect.iter_items`) and routing (`camera.routing.CameraRouter`) over the shared topics
-only, so `info` and `audit` cannot disagree on which camera a message belongs to.
+(`logs.parallel.iter_items` with the camera rows of `camera.frame_rows`) and routing
+(`camera.routing.CameraRouter`) over the shared topics only, so `info` and `audit`
+cannot disagree on which camera a message belongs to.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from syncaudit.audit.collect import ExtractPlan, iter_items
+from syncaudit.camera.frame_rows import CameraRowExtractor
 from syncaudit.camera.routing import CameraRouter, SharedTopicCount
 from syncaudit.errors import LogReadError
 from syncaudit.logs import LogReader
+from syncaudit.logs.parallel import iter_items
 from syncaudit.rig import CameraConfig
 
 __all__ = ["SharedCensus", "shared_topic_census"]
@@ -32,7 +34,7 @@ def shared_topic_census(
 ) -> SharedCensus:
     """Count, per topic several of `cameras` read, the messages each camera gets.
 
-    Reads only those topics, as the audit reads them (`collect.iter_items`: `jobs` worker
+    Reads only those topics, as the audit reads them (`logs.parallel.iter_items`: `jobs` worker
     processes where the log allows; of an image, only its header's first bytes).
     A topic whose every message is damaged is reported as a warning, as far as counted.
     """
@@ -41,14 +43,12 @@ def shared_topic_census(
     if not shared:
         return SharedCensus([], [])
     # A shared topic's owner is "": the router gives each row to the camera it names.
-    plan = ExtractPlan(
-        lidar_topic="",
-        lidar_family="",
+    rows = CameraRowExtractor(
         images={t: "" for k, t in shared if k == "image"},
         exposures={t: ("", _stamp(router, t)) for k, t in shared if k == "exposure"},
         triggers={t: "" for k, t in shared if k == "trigger"},
     )
-    for kind, topic, payload in iter_items(log, plan, jobs):
+    for kind, topic, payload in iter_items(log, rows, jobs):
         router.feed(kind, topic, payload)
     try:
         warnings = router.finish()

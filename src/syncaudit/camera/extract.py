@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from syncaudit.camera.rowstore import DamagedRow, Row, RowStore
 from syncaudit.camera.sequences import SequenceCounter, field_counter, header_seq_counter
-from syncaudit.columns.camera import FRAME_COLUMNS, TRIGGER_COLUMNS
+from syncaudit.columns.camera import CAMERA_EXPOSURE, FRAME_COLUMNS, TRIGGER_COLUMNS, CameraTables
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage
 from syncaudit.rig import CameraConfig
@@ -245,35 +245,6 @@ def _trigger_row(msg: RawMessage, m: Any, camera: str) -> tuple[Any, ...]:
         msg.msgtype,
         frame_id,
     )
-
-
-@dataclass(frozen=True, slots=True)
-class CameraTables:
-    """Everything one camera's topics say, as tables."""
-
-    name: str
-    images: Table
-    """header_stamp_ns, log_time_ns, frame_sequence (ROS 1 seq), frame_id of every image."""
-    frames: Table
-    """FRAME_COLUMNS: one row per exposure record (or per image where there are none), in
-    log-time order."""
-    triggers: Table
-    """TRIGGER_COLUMNS, in the order the log gave them."""
-    exposure_source: str | None
-    trigger_source: str | None
-    warnings: tuple[str, ...] = ()
-    """Damaged messages skipped, one line per topic."""
-    shared_topic_notes: tuple[str, ...] = ()
-    """Why messages of a topic this camera shares with others could not be given to it
-    (nothing in them tells the cameras apart): the reason it is not judged, if it is not."""
-    frame_counter: SequenceCounter | None = None
-    """What the frames' `frame_sequence` numbers count (None: unknown, as one camera's)."""
-    trigger_counter: SequenceCounter | None = None
-    """What the triggers' `frame_sequence` numbers count."""
-
-
-CAMERA_EXPOSURE = "syncaudit_msgs/msg/CameraExposure"
-"""The one exposure type stating its exposure start; the others' follow the rig's `stamp`."""
 
 
 @dataclass(slots=True)

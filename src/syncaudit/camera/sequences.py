@@ -16,39 +16,16 @@ Frames pair with triggers by number only where both numbers count the same thing
 this camera's frames, or both the header.seq of topics shared by the very same cameras
 (one driver publishing each frame on each topic in turn; the time check of
 `analysis.pairing.sequence_problem` still has the last word). Otherwise frames pair by time.
+
+The counters are `columns.sequence_counter.SequenceCounter`s (what the analysis reads); whether
+two of them can pair is `analysis.pairing.incomparable`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from syncaudit.columns.sequence_counter import SequenceCounter
 
-__all__ = ["SequenceCounter", "field_counter", "header_seq_counter", "incomparable"]
-
-
-@dataclass(frozen=True, slots=True)
-class SequenceCounter:
-    """What the `frame_sequence` numbers of one frame or trigger table count."""
-
-    label: str
-    """Where the numbers come from, for messages: `TriggerEvent.frame_sequence`,
-    `header.seq of /cameras/meta`."""
-    cameras: tuple[str, ...]
-    """The cameras whose messages the counter counts (sorted; one for a camera's own)."""
-    topic: str | None = None
-    """The topic whose header.seq it is (None: a message field)."""
-
-    @property
-    def shared(self) -> bool:
-        """Whether it counts the messages of several cameras."""
-        return len(self.cameras) > 1
-
-    def describe(self) -> str:
-        """The counter in words: `header.seq of /cameras/meta (shared by a, b, c: it counts
-        all their messages)`."""
-        if not self.shared:
-            return self.label
-        names = ", ".join(self.cameras)
-        return f"{self.label} (shared by cameras {names}: it counts all their messages)"
+__all__ = ["SequenceCounter", "field_counter", "header_seq_counter"]
 
 
 def field_counter(msgtype: str, camera: str) -> SequenceCounter:
@@ -60,18 +37,3 @@ def header_seq_counter(topic: str | None, cameras: tuple[str, ...]) -> SequenceC
     """ROS 1 header.seq of `topic`, which `cameras` read (sorted)."""
     where = f"header.seq of {topic}" if topic else "header.seq"
     return SequenceCounter(where, tuple(sorted(cameras)), topic)
-
-
-def incomparable(frames: SequenceCounter, triggers: SequenceCounter) -> str | None:
-    """Why the two counters cannot pair frames with triggers (None: they count alike).
-
-    Alike: both count one and the same camera's frames, or both are the header.seq of
-    topics the same cameras share (one publisher per topic, publishing every camera's
-    frames in the same order on each).
-    """
-    if frames.cameras == triggers.cameras:  # a field counter counts one camera only
-        return None
-    return (
-        f"the frames' numbers are {frames.describe()}, the triggers' are "
-        f"{triggers.describe()}: they do not count the same messages"
-    )

@@ -1,4 +1,5 @@
-"""LiDAR columns: per packet (from the decoders) and per revolution (from the tracker)."""
+"""LiDAR columns: per revolution (from the tracker), the clock report, and a topic's whole
+reduced timing (`LidarScan`), as `lidar.scan` makes them and the analysis reads them."""
 
 from __future__ import annotations
 
@@ -33,3 +34,92 @@ class RevolutionColumns:
     def count(self) -> int:
         """Number of revolutions."""
         return int(self.zero_crossing_sensor_ns.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class ClockReport:
+    """What the driver-minus-sensor differences say about the two clocks and t1."""
+
+    packets: int
+    raw_min_ns: int
+    raw_median_ns: int
+    raw_max_ns: int
+    raw_mean_ns: float
+    synchronised: bool
+    offset_ns: int
+    """Host minus sensor clock: 0 when synchronised, else the minimum-filter estimate."""
+    t1_mean_ns: float
+    """Mean t1 after removing `offset_ns`; with an estimated offset this is the spread."""
+    t1_p50_ns: float
+    t1_p99_ns: float
+    t1_std_ns: float
+
+
+@dataclass(frozen=True, slots=True)
+class LidarScan:
+    """The reduced timing of one LiDAR topic."""
+
+    topic: str
+    vendor: str
+    model: str
+    scans: int
+    packets: int
+    return_modes: tuple[int, ...]
+    dual_return: bool
+    revolutions: RevolutionColumns
+    clock: ClockReport | None
+    omega_blocks_deg_s: float
+    """Angular velocity from block to block, for logs shorter than two revolutions."""
+    cropped_sector: tuple[float, float, int] | None
+    """(angle where recording stops, packets missing per turn, revolutions) of a FOV crop."""
+    outlier_blocks: int
+    declared_rpm: float = float("nan")
+    """Mean rotation rate the packets themselves declare (Hesai tail motor speed, Ouster
+    lidar_mode), RPM; NaN where the vendor's packets carry none (Velodyne)."""
+
+    @property
+    def rpm_disagreement(self) -> float:
+        """(measured - declared) / declared rotation rate; NaN when either is unknown."""
+        if not (self.declared_rpm > 0) or not np.isfinite(self.rpm):
+            return float("nan")
+        return (self.rpm - self.declared_rpm) / self.declared_rpm
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the topic's own packets say is wrong with the decoded timing."""
+        off = self.rpm_disagreement
+        if not abs(off) > RPM_TOLERANCE:
+            return []
+        source = _DECLARED_BY.get(self.vendor, "the packets")
+        return [
+            f"{self.topic}: decoded rotation {self.rpm:.2f} RPM disagrees with the "
+            f"{self.declared_rpm:.0f} RPM of {source} ({off:+.1%}): revolutions, "
+            "packets/rev and drops are suspect (wrong return-mode grouping or packet clock?)"
+        ]
+
+    @property
+    def rpm(self) -> float:
+        """Median measured rotation rate (revolutions per minute)."""
+        omega = self.revolutions.omega_deg_s
+        omega = omega[np.isfinite(omega)]
+        return float(np.median(omega) / 6.0) if omega.size else self.omega_blocks_deg_s / 6.0
+
+    @property
+    def packets_per_revolution(self) -> float:
+        """Median packets in a complete revolution (first and last are partial)."""
+        counts = self.revolutions.packets[1:-1]
+        return float(np.median(counts)) if counts.size else float("nan")
+
+    @property
+    def dropped_packets(self) -> int:
+        """Packets missing from gaps in the packet cadence."""
+        return int(self.revolutions.dropped_packets.sum())
+
+
+RPM_TOLERANCE = 0.03
+"""Relative disagreement between the decoded and the declared rotation rate that warns:
+motor-speed fields hold whole RPM and the motor hunts by well under 1 %, while a wrong
+block grouping or packet clock is off by tens of percent."""
+
+_DECLARED_BY = {"hesai": "the packets' motor-speed field", "ouster": "the metadata's lidar_mode"}
+"""Where each vendor's declared rotation rate comes from, for the warning."""

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from syncaudit import __version__
-from syncaudit.audit.collect import default_jobs
 from syncaudit.errors import GateFailedError, LogReadError, OutputError, SyncauditError
 from syncaudit.fleet.checks import evaluate, verdict
 from syncaudit.fleet.database import ResultsDB
@@ -27,6 +26,7 @@ from syncaudit.fleet.log_pages import render_error_page, report_file_name, repor
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.fleet.remote_job import run_any_log_job
+from syncaudit.logs.parallel import default_jobs
 from syncaudit.remote.fetch import is_url, public_url
 
 DB_BATCH_LOGS = 32

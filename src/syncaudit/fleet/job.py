@@ -104,7 +104,7 @@ def wants_calibration(options: JobOptions, job: LogJob) -> bool:
 
 
 def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
-    from syncaudit.audit.collect import lidar_family
+    from syncaudit.audit.probe import lidar_family
     from syncaudit.audit.run import audit_log
     from syncaudit.logs import open_log
     from syncaudit.rig import load_rig

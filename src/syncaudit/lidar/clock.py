@@ -13,29 +13,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from syncaudit.columns.lidar import ClockReport
+
 SAMPLE_CAP = 131_072
 """Differences kept for quantiles; beyond it the sample is decimated, so memory is flat."""
 SYNC_FLOOR_NS = -1_000_000
 """A driver stamp more than 1 ms before the sensor time means the clocks disagree."""
-
-
-@dataclass(frozen=True, slots=True)
-class ClockReport:
-    """What the driver-minus-sensor differences say about the two clocks and t1."""
-
-    packets: int
-    raw_min_ns: int
-    raw_median_ns: int
-    raw_max_ns: int
-    raw_mean_ns: float
-    synchronised: bool
-    offset_ns: int
-    """Host minus sensor clock: 0 when synchronised, else the minimum-filter estimate."""
-    t1_mean_ns: float
-    """Mean t1 after removing `offset_ns`; with an estimated offset this is the spread."""
-    t1_p50_ns: float
-    t1_p99_ns: float
-    t1_std_ns: float
 
 
 @dataclass(slots=True)

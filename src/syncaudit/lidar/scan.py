@@ -1,87 +1,25 @@
-"""One pass over a LiDAR topic: revolutions, cadence, clock — everything timing needs."""
+"""One pass over a LiDAR topic: revolutions, cadence, clock — everything timing needs.
+
+The packets are read by `logs.parallel` (worker processes where the log allows), each
+message reduced there to two timing samples per packet (`packet_samples_of`); the
+`LidarScanner` then folds them, in log order, into a `columns.lidar.LidarScan`.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from syncaudit.columns.lidar import RevolutionColumns
-from syncaudit.lidar.clock import ClockEstimator, ClockReport
+from syncaudit.columns.lidar import LidarScan
+from syncaudit.lidar import ouster
+from syncaudit.lidar.clock import ClockEstimator
 from syncaudit.lidar.revolutions import RevolutionTracker
-from syncaudit.lidar.samples import PacketSamples, concat_samples
-from syncaudit.lidar.stream import packet_family
-from syncaudit.logs import LogReader
+from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
+from syncaudit.lidar.stream import decode_ouster_message, decode_scan, packet_family
+from syncaudit.logs import LogReader, RawMessage
+from syncaudit.logs.parallel import iter_items
 
+__all__ = ["LidarScan", "LidarScanner", "PacketExtractor", "packet_samples_of", "scan_lidar"]
 
-@dataclass(frozen=True, slots=True)
-class LidarScan:
-    """The reduced timing of one LiDAR topic."""
-
-    topic: str
-    vendor: str
-    model: str
-    scans: int
-    packets: int
-    return_modes: tuple[int, ...]
-    dual_return: bool
-    revolutions: RevolutionColumns
-    clock: ClockReport | None
-    omega_blocks_deg_s: float
-    """Angular velocity from block to block, for logs shorter than two revolutions."""
-    cropped_sector: tuple[float, float, int] | None
-    """(angle where recording stops, packets missing per turn, revolutions) of a FOV crop."""
-    outlier_blocks: int
-    declared_rpm: float = float("nan")
-    """Mean rotation rate the packets themselves declare (Hesai tail motor speed, Ouster
-    lidar_mode), RPM; NaN where the vendor's packets carry none (Velodyne)."""
-
-    @property
-    def rpm_disagreement(self) -> float:
-        """(measured - declared) / declared rotation rate; NaN when either is unknown."""
-        if not (self.declared_rpm > 0) or not np.isfinite(self.rpm):
-            return float("nan")
-        return (self.rpm - self.declared_rpm) / self.declared_rpm
-
-    @property
-    def warnings(self) -> list[str]:
-        """What the topic's own packets say is wrong with the decoded timing."""
-        off = self.rpm_disagreement
-        if not abs(off) > RPM_TOLERANCE:
-            return []
-        source = _DECLARED_BY.get(self.vendor, "the packets")
-        return [
-            f"{self.topic}: decoded rotation {self.rpm:.2f} RPM disagrees with the "
-            f"{self.declared_rpm:.0f} RPM of {source} ({off:+.1%}): revolutions, "
-            "packets/rev and drops are suspect (wrong return-mode grouping or packet clock?)"
-        ]
-
-    @property
-    def rpm(self) -> float:
-        """Median measured rotation rate (revolutions per minute)."""
-        omega = self.revolutions.omega_deg_s
-        omega = omega[np.isfinite(omega)]
-        return float(np.median(omega) / 6.0) if omega.size else self.omega_blocks_deg_s / 6.0
-
-    @property
-    def packets_per_revolution(self) -> float:
-        """Median packets in a complete revolution (first and last are partial)."""
-        counts = self.revolutions.packets[1:-1]
-        return float(np.median(counts)) if counts.size else float("nan")
-
-    @property
-    def dropped_packets(self) -> int:
-        """Packets missing from gaps in the packet cadence."""
-        return int(self.revolutions.dropped_packets.sum())
-
-
-RPM_TOLERANCE = 0.03
-"""Relative disagreement between the decoded and the declared rotation rate that warns:
-motor-speed fields hold whole RPM and the motor hunts by well under 1 %, while a wrong
-block grouping or packet clock is off by tens of percent."""
-
-_DECLARED_BY = {"hesai": "the packets' motor-speed field", "ouster": "the metadata's lidar_mode"}
-"""Where each vendor's declared rotation rate comes from, for the warning."""
 
 FEED_PACKETS = 4096
 """Packets gathered before the tracker and clock run: their numpy work per call is then
@@ -169,6 +107,48 @@ class LidarScanner:
         )
 
 
+def packet_samples_of(
+    msg: RawMessage, family: str, ouster_meta: ouster.OusterMetadata | None
+) -> PacketSamples | None:
+    """The timing samples of one packet message of `family` (None: no packet in it, e.g.
+    an IMU-sized Ouster message); Ouster needs the sensor metadata."""
+    if family == "ouster":
+        assert ouster_meta is not None
+        chunk = decode_ouster_message(msg, ouster_meta)
+    else:
+        chunk = decode_scan(family, msg, 0)
+    if chunk is None:
+        return None
+    return packet_samples(chunk.timing, chunk.driver_stamp_ns)
+
+
+@dataclass(frozen=True, slots=True)
+class PacketExtractor:
+    """What `logs.parallel` makes of one LiDAR topic's messages: their packets' timing
+    samples (picklable for worker processes)."""
+
+    topic: str
+    family: str
+    ouster_meta: ouster.OusterMetadata | None = None
+
+    @property
+    def topics(self) -> list[str]:
+        """The packet topic."""
+        return [self.topic]
+
+    def prefix_bytes(self, topic: str) -> int:
+        """Packets are read whole."""
+        return 0
+
+    def rosbags_encodings(self, log: LogReader) -> set[str]:
+        """None: packets are decoded from their bytes."""
+        return set()
+
+    def extract(self, msg: RawMessage, log: LogReader) -> PacketSamples | None:
+        """The samples of one packet message."""
+        return packet_samples_of(msg, self.family, self.ouster_meta)
+
+
 def scan_lidar(
     log: LogReader,
     topic: str,
@@ -180,11 +160,9 @@ def scan_lidar(
     ouster_metadata_topic: str | None = None,
     jobs: int = 1,
 ) -> LidarScan:
-    """Read the topic once, as the audit reads it (`collect.iter_items`: `jobs` worker
-    processes where the log allows, one scan message at a time), and reduce it to
+    """Read the topic once, as the audit reads it (`logs.parallel.iter_items`: `jobs`
+    worker processes where the log allows, one scan message at a time), and reduce it to
     revolutions and clock statistics."""
-    from syncaudit.audit.collect import ExtractPlan, iter_items
-
     family, meta = packet_family(log, topic, ouster_metadata_topic)
     scanner = LidarScanner.create(
         topic,
@@ -193,6 +171,6 @@ def scan_lidar(
         target_azimuth_deg=target_azimuth_deg,
         clock_tolerance_ns=clock_tolerance_ns,
     )
-    for _kind, _topic, samples in iter_items(log, ExtractPlan(topic, family, meta), jobs):
+    for samples in iter_items(log, PacketExtractor(topic, family, meta), jobs):
         scanner.feed(samples)
     return scanner.finish()

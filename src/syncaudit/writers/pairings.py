@@ -8,7 +8,7 @@ from typing import Any
 
 import pandas as pd
 
-from syncaudit.audit.run import AuditResult
+from syncaudit.columns.audit_result import AuditedLog
 from syncaudit.writers.log_writer import open_writer
 from syncaudit.writers.outputs import OutputSet
 
@@ -26,7 +26,7 @@ def _ns(value: Any) -> int:
 
 
 def write_pairings(
-    result: AuditResult, out: Path, *, overwrite: bool = False, outputs: OutputSet | None = None
+    result: AuditedLog, out: Path, *, overwrite: bool = False, outputs: OutputSet | None = None
 ) -> int:
     """Write one FramePairing per frame (MCAP, .db3 or .bag by the suffix); return the count.
 

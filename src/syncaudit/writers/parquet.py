@@ -18,13 +18,12 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from syncaudit.analysis.sync import FRAME_TABLE_DTYPES
+from syncaudit.columns.audit_result import SCHEMA_VERSION, AuditedLog
+from syncaudit.columns.frame_table import FRAME_TABLE_DTYPES
 from syncaudit.errors import OutputError
 
 if TYPE_CHECKING:
     import pandas as pd
-
-    from syncaudit.audit.run import AuditResult
 
 INSTALL_HINT = "--parquet needs pyarrow: pip install 'syncaudit[parquet]'"
 
@@ -50,9 +49,7 @@ def _pyarrow() -> Any:
     return pa
 
 
-def _metadata(result: AuditResult, table: str) -> dict[bytes, bytes]:
-    from syncaudit.audit.run import SCHEMA_VERSION
-
+def _metadata(result: AuditedLog, table: str) -> dict[bytes, bytes]:
     meta = {
         "table": table,
         "schema_version": SCHEMA_VERSION,
@@ -133,7 +130,7 @@ def summary_dtypes(unpaired: tuple[str, ...] = UNPAIRED_REASONS) -> dict[str, st
     return dtypes
 
 
-def typed_frames(result: AuditResult) -> pd.DataFrame:
+def typed_frames(result: AuditedLog) -> pd.DataFrame:
     """`result.frames()` with every column of `FRAME_DTYPES` typed (zero rows without cameras)."""
     import pandas as pd
 
@@ -143,7 +140,7 @@ def typed_frames(result: AuditResult) -> pd.DataFrame:
     return frames.astype({c: t for c, t in FRAME_DTYPES.items() if c in frames.columns})
 
 
-def camera_summary(result: AuditResult) -> pd.DataFrame:
+def camera_summary(result: AuditedLog) -> pd.DataFrame:
     """One row per camera: verdict, Eq. 1-6 figures, latencies, replay (µs as the JSON).
 
     Typed by `summary_dtypes`, so a log without cameras gets the same columns, no rows.
@@ -183,13 +180,13 @@ def _table_bytes(frame: pd.DataFrame, metadata: dict[bytes, bytes]) -> bytes:
     return data
 
 
-def frames_parquet(result: AuditResult) -> bytes:
+def frames_parquet(result: AuditedLog) -> bytes:
     """The per-frame table (every column of `frames()`) as Parquet bytes."""
     _pyarrow()
     return _table_bytes(typed_frames(result), _metadata(result, "frames"))
 
 
-def cameras_parquet(result: AuditResult) -> bytes:
+def cameras_parquet(result: AuditedLog) -> bytes:
     """The per-camera summary as Parquet bytes."""
     _pyarrow()
     return _table_bytes(camera_summary(result), _metadata(result, "cameras"))
@@ -215,7 +212,7 @@ def _write_bytes_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def write_parquet(result: AuditResult, path: str | Path) -> tuple[Path, Path]:
+def write_parquet(result: AuditedLog, path: str | Path) -> tuple[Path, Path]:
     """Write both tables (frames at `path`, summary at `cameras_path(path)`); their paths.
 
     Both are rendered before either is written, so a failure leaves neither half-done.

@@ -1,13 +1,13 @@
-"""One pass over a log for the audit: each message becomes a small item, in log order.
+"""One pass over chosen topics of a log, each message made into a small item, in log order.
 
-The extraction of a message (decoding LiDAR packets, reading an image header,
-deserialising an exposure or trigger) is pure, so for a log that offers read units
-(`LogReader.read_units`: MCAP chunks, ROS 1 chunks, SQLite row ranges) it runs in worker
-processes, one group of units each, on all cores, each unit read by the reader class
-registered for its kind (`logs.units`); the parent merges the groups back into log-time
-order (ties broken by file, unit offset and index in the unit), so the serial and
-parallel paths yield the same items in the same order. A log of one group is read in the
-parent: a pool would only cost.
+What a message becomes is the caller's `Extractor` (decoding LiDAR packets, reading an
+image header, deserialising an exposure record): pure, and picklable, so for a log that
+offers read units (`LogReader.read_units`: MCAP chunks, ROS 1 chunks, SQLite row ranges)
+it runs in worker processes, one group of units each, on all cores, each unit read by the
+reader class registered for its kind (`logs.unit_readers`); the parent merges the groups
+back into log-time order (ties broken by file, unit offset and index in the unit), so the
+serial and parallel paths yield the same items in the same order. A log of one group is
+read in the parent: a pool would only cost.
 """
 
 from __future__ import annotations
@@ -21,79 +21,45 @@ import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
-from syncaudit.camera.cdr_fast import has_fast_reader, read_fast
-from syncaudit.camera.extract import exposure_row, image_row, trigger_row
-from syncaudit.lidar import ouster
-from syncaudit.lidar.samples import packet_samples
-from syncaudit.lidar.stream import SCAN_TYPES, decode_ouster_message, decode_scan
-from syncaudit.logs import LogReader, RawMessage
-from syncaudit.logs.model import ChannelInfo, ReadUnit
+from syncaudit.logs.base import LogReader
+from syncaudit.logs.model import ChannelInfo, RawMessage, ReadUnit
 from syncaudit.logs.unit_readers import UnitReader, group_units, open_unit_reader
 from syncaudit.workers import worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
-IMAGE_PREFIX_BYTES = 256
-"""Bytes of an image payload the audit reads: its header (stamp, ROS 1 seq) lies in the
-first 12-16; the rest (pixels) is never looked at, and readers that can skip it do."""
 TASKS_PER_WORKER = 8
 """Tasks in flight per worker: enough queued work that workers never wait on a parent
 busy with something else (its one-off imports); results are small, so memory stays low."""
 
-Item = tuple[str, str, Any]
-"""(kind, topic, payload): kind is 'lidar', 'image', 'exposure', 'trigger'."""
+ItemT = TypeVar("ItemT")
+ItemT_co = TypeVar("ItemT_co", covariant=True)
 
 
-@dataclass(frozen=True, slots=True)
-class ExtractPlan:
-    """Which topics the audit reads and what to make of each; picklable for workers."""
-
-    lidar_topic: str
-    lidar_family: str
-    ouster_meta: ouster.OusterMetadata | None = None
-    check_crc: bool = False
-    """Verify each MCAP chunk's CRC (about as much CPU as decompressing the chunk)."""
-    images: dict[str, str] = field(default_factory=dict)
-    """image topic -> camera."""
-    exposures: dict[str, tuple[str, str]] = field(default_factory=dict)
-    """exposure topic -> (camera, stamp semantics)."""
-    triggers: dict[str, str] = field(default_factory=dict)
-    """trigger topic -> camera."""
+class Extractor(Protocol[ItemT_co]):
+    """What a read makes of each message of its topics; pure and picklable, since worker
+    processes run it (forked ones get it by token, spawned ones by pickle)."""
 
     @property
     def topics(self) -> list[str]:
-        """Every topic the plan reads."""
-        return sorted({self.lidar_topic, *self.images, *self.exposures, *self.triggers})
+        """Every topic to read."""
+        ...
 
+    def prefix_bytes(self, topic: str) -> int:
+        """Bytes of a message on `topic` the extraction looks at (0: all); readers that can
+        skip the rest (image pixels) do."""
+        ...
 
-def extract(plan: ExtractPlan, msg: RawMessage, log: LogReader) -> Item | None:
-    """The item one message contributes (None for nothing, e.g. an IMU-sized packet)."""
-    topic = msg.topic
-    if topic == plan.lidar_topic:
-        if plan.lidar_family == "ouster":
-            assert plan.ouster_meta is not None
-            chunk = decode_ouster_message(msg, plan.ouster_meta)
-        else:
-            chunk = decode_scan(plan.lidar_family, msg, 0)
-        if chunk is None:
-            return None
-        return ("lidar", topic, packet_samples(chunk.timing, chunk.driver_stamp_ns))
-    if topic in plan.images:
-        return ("image", topic, image_row(msg))
-    if topic in plan.exposures:
-        camera, semantics = plan.exposures[topic]
-        return ("exposure", topic, exposure_row(msg, _fields(msg, log), camera, semantics))
-    if topic in plan.triggers:
-        return ("trigger", topic, trigger_row(msg, _fields(msg, log), plan.triggers[topic]))
-    return None
+    def rosbags_encodings(self, log: LogReader) -> set[str]:
+        """Encodings of messages the extraction deserialises through the log's type
+        registry: built once before forking (~80 ms of schema parsing), only where needed."""
+        ...
 
-
-def _fields(msg: RawMessage, log: LogReader) -> Any:
-    """A message's fields: by struct for the known per-frame types, else through rosbags."""
-    fast = read_fast(msg.data, msg.msgtype, msg.encoding)
-    return fast if fast is not None else log.deserialize(msg)
+    def extract(self, msg: RawMessage, log: LogReader) -> ItemT_co | None:
+        """The item one message contributes (None for nothing)."""
+        ...
 
 
 def default_jobs() -> int:
@@ -106,19 +72,21 @@ def default_jobs() -> int:
 
 def iter_items(
     log: LogReader,
-    plan: ExtractPlan,
+    extractor: Extractor[ItemT],
     jobs: int = 1,
     *,
+    check_crc: bool = False,
     meanwhile: Callable[[], object] | None = None,
-) -> Iterator[Item]:
-    """Every item of the plan's topics, in log-time order; parallel where the log allows.
+) -> Iterator[ItemT]:
+    """Every item of the extractor's topics, in log-time order; parallel where the log allows.
 
+    `check_crc` verifies each MCAP chunk's CRC (about as much CPU as decompressing it).
     `meanwhile` is work of the caller's (e.g. imports it needs afterwards) run once: in
     the parallel path as soon as the workers have their first tasks, so it overlaps them;
     otherwise before the read.
     """
     with _collection_paused():
-        yield from _items(log, plan, jobs, meanwhile)
+        yield from _items(log, extractor, jobs, check_crc, meanwhile)
 
 
 @contextlib.contextmanager
@@ -151,42 +119,48 @@ def _keep_out_of_young_passes() -> None:
 
 
 def _items(
-    log: LogReader, plan: ExtractPlan, jobs: int, meanwhile: Callable[[], object] | None
-) -> Iterator[Item]:
+    log: LogReader,
+    extractor: Extractor[ItemT],
+    jobs: int,
+    check_crc: bool,
+    meanwhile: Callable[[], object] | None,
+) -> Iterator[ItemT]:
     """`iter_items`' body."""
-    topics = frozenset(plan.topics)
+    topics = frozenset(extractor.topics)
     units = log.read_units(topics)
     groups = group_units(units, GROUP_BYTES) if units is not None else []
     if meanwhile is not None and not (jobs > 1 and len(groups) > 1):
         meanwhile()
     if units is None:
-        for msg in log.messages(plan.topics):
-            item = extract(plan, msg, log)
+        extract = extractor.extract
+        for msg in log.messages(extractor.topics):
+            item = extract(msg, log)
             if item is not None:
                 yield item
         return
-    channels = _with_prefixes(log.unit_channels(topics), plan)
+    channels = _with_prefixes(log.unit_channels(topics), extractor)
     ranks = _source_ranks(units)
     if jobs > 1 and len(groups) > 1:
-        results = _parallel_results(log, groups, channels, plan, jobs, meanwhile)
+        results = _parallel_results(log, groups, channels, extractor, jobs, check_crc, meanwhile)
         yield from _merged(groups, results)
         return
-    readers = _Readers(plan.check_crc)
+    readers = _Readers(check_crc)
     try:
-        results = (_extract_units(log, readers, g, channels, ranks, plan) for g in groups)
-        yield from _merged(groups, results)
+        serial = (_extract_units(log, readers, g, channels, ranks, extractor) for g in groups)
+        yield from _merged(groups, serial)
     finally:
         readers.close()
 
 
-def _with_prefixes(channels: dict[int, ChannelInfo], plan: ExtractPlan) -> dict[int, ChannelInfo]:
-    """The channels, image topics marked as read for their header only."""
-    if IMAGE_PREFIX_BYTES <= 0:
-        return channels
-    return {
-        cid: replace(info, prefix_bytes=IMAGE_PREFIX_BYTES) if info.topic in plan.images else info
-        for cid, info in channels.items()
-    }
+def _with_prefixes(
+    channels: dict[int, ChannelInfo], extractor: Extractor[object]
+) -> dict[int, ChannelInfo]:
+    """The channels, those the extractor reads the start of marked as read for it only."""
+    out = {}
+    for cid, info in channels.items():
+        prefix = extractor.prefix_bytes(info.topic)
+        out[cid] = replace(info, prefix_bytes=prefix) if prefix > 0 else info
+    return out
 
 
 def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
@@ -196,7 +170,7 @@ def _source_ranks(units: list[ReadUnit]) -> dict[str, int]:
 
 # ---- worker side -------------------------------------------------------------------------
 
-Keyed = tuple[int, int, int, int, Item]
+Keyed = tuple[int, int, int, int, ItemT]
 """(log time, file rank (by path), unit offset, index in unit, item): the merge order."""
 
 
@@ -227,40 +201,41 @@ _INHERITED_LOGS: dict[str, LogReader] = {}
 """Logs open in the parent while its pool runs: forked workers use them as they are."""
 _WORKER_STATE: dict[tuple[str, bool], tuple[LogReader, _Readers]] = {}
 """Per worker process: the log and its unit readers (buffers reused for every task)."""
-_INHERITED_TASKS: dict[str, _Task] = {}
+_INHERITED_TASKS: dict[str, _Task[Any]] = {}
 """Task of each pool running in the parent, by token: forked workers look theirs up rather
-than unpickling it (its channels and plan, ~3 KB) with every group."""
+than unpickling it (its channels and extractor, ~3 KB) with every group."""
 _task_tokens = itertools.count()
 
 
 @dataclass(frozen=True, slots=True)
-class _Task:
+class _Task(Generic[ItemT]):
     """What a worker needs besides the units: picklable."""
 
     log_path: str
     channels: dict[int, ChannelInfo]
     ranks: dict[str, int]
-    plan: ExtractPlan
+    extractor: Extractor[ItemT]
+    check_crc: bool = False
     open_as: str = field(default="", repr=False)
     """What a spawned worker opens instead of `log_path`: a remote log's URL as given (a
     signed URL's query string, which `log_path` and every message leave out). Not shown."""
 
 
-def _extract_group(task: _Task | str, units: list[ReadUnit]) -> list[Keyed]:
+def _extract_group(task: _Task[ItemT] | str, units: list[ReadUnit]) -> list[Keyed[ItemT]]:
     """Read and extract one group of units (the worker task); `task` is the task itself, or
     a forked worker's token of it in `_INHERITED_TASKS`."""
     if isinstance(task, str):
         task = _INHERITED_TASKS[task]
-    key = (task.log_path, task.plan.check_crc)
+    key = (task.log_path, task.check_crc)
     if key not in _WORKER_STATE:
         log = _INHERITED_LOGS.get(task.log_path)
         if log is None:  # spawned, not forked: open the log afresh
-            from syncaudit.logs import open_log
+            from syncaudit.logs.open import open_log
 
             log = open_log(task.open_as or task.log_path)
-        _WORKER_STATE[key] = (log, _Readers(task.plan.check_crc))
+        _WORKER_STATE[key] = (log, _Readers(task.check_crc))
     log, readers = _WORKER_STATE[key]
-    return _extract_units(log, readers, units, task.channels, task.ranks, task.plan)
+    return _extract_units(log, readers, units, task.channels, task.ranks, task.extractor)
 
 
 def _extract_units(
@@ -269,23 +244,24 @@ def _extract_units(
     units: list[ReadUnit],
     channels: dict[int, ChannelInfo],
     ranks: dict[str, int],
-    plan: ExtractPlan,
-) -> list[Keyed]:
+    extractor: Extractor[ItemT],
+) -> list[Keyed[ItemT]]:
     """The items of a group of units, sorted into merge order."""
-    out: list[Keyed] = []
+    out: list[Keyed[ItemT]] = []
+    extract = extractor.extract
     for unit in units:
         rank = ranks[unit.source]
         for log_time, index, cid, data in readers.get(unit).messages(unit, channels):
             info = channels[cid]
             msg = RawMessage(info.topic, info.msgtype, log_time, data, info.encoding)
-            item = extract(plan, msg, log)
+            item = extract(msg, log)
             if item is not None:
                 out.append((log_time, rank, unit.offset, index, item))
     out.sort(key=_merge_key)
     return out
 
 
-def _merge_key(keyed: Keyed) -> tuple[int, int, int, int]:
+def _merge_key(keyed: Keyed[object]) -> tuple[int, int, int, int]:
     return keyed[0], keyed[1], keyed[2], keyed[3]
 
 
@@ -293,23 +269,24 @@ def _parallel_results(
     log: LogReader,
     groups: list[list[ReadUnit]],
     channels: dict[int, ChannelInfo],
-    plan: ExtractPlan,
+    extractor: Extractor[ItemT],
     jobs: int,
+    check_crc: bool,
     meanwhile: Callable[[], object] | None = None,
-) -> Iterator[list[Keyed]]:
+) -> Iterator[list[Keyed[ItemT]]]:
     """Each group's extracted items, in group order, computed by `jobs` worker processes;
     `meanwhile` runs here once the first tasks are submitted."""
     path = log.summary.path
     ranks = _source_ranks([u for g in groups for u in g])
-    task = _Task(path, channels, ranks, plan, open_as=getattr(log, "url", ""))
+    task = _Task(path, channels, ranks, extractor, check_crc, open_as=getattr(log, "url", ""))
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
-    sent: _Task | str = task
+    sent: _Task[ItemT] | str = task
     if context.get_start_method() == "fork":
         # Forked workers inherit the open log, with the type registries they will need
         # built once here (parsing a log's schemas costs ~80 ms: only where needed), and
         # the task: each group is sent with its token.
-        for encoding in _deserialised_encodings(log, plan):
+        for encoding in extractor.rosbags_encodings(log):
             log.type_registry(encoding)
         _INHERITED_LOGS[path] = log
         sent = f"{path}#{next(_task_tokens)}"
@@ -322,7 +299,7 @@ def _parallel_results(
         gc.freeze()
     try:
         with worker_pool(jobs, context, label=f"{path}: a reader worker process") as pool:
-            window: list[Future[list[Keyed]]] = []
+            window: list[Future[list[Keyed[ItemT]]]] = []
             submitted = 0
             for _ in range(len(groups)):
                 while submitted < len(groups) and len(window) < TASKS_PER_WORKER * jobs:
@@ -340,15 +317,9 @@ def _parallel_results(
             _INHERITED_TASKS.pop(sent, None)
 
 
-def _deserialised_encodings(log: LogReader, plan: ExtractPlan) -> set[str]:
-    """Encodings of the plan's messages that go through rosbags (no struct reader)."""
-    infos = [log.topics[t] for t in (*plan.exposures, *plan.triggers) if t in log.topics]
-    return {i.encoding for i in infos if not has_fast_reader(i.msgtype, i.encoding)}
-
-
-def _merged(groups: list[list[ReadUnit]], results: Iterator[list[Keyed]]) -> Iterator[Item]:
+def _merged(groups: list[list[ReadUnit]], results: Iterator[list[Keyed[ItemT]]]) -> Iterator[ItemT]:
     """Group results merged into one log-time order (units of a log may overlap in time)."""
-    pending: list[Keyed] = []
+    pending: list[Keyed[ItemT]] = []
     for done, result in enumerate(results):
         # Everything before the next group's first message can no longer be overtaken.
         horizon = min(u.start_ns for u in groups[done + 1]) if done + 1 < len(groups) else None
@@ -362,9 +333,4 @@ def _merged(groups: list[list[ReadUnit]], results: Iterator[list[Keyed]]) -> Ite
             yield keyed[4]
 
 
-def lidar_family(msgtype: str) -> str | None:
-    """The vendor family of a LiDAR packet message type."""
-    return SCAN_TYPES.get(msgtype)
-
-
-__all__ = ["ExtractPlan", "Item", "default_jobs", "extract", "iter_items"]
+__all__ = ["GROUP_BYTES", "Extractor", "default_jobs", "iter_items"]
