@@ -11,9 +11,10 @@ from typing import Any
 import pytest
 
 from syncaudit.camera import cdr_fast
-from syncaudit.camera.cdr_fast import FAST_READERS, _Cursor, _TruncatedError, read_fast
+from syncaudit.camera.cdr_fast import FAST_READERS, _Cursor, read_fast
 from syncaudit.camera.extract import exposure_row, trigger_row
 from syncaudit.logs import open_log
+from syncaudit.logs.wire import WireError
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
 
@@ -72,7 +73,7 @@ def test_ros1_one_pass_readers_equal_the_cursor_on_whole_and_cut_messages(
                 part = data[:cut]
                 try:
                     expected = FAST_READERS[msg.msgtype](_Cursor(part, ros1=True))
-                except _TruncatedError:
+                except WireError:
                     got = read_fast(part, msg.msgtype, "ros1")
                     assert got is not None and got.damaged.startswith("truncated ")
                     continue
@@ -130,7 +131,7 @@ def test_cdr_one_pass_readers_equal_rosbags_and_the_cursor(tmp_path: Path) -> No
             assert got is not None
             try:
                 expected = FAST_READERS[msgtype](_Cursor(part))
-            except _TruncatedError:
+            except WireError:
                 assert got.damaged.startswith("truncated ")
                 continue
             assert _plain(got) == _plain(expected)

@@ -124,3 +124,12 @@ def test_random_damage_never_raises() -> None:
                 mutant[rng.randrange(len(mutant))] = rng.randrange(256)
             got = read_tf_message(bytes(mutant[: rng.randint(0, len(mutant))]), encoding)
             assert got is None or isinstance(got.transforms, list)
+
+
+def test_only_cdr_le_and_be_are_read() -> None:
+    """PL_CDR and XCDR2 bodies are not the plain layout: None, and rosbags is asked."""
+    original, store, msgtype = _tf_message(SAMPLES[0], "cdr")
+    data = bytes(store.serialize_cdr(original, msgtype))
+    assert read_tf_message(data, "cdr") is not None
+    for head in (b"\x00\x02", b"\x00\x03", b"\x00\x07"):
+        assert read_tf_message(head + data[2:], "cdr") is None

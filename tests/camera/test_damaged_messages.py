@@ -9,6 +9,7 @@ a topic holds nothing readable).
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,13 @@ from mcap.records import Channel, Message, Schema
 
 from mcap_copy import copy_mcap
 from syncaudit.camera.cdr_fast import FAST_READERS, read_fast
-from syncaudit.camera.extract import CameraTableBuilder, exposure_row, image_row, trigger_row
+from syncaudit.camera.extract import (
+    CameraTableBuilder,
+    exposure_row,
+    header_frame_id,
+    image_row,
+    trigger_row,
+)
 from syncaudit.camera.rowstore import DamagedRow
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage, open_log
@@ -177,3 +184,41 @@ def test_audit_of_a_log_with_cut_exposures_goes_on(tmp_path: Path) -> None:
     assert len(front.frames) == len(whole_front.frames) - cut
     # The other cameras are audited exactly as on the whole log.
     assert damaged.cameras[1].to_dict() == whole.cameras[1].to_dict()
+
+
+def test_only_cdr_le_and_be_are_read(messages: dict[str, RawMessage]) -> None:
+    """PL_CDR (00 02/00 03) is a parameter list, not the plain layout ROS 2 writes: the
+    struct readers and the image header reader refuse it as they refuse any other id
+    (they used to read 00 03 as CDR_LE and 00 02 as CDR_BE)."""
+    for head in (b"\x00\x02", b"\x00\x03", b"\x00\x07"):
+        for msgtype in FAST_READERS:
+            data = head + messages[msgtype].data[2:]
+            name = msgtype.rsplit("/", 1)[-1]
+            assert read_fast(data, msgtype, "cdr").damaged == (
+                f"{name} of {len(data)} bytes has no CDR encapsulation header ({data[:4].hex()})"
+            )
+        image = messages["sensor_msgs/msg/Image"]
+        bad = RawMessage(image.topic, image.msgtype, 5, head + image.data[2:], "cdr")
+        row = image_row(bad)
+        assert isinstance(row, DamagedRow) and "encapsulation" in row.reason
+        assert header_frame_id(bad) == ""
+    assert header_frame_id(messages["sensor_msgs/msg/Image"]) == "front_optical_frame"
+
+
+def test_a_cdr_string_without_its_nul_is_damaged(messages: dict[str, RawMessage]) -> None:
+    """CDR strings end in a NUL their length counts; one whose last byte is not NUL has a
+    wrong length: damaged (it used to be read with its last character dropped)."""
+    msg = messages["syncaudit_msgs/msg/CameraExposure"]
+    data = bytearray(msg.data)
+    (length,) = struct.unpack_from("<I", data, 12)
+    data[16 + length - 1] = ord("x")
+    fields = read_fast(bytes(data), msg.msgtype, "cdr")
+    assert fields.damaged == (
+        f"damaged CameraExposure ({len(data)} bytes): "
+        f"a string of {length} bytes at byte 12 has no NUL"
+    )
+    image = messages["sensor_msgs/msg/Image"]
+    cut_nul = bytearray(image.data)
+    cut_nul[16 + struct.unpack_from("<I", cut_nul, 12)[0] - 1] = ord("x")
+    row = image_row(RawMessage(image.topic, image.msgtype, 5, bytes(cut_nul), "cdr"))
+    assert isinstance(row, tuple) and row[3] == ""  # the stamp is read, the name is not

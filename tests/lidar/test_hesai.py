@@ -437,3 +437,32 @@ def test_other_decode_errors() -> None:
         encode_hesai("Pandar40P", np.zeros((1, 10)), t_ns[:1], 0x3D)
     with pytest.raises(ValueError):
         hesai_revolution_schedule("PandarXT32", 600.0, 0, return_mode=0x00)
+
+
+def test_header_damage_and_text_as_the_wire_readers_say() -> None:
+    """The header is read by syncaudit.logs.wire: a frame_id with a flipped bit decodes with
+    U+FFFD (it used to raise "not UTF-8": neither format requires valid text), a CDR
+    frame_id whose length misses its NUL and PL_CDR (00 03) are refused."""
+    rev = hesai_revolution_schedule("PandarXT32", 600.0, START_NS)
+    data, size = encode_hesai("PandarXT32", rev.block_azimuth_deg[:2], rev.packet_time_ns[:2])
+    for encoding in ("cdr", "ros1"):
+        raw = bytearray(
+            build_pandar_scan(
+                RosHeader(START_NS, "hesai"), rev.packet_time_ns[:2], data, size, encoding
+            )
+        )
+        at = 16  # frame_id text: CDR 4 + stamp 8 + length 4; ROS 1 seq 4 + stamp 8 + length 4
+        raw[at] = 0xFF
+        assert ros_header(bytes(raw), encoding).frame_id == "\ufffdesai"
+        assert (
+            pandar_scan_packets(bytes(raw), encoding)[0].tolist() == rev.packet_time_ns[:2].tolist()
+        )
+    raw = bytearray(
+        build_pandar_scan(RosHeader(START_NS, "hesai"), rev.packet_time_ns[:2], data, size)
+    )
+    raw[16 + 5] = ord("x")  # the NUL of "hesai"
+    with pytest.raises(DecodeError, match="has no NUL") as e:
+        ros_header(bytes(raw))
+    _one_line(e)
+    with pytest.raises(DecodeError, match="encapsulation 0003"):
+        ros_header(b"\x00\x03" + bytes(raw[2:]))

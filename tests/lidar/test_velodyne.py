@@ -587,3 +587,20 @@ def test_packet_views_of_any_layout_decode_alike(vlp16: list[Scan]) -> None:
     stamps, data = v.velodyne_scan_packets(ros1, "ros1")  # stride 1214: unaligned fields
     _same_timing(v.decode_velodyne(data, stamps), want)
     assert v.detect_velodyne_model(data[::-1]) == "VLP-16"
+
+
+def test_header_read_by_the_wire_readers() -> None:
+    """A frame_id with a flipped bit decodes with U+FFFD (it used to raise "not UTF-8");
+    PL_CDR (00 03) and a CDR frame_id without its NUL are refused."""
+    stamps = np.array([5_000_000_000, 5_001_000_000], dtype=np.int64)
+    data = np.zeros((2, v.PACKET_BYTES), dtype=np.uint8)
+    for encoding in ("cdr", "ros1"):
+        raw = bytearray(ve.build_velodyne_scan(7_000_000_001, "velodyne", stamps, data, encoding))
+        raw[16] = 0xFF  # the first character of the frame_id in both encodings
+        assert v.velodyne_scan_header(bytes(raw), encoding) == (7_000_000_001, "\ufffdelodyne")
+    raw = bytearray(ve.build_velodyne_scan(7_000_000_001, "velodyne", stamps, data, "cdr"))
+    with pytest.raises(DecodeError, match="VelodyneScan: CDR encapsulation 0003"):
+        v.velodyne_scan_header(b"\x00\x03" + bytes(raw[2:]), "cdr")
+    raw[16 + 8] = ord("x")  # the NUL of "velodyne"
+    with pytest.raises(DecodeError, match="has no NUL"):
+        v.velodyne_scan_header(bytes(raw), "cdr")

@@ -6,8 +6,9 @@ rosbags deserialises any message but costs ~30 us each; these fixed-layout CDR m
 a few microseconds, in CDR (ROS 2) and ROS 1 serialization alike. Anything else goes
 through rosbags. Tests check the two give identical rows.
 
-Damaged bytes (a message cut short, a length past its end, an unknown encapsulation)
-never raise: `read_fast` returns a namespace whose `damaged` attribute says what is
+Headers, strings and the encapsulation are read by `syncaudit.logs.wire`. Damaged bytes (a
+message cut short, a length past its end, an encapsulation other than CDR_LE/CDR_BE) never
+raise: `read_fast` returns a namespace whose `damaged` attribute says what is
 wrong, so the row functions can skip the message with a counted warning (a damaged
 camera message should not stop the audit of everything else). Strings decode leniently
 (bit flips become U+FFFD): the audit uses their text only to tell cameras sharing a topic
@@ -20,6 +21,16 @@ import struct
 from types import SimpleNamespace
 from typing import Any
 
+from syncaudit.logs.wire import (
+    WireError,
+    cdr_align,
+    cdr_byte_order,
+    cdr_header,
+    cdr_string,
+    ros1_header,
+    ros1_string,
+)
+
 _LE = {
     "I": struct.Struct("<I"),
     "i": struct.Struct("<i"),
@@ -29,13 +40,6 @@ _LE = {
     "f": struct.Struct("<f"),
 }
 _BE = {k: struct.Struct(">" + v.format[1:]) for k, v in _LE.items()}
-_CDR_LE_IDS = (b"\x00\x01", b"\x00\x03")
-_CDR_IDS = (b"\x00\x00", *_CDR_LE_IDS, b"\x00\x02")
-"""Encapsulation ids of (PL_)CDR big- and little-endian: what ROS 2 writes."""
-
-
-class _TruncatedError(Exception):
-    """A field reaches past the end of the message (internal to this module)."""
 
 
 class _Cursor:
@@ -45,12 +49,13 @@ class _Cursor:
     strings without terminator, and the std_msgs/Header `seq` before the stamp.
     """
 
-    __slots__ = ("data", "fmt", "pos", "ros1")
+    __slots__ = ("data", "fmt", "order", "pos", "ros1")
 
     def __init__(self, data: bytes | memoryview, *, ros1: bool = False) -> None:
         self.data = data
         self.ros1 = ros1
-        self.fmt = _LE if ros1 or bytes(data[0:2]) in _CDR_LE_IDS else _BE
+        self.order = "<" if ros1 else cdr_byte_order(data)
+        self.fmt = _LE if self.order == "<" else _BE
         self.pos = 0 if ros1 else 4
 
     def _get(self, code: str, size: int) -> Any:
@@ -58,7 +63,7 @@ class _Cursor:
         if rem:
             self.pos += size - rem
         if self.pos + size > len(self.data):
-            raise _TruncatedError(f"a {size}-byte field at byte {self.pos}")
+            raise WireError(f"a {size}-byte field at byte {self.pos} is missing or cut", cut=True)
         (value,) = self.fmt[code].unpack_from(self.data, self.pos)
         self.pos += size
         return value
@@ -82,14 +87,10 @@ class _Cursor:
         return int(self._get("h", 2))
 
     def string(self) -> str:
-        start = self.pos
-        length = self.u32()
-        terminator = 0 if self.ros1 else 1
-        if length < terminator or self.pos + length > len(self.data):
-            raise _TruncatedError(f"a string of {length} bytes at byte {start}")
-        end = self.pos + length - terminator
-        text = bytes(self.data[self.pos : end]).decode(errors="replace")
-        self.pos += length
+        if self.ros1:
+            text, self.pos = ros1_string(self.data, self.pos)
+        else:
+            text, self.pos = cdr_string(self.data, self.pos, self.order)
         return text
 
     def time(self) -> SimpleNamespace:
@@ -97,9 +98,20 @@ class _Cursor:
 
     def header(self) -> SimpleNamespace:
         if self.ros1:
-            seq = self.u32()
-            return SimpleNamespace(seq=seq, stamp=self.time(), frame_id=self.string())
-        return SimpleNamespace(stamp=self.time(), frame_id=self.string())
+            seq, sec, nsec, frame_id, self.pos = ros1_header(self.data, self.pos)
+            return _r1_header_fields(seq, sec, nsec, frame_id)
+        sec, nsec, frame_id, self.pos = cdr_header(self.data, self.pos, self.order)
+        return _cdr_header_fields(sec, nsec, frame_id)
+
+
+def _r1_header_fields(seq: int, sec: int, nsec: int, frame_id: str) -> SimpleNamespace:
+    """A ROS 1 std_msgs/Header's fields."""
+    return SimpleNamespace(seq=seq, stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=frame_id)
+
+
+def _cdr_header_fields(sec: int, nsec: int, frame_id: str) -> SimpleNamespace:
+    """A ROS 2 std_msgs/Header's fields."""
+    return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=frame_id)
 
 
 def _camera_exposure(c: _Cursor) -> SimpleNamespace:
@@ -134,33 +146,11 @@ def _image_meta(c: _Cursor) -> SimpleNamespace:
 
 
 # ROS 1 serialization is packed little-endian: each message is read with one unpack per
-# run of fixed fields between its strings. Bytes that do not fit (a struct.error, a string
-# past the end) fall back to `_Cursor`, which says what is damaged.
-_R1_HEADER = struct.Struct("<IIII")  # seq, stamp sec, stamp nsec, frame_id length
-_R1_LENGTH = struct.Struct("<I")
+# run of fixed fields between its strings. Bytes that do not fit (a struct.error, a
+# WireError) fall back to `_Cursor`, which says what is damaged.
 _R1_EXPOSURE = struct.Struct("<IIId")  # frame_sequence, exposure_start, exposure_duration
 _R1_TRIGGER = struct.Struct("<I10Id")  # frame_sequence, five times, applied_delay
 _R1_META = struct.Struct("<QhI")  # camera_time, brightness, exposure_time
-
-
-def _r1_string(data: bytes | memoryview, pos: int) -> tuple[str, int]:
-    (length,) = _R1_LENGTH.unpack_from(data, pos)
-    end = pos + 4 + length
-    if end > len(data):
-        raise _TruncatedError("string")
-    return bytes(data[pos + 4 : end]).decode(errors="replace"), end
-
-
-def _r1_header(data: bytes | memoryview, pos: int = 0) -> tuple[SimpleNamespace, int]:
-    """The std_msgs/Header at `pos` of a ROS 1 message and the byte after it."""
-    seq, sec, nsec, length = _R1_HEADER.unpack_from(data, pos)
-    start = pos + _R1_HEADER.size
-    end = start + length
-    if end > len(data):
-        raise _TruncatedError("frame_id")
-    stamp = SimpleNamespace(sec=sec, nanosec=nsec)
-    frame_id = bytes(data[start:end]).decode(errors="replace")
-    return SimpleNamespace(seq=seq, stamp=stamp, frame_id=frame_id), end
 
 
 def _exposure_fields(
@@ -203,20 +193,23 @@ def _meta_fields(
 
 
 def _r1_camera_exposure(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
-    camera, pos = _r1_string(data, pos)
+    seq, sec, nsec, frame_id, pos = ros1_header(data, 0)
+    header = _r1_header_fields(seq, sec, nsec, frame_id)
+    camera, pos = ros1_string(data, pos)
     return _exposure_fields(header, camera, *_R1_EXPOSURE.unpack_from(data, pos))
 
 
 def _r1_trigger_event(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
-    camera, pos = _r1_string(data, pos)
+    seq, sec, nsec, frame_id, pos = ros1_header(data, 0)
+    header = _r1_header_fields(seq, sec, nsec, frame_id)
+    camera, pos = ros1_string(data, pos)
     sequence, *t, delay = _R1_TRIGGER.unpack_from(data, pos)
     return _trigger_fields(header, camera, sequence, t, delay)
 
 
 def _r1_image_meta(data: bytes | memoryview) -> SimpleNamespace:
-    header, pos = _r1_header(data)
+    seq, sec, nsec, frame_id, pos = ros1_header(data, 0)
+    header = _r1_header_fields(seq, sec, nsec, frame_id)
     return _meta_fields(header, *_R1_META.unpack_from(data, pos))
 
 
@@ -226,8 +219,6 @@ def _r1_image_meta(data: bytes | memoryview) -> SimpleNamespace:
 # multiple of 8 (relative). A message that does not fit falls back to `_Cursor`.
 _CDR_FORMATS = {
     order: (
-        struct.Struct(order + "iII"),  # header stamp sec, nsec, frame_id length
-        struct.Struct(order + "I"),  # a string's length
         struct.Struct(order + "IiI"),  # frame_sequence, exposure_start
         struct.Struct(order + "I" + "iI" * 5),  # frame_sequence, five times
         struct.Struct(order + "d"),
@@ -237,56 +228,31 @@ _CDR_FORMATS = {
 }
 
 
-def _align(pos: int, size: int) -> int:
-    """`pos` moved to the next multiple of `size` counted from byte 4 (after the header)."""
-    return pos + (-(pos - 4) % size)
-
-
-def _cdr_string(data: bytes | memoryview, pos: int, length_of: struct.Struct) -> tuple[str, int]:
-    """A NUL-terminated CDR string whose length field is at `pos` (4-aligned): (text, end)."""
-    (length,) = length_of.unpack_from(data, pos)
-    end = pos + 4 + length
-    if length < 1 or end > len(data):
-        raise _TruncatedError("string")
-    return bytes(data[pos + 4 : end - 1]).decode(errors="replace"), end
-
-
-def _cdr_header(data: bytes | memoryview, order: str, pos: int = 4) -> tuple[SimpleNamespace, int]:
-    """The std_msgs/Header at (the 4-aligned) `pos` of a CDR message and the byte after it."""
-    head = _CDR_FORMATS[order][0]
-    pos = _align(pos, 4)
-    sec, nsec, length = head.unpack_from(data, pos)
-    start = pos + head.size
-    end = start + length
-    if length < 1 or end > len(data):
-        raise _TruncatedError("frame_id")
-    frame_id = bytes(data[start : end - 1]).decode(errors="replace")
-    return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nsec), frame_id=frame_id), end
-
-
 def _cdr_camera_exposure(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    _head, length_of, run, _trigger_run, f64, _meta_run = _CDR_FORMATS[order]
-    header, pos = _cdr_header(data, order)
-    camera, pos = _cdr_string(data, _align(pos, 4), length_of)
-    pos = _align(pos, 4)
-    sequence, sec, nsec = run.unpack_from(data, pos)
-    (duration,) = f64.unpack_from(data, _align(pos + run.size, 8))
-    return _exposure_fields(header, camera, sequence, sec, nsec, duration)
+    run, _trigger_run, f64, _meta_run = _CDR_FORMATS[order]
+    sec, nsec, frame_id, pos = cdr_header(data, 4, order)
+    camera, pos = cdr_string(data, pos, order)
+    pos = cdr_align(pos, 4)
+    sequence, start_sec, start_nsec = run.unpack_from(data, pos)
+    (duration,) = f64.unpack_from(data, cdr_align(pos + run.size, 8))
+    header = _cdr_header_fields(sec, nsec, frame_id)
+    return _exposure_fields(header, camera, sequence, start_sec, start_nsec, duration)
 
 
 def _cdr_trigger_event(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    _head, length_of, _exposure_run, run, f64, _meta_run = _CDR_FORMATS[order]
-    header, pos = _cdr_header(data, order)
-    camera, pos = _cdr_string(data, _align(pos, 4), length_of)
-    pos = _align(pos, 4)
+    _exposure_run, run, f64, _meta_run = _CDR_FORMATS[order]
+    sec, nsec, frame_id, pos = cdr_header(data, 4, order)
+    camera, pos = cdr_string(data, pos, order)
+    pos = cdr_align(pos, 4)
     sequence, *t = run.unpack_from(data, pos)
-    (delay,) = f64.unpack_from(data, _align(pos + run.size, 8))
-    return _trigger_fields(header, camera, sequence, t, delay)
+    (delay,) = f64.unpack_from(data, cdr_align(pos + run.size, 8))
+    return _trigger_fields(_cdr_header_fields(sec, nsec, frame_id), camera, sequence, t, delay)
 
 
 def _cdr_image_meta(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    header, pos = _cdr_header(data, order)
-    return _meta_fields(header, *_CDR_FORMATS[order][5].unpack_from(data, _align(pos, 8)))
+    sec, nsec, frame_id, pos = cdr_header(data, 4, order)
+    fields = _CDR_FORMATS[order][3].unpack_from(data, cdr_align(pos, 8))
+    return _meta_fields(_cdr_header_fields(sec, nsec, frame_id), *fields)
 
 
 CDR_READERS = {
@@ -325,30 +291,30 @@ def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNa
     """
     if not has_fast_reader(msgtype, encoding):
         return None
-    ros1 = encoding == "ros1"
-    if ros1:
-        try:
-            return ROS1_READERS[msgtype](data)
-        except (struct.error, _TruncatedError):
-            pass  # damaged: the cursor below says where
     name = msgtype.rsplit("/", 1)[-1]
-    if not ros1 and (len(data) < 4 or bytes(data[0:2]) not in _CDR_IDS):
-        head = bytes(data[0:4]).hex() or "nothing"
-        return SimpleNamespace(
-            damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
-        )
+    ros1 = encoding == "ros1"
+    order = "<"
     if not ros1:
         try:
-            order = "<" if bytes(data[0:2]) in _CDR_LE_IDS else ">"
-            return CDR_READERS[msgtype](data, order)
-        except (struct.error, _TruncatedError):
-            pass  # damaged: the cursor below says where
+            order = cdr_byte_order(data)
+        except WireError:
+            head = bytes(data[0:4]).hex() or "nothing"
+            return SimpleNamespace(
+                damaged=f"{name} of {len(data)} bytes has no CDR encapsulation header ({head})"
+            )
+    try:
+        return ROS1_READERS[msgtype](data) if ros1 else CDR_READERS[msgtype](data, order)
+    except (struct.error, WireError):
+        pass  # damaged: the cursor below says where
     try:
         return FAST_READERS[msgtype](_Cursor(data, ros1=ros1))
-    except _TruncatedError as exc:
-        return SimpleNamespace(
-            damaged=f"truncated {name} ({len(data)} bytes): {exc} is missing or cut"
-        )
+    except WireError as exc:
+        return SimpleNamespace(damaged=_damage(name, len(data), exc))
+
+
+def _damage(name: str, size: int, exc: WireError) -> str:
+    """What is wrong with a message of `size` bytes, as `read_fast` says it."""
+    return f"{'truncated' if exc.cut else 'damaged'} {name} ({size} bytes): {exc}"
 
 
 # tf2_msgs/TFMessage, for the camera mounts in /tf_static: a guessed rig then needs no type
@@ -356,6 +322,8 @@ def read_fast(data: bytes | memoryview, msgtype: str, encoding: str) -> SimpleNa
 # ~0.1 s: the registry and rosbags' code generator). Bytes that do not fit give None, and
 # the caller asks rosbags, which says what is wrong.
 _CDR_TRANSFORM = {order: struct.Struct(order + "7d") for order in "<>"}
+_CDR_COUNT = {order: struct.Struct(order + "I") for order in "<>"}  # the transforms' count
+_R1_COUNT = struct.Struct("<I")
 _R1_TRANSFORM = struct.Struct("<7d")  # translation x, y, z; rotation x, y, z, w
 _MIN_CDR_TRANSFORM = 8 + 4 + 1 + 3 + 4 + 1 + 3 + 56
 """Fewest bytes one TransformStamped takes in CDR (empty strings, padding): a count
@@ -370,9 +338,9 @@ def read_tf_message(data: bytes | memoryview, encoding: str) -> SimpleNamespace 
     try:
         if encoding == "ros1":
             return _r1_tf_message(data)
-        if encoding == "cdr" and len(data) >= 8 and bytes(data[0:2]) in _CDR_IDS:
-            return _cdr_tf_message(data, "<" if bytes(data[0:2]) in _CDR_LE_IDS else ">")
-    except (struct.error, _TruncatedError):
+        if encoding == "cdr":
+            return _cdr_tf_message(data, cdr_byte_order(data))
+    except (struct.error, WireError):
         return None
     return None
 
@@ -390,28 +358,30 @@ def _transform(header: SimpleNamespace, child: str, values: tuple[float, ...]) -
 
 
 def _cdr_tf_message(data: bytes | memoryview, order: str) -> SimpleNamespace:
-    length_of, values = _CDR_FORMATS[order][1], _CDR_TRANSFORM[order]
-    (count,) = length_of.unpack_from(data, 4)
+    values = _CDR_TRANSFORM[order]
+    (count,) = _CDR_COUNT[order].unpack_from(data, 4)
     if count * _MIN_CDR_TRANSFORM > len(data):
-        raise _TruncatedError("transforms")
+        raise WireError(f"{count} transforms cannot fit {len(data)} bytes", cut=True)
     pos, transforms = 8, []
     for _ in range(count):
-        header, pos = _cdr_header(data, order, pos)
-        child, pos = _cdr_string(data, _align(pos, 4), length_of)
-        pos = _align(pos, 8)
+        sec, nsec, frame_id, pos = cdr_header(data, pos, order)
+        child, pos = cdr_string(data, pos, order)
+        pos = cdr_align(pos, 8)
+        header = _cdr_header_fields(sec, nsec, frame_id)
         transforms.append(_transform(header, child, values.unpack_from(data, pos)))
         pos += values.size
     return SimpleNamespace(transforms=transforms)
 
 
 def _r1_tf_message(data: bytes | memoryview) -> SimpleNamespace:
-    (count,) = _R1_LENGTH.unpack_from(data, 0)
+    (count,) = _R1_COUNT.unpack_from(data, 0)
     if count * _MIN_R1_TRANSFORM > len(data):
-        raise _TruncatedError("transforms")
+        raise WireError(f"{count} transforms cannot fit {len(data)} bytes", cut=True)
     pos, transforms = 4, []
     for _ in range(count):
-        header, pos = _r1_header(data, pos)
-        child, pos = _r1_string(data, pos)
+        seq, sec, nsec, frame_id, pos = ros1_header(data, pos)
+        child, pos = ros1_string(data, pos)
+        header = _r1_header_fields(seq, sec, nsec, frame_id)
         transforms.append(_transform(header, child, _R1_TRANSFORM.unpack_from(data, pos)))
         pos += _R1_TRANSFORM.size
     return SimpleNamespace(transforms=transforms)

@@ -24,17 +24,20 @@ from syncaudit.camera.sequences import SequenceCounter, field_counter, header_se
 from syncaudit.columns.camera import CAMERA_EXPOSURE, FRAME_COLUMNS, TRIGGER_COLUMNS, CameraTables
 from syncaudit.errors import LogReadError
 from syncaudit.logs import RawMessage
+from syncaudit.logs.wire import (
+    WireError,
+    cdr_byte_order,
+    cdr_string,
+    cdr_time,
+    ros1_string,
+    ros1_time,
+)
 from syncaudit.rig import CameraConfig
 
 if TYPE_CHECKING:
     from syncaudit.columns.table import Table
 
-_STAMP = struct.Struct("<iI")
-_STAMP_BE = struct.Struct(">iI")
-_ROS1_STAMP = struct.Struct("<II")
 _ROS1_SEQ = struct.Struct("<I")
-_U32 = struct.Struct("<I")
-_U32_BE = struct.Struct(">I")
 
 _HEADER_BYTES = 12
 """Bytes up to the end of the header stamp: ROS 1 seq + stamp, or CDR encapsulation + stamp."""
@@ -54,41 +57,46 @@ def header_stamp_ns(msg: RawMessage) -> int:
     """std_msgs/Header stamp of a message whose first field is the header.
 
     Raises LogReadError (naming topic and log time) where the message is too short to
-    hold one or its nanoseconds are out of range.
+    hold one, its CDR encapsulation is not CDR_LE/CDR_BE or its stamp is out of range.
     """
+    return _header_stamp(msg)[0]
+
+
+def _header_stamp(msg: RawMessage) -> tuple[int, str]:
+    """header_stamp_ns and the byte order of the message's fields ("<" or ">")."""
     data = msg.data
     if len(data) < _HEADER_BYTES:
         raise LogReadError(_where(msg, f"{len(data)} bytes cannot hold a header stamp"))
-    if msg.encoding == "ros1":
-        sec, nsec = _ROS1_STAMP.unpack_from(data, 4)
-    else:
-        little = bytes(data[1:2]) in (b"\x01", b"\x03")
-        sec, nsec = (_STAMP if little else _STAMP_BE).unpack_from(data, 4)
+    try:
+        if msg.encoding == "ros1":
+            order = "<"
+            sec, nsec, _end = ros1_time(data, 4)
+        else:
+            order = cdr_byte_order(data)
+            sec, nsec, _end = cdr_time(data, 4, order)
+    except WireError as exc:
+        raise LogReadError(_where(msg, str(exc))) from None
     if sec < 0 or nsec >= 1_000_000_000:
         raise LogReadError(_where(msg, f"header stamp {sec} s {nsec} ns out of range"))
-    return int(sec) * 1_000_000_000 + int(nsec)
+    return int(sec) * 1_000_000_000 + int(nsec), order
 
 
 def header_frame_id(msg: RawMessage) -> str:
     """`header.frame_id` of a message whose first field is a std_msgs/Header, from its bytes.
 
-    "" where the message is too short to hold one (image_row reports the damage).
+    "" where the bytes hold none (image_row reports a message too short for its stamp).
     """
-    data = msg.data
+    try:
+        return _raw_frame_id(msg, "<" if msg.encoding == "ros1" else cdr_byte_order(msg.data))
+    except WireError:
+        return ""
+
+
+def _raw_frame_id(msg: RawMessage, order: str) -> str:
+    """`header.frame_id` of a message of that byte order; WireError where it holds none."""
     if msg.encoding == "ros1":
-        unpack = _U32.unpack_from  # ROS 1 is little-endian; strings have no terminator
-        terminator = 0
-    else:
-        little = bytes(data[1:2]) in (b"\x01", b"\x03")
-        unpack = (_U32 if little else _U32_BE).unpack_from
-        terminator = 1  # CDR strings count their NUL
-    if len(data) < _HEADER_BYTES + 4:
-        return ""
-    (length,) = unpack(data, _HEADER_BYTES)
-    end = _HEADER_BYTES + 4 + length - terminator
-    if length < terminator or end > len(data):
-        return ""
-    return bytes(data[_HEADER_BYTES + 4 : end]).decode("utf-8", errors="replace")
+        return ros1_string(msg.data, _HEADER_BYTES)[0]
+    return cdr_string(msg.data, _HEADER_BYTES, order)[0]
 
 
 def _where(msg: RawMessage, what: str) -> str:
@@ -130,9 +138,15 @@ def exposure_start_ns(stamp: int, duration: int | None, semantics: str) -> int:
 def image_row(msg: RawMessage) -> ImageRow | DamagedRow:
     """The header of an image (or CameraInfo / WFOVImage) message; DamagedRow if unreadable."""
     try:
-        return header_stamp_ns(msg), msg.log_time_ns, _ros1_seq(msg), header_frame_id(msg)
+        stamp_ns, order = _header_stamp(msg)
+        seq = _ros1_seq(msg)
     except LogReadError as exc:
         return _damaged(msg, str(exc).rsplit(": ", 1)[-1])
+    try:
+        frame_id = _raw_frame_id(msg, order)
+    except WireError:
+        frame_id = ""
+    return stamp_ns, msg.log_time_ns, seq, frame_id
 
 
 def _named_camera(msg: RawMessage, m: Any, camera: str) -> str:

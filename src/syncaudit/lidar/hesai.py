@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from syncaudit.columns.distinct import distinct
 from syncaudit.errors import DecodeError
 from syncaudit.lidar.packets import PacketTiming
+from syncaudit.logs.wire import cdr_byte_order, cdr_header, ros1_header
 
 __all__ = [
     "HESAI_LAYOUTS",
@@ -78,32 +79,26 @@ def _check_encoding(encoding: str) -> None:
 
 
 class _Cursor:
-    """Reads a serialized ROS message header: CDR (XCDR1, aligned) or ROS 1 (packed)."""
+    """Reads a serialized ROS message: CDR (CDR_LE/CDR_BE, aligned) or ROS 1 (packed).
+
+    The encapsulation and the header are read by `syncaudit.logs.wire`.
+    """
 
     def __init__(self, buf: NDArray[np.uint8], encoding: str) -> None:
         _check_encoding(encoding)
         self.buf = buf
         self.mem = buf.data
         self.cdr = encoding == "cdr"
-        if self.cdr:
-            if buf.size < 4:
-                raise DecodeError(f"CDR message of {buf.size} bytes has no encapsulation header")
-            if buf[0] != 0 or buf[1] not in (0, 1):
-                raise DecodeError(
-                    f"unsupported CDR encapsulation {int(buf[0]):#04x}{int(buf[1]):02x} "
-                    "(plain XCDR1 expected)"
-                )
-            self.endian = "<" if buf[1] == 1 else ">"
-            self.origin = 4
-        else:
-            self.endian = "<"
-            self.origin = 0
-        self.pos = self.origin
+        self.endian = cdr_byte_order(self.mem) if self.cdr else "<"
+        self.pos = 4 if self.cdr else 0
 
     def align(self, n: int) -> None:
-        """Skip CDR padding so that the next read is n-aligned relative to the origin."""
+        """Skip CDR padding so that the next read is n-aligned (counted after byte 4).
+
+        `wire.cdr_align` inlined: NebulaPackets aligns twice a packet.
+        """
         if self.cdr:
-            self.pos += -(self.pos - self.origin) % n
+            self.pos += -(self.pos - 4) % n
 
     def need(self, n: int, what: str) -> None:
         if self.pos + n > self.buf.size:
@@ -130,21 +125,14 @@ class _Cursor:
         return int(sec) * _NS_PER_S + int(nsec)
 
     def header(self) -> RosHeader:
-        seq = 0 if self.cdr else self.u32("header.seq")
-        stamp_ns = self.time_ns("header.stamp")
-        n = self.u32("header.frame_id length")
-        self.need(n, "header.frame_id")
-        raw = bytes(self.mem[self.pos : self.pos + n])
+        seq = 0
         if self.cdr:
-            if n == 0 or raw[-1] != 0:
-                raise DecodeError("header.frame_id is not a NUL-terminated CDR string")
-            raw = raw[:-1]
-        self.pos += n
-        try:
-            frame_id = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise DecodeError(f"header.frame_id is not UTF-8: {exc}") from None
-        return RosHeader(stamp_ns, frame_id, seq)
+            sec, nsec, frame_id, self.pos = cdr_header(self.mem, self.pos, self.endian)
+        else:
+            seq, sec, nsec, frame_id, self.pos = ros1_header(self.mem, self.pos)
+        if nsec >= _NS_PER_S:
+            raise DecodeError(f"header.stamp: nanoseconds field {nsec} is not below 1e9")
+        return RosHeader(int(sec) * _NS_PER_S + int(nsec), frame_id, seq)
 
 
 def ros_header(raw: Bytes, encoding: str = "cdr") -> RosHeader:

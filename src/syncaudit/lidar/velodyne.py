@@ -37,13 +37,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cache
-from typing import Final, Literal, TypeVar
+from typing import Final, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from syncaudit.errors import DecodeError
 from syncaudit.lidar.packets import PacketTiming
+from syncaudit.logs.wire import WireError, cdr_align, cdr_byte_order, cdr_header, ros1_header
 
 PACKET_BYTES: Final = 1206
 BLOCKS: Final = 12
@@ -139,6 +140,7 @@ def _check_encoding(encoding: str) -> None:
 
 
 def _align4(offset: int) -> int:
+    """`offset` rounded up to a multiple of 4 (the encoder's CDR padding)."""
     return (offset + 3) & ~3
 
 
@@ -158,46 +160,26 @@ def _scan_layout(buf: NDArray[np.uint8], encoding: str) -> _ScanLayout:
     """Parse the fixed head of a VelodyneScan message and validate the total length."""
     _check_encoding(encoding)
     size = int(buf.size)
+    mem = buf.data
+    try:
+        if encoding == "cdr":
+            endian = cdr_byte_order(mem)
+            sec, nsec, frame_id, pos = cdr_header(mem, 4, endian)
+            pos = cdr_align(pos, 4)
+        else:
+            endian = "<"
+            _seq, sec, nsec, frame_id, pos = ros1_header(mem, 0)
+    except WireError as exc:
+        raise DecodeError(f"VelodyneScan: {exc}") from None
+    if pos + 4 > size:
+        raise DecodeError(f"VelodyneScan: packet count runs past {size} bytes")
+    count = int.from_bytes(bytes(buf[pos : pos + 4]), "little" if endian == "<" else "big")
+    first = pos + 4
     if encoding == "cdr":
-        if size < 4 + 16:
-            raise DecodeError(f"VelodyneScan: {size} bytes is too short for a CDR header")
-        if buf[0] != 0 or buf[1] not in (0, 1):
-            raise DecodeError(
-                f"VelodyneScan: encapsulation {bytes(buf[:2]).hex()} is not XCDR1 (0000/0001)"
-            )
-        endian = "<" if buf[1] == 1 else ">"
-        order: Literal["little", "big"] = "little" if endian == "<" else "big"
-        base = 4
-        sec = int.from_bytes(bytes(buf[base : base + 4]), order, signed=True)
-        nsec = int.from_bytes(bytes(buf[base + 4 : base + 8]), order)
-        flen = int.from_bytes(bytes(buf[base + 8 : base + 12]), order)
-        pos = base + 12 + flen
-        if flen < 1 or pos + 4 > size:
-            raise DecodeError(f"VelodyneScan: frame_id length {flen} runs past {size} bytes")
-        if buf[pos - 1] != 0:
-            raise DecodeError("VelodyneScan: frame_id is not NUL-terminated")
-        frame = bytes(buf[base + 12 : pos - 1])
-        pos = base + _align4(pos - base)
-        if pos + 4 > size:
-            raise DecodeError(f"VelodyneScan: packet count runs past {size} bytes")
-        count = int.from_bytes(bytes(buf[pos : pos + 4]), order)
-        first = pos + 4
         stride = _CDR_PACKET_STRIDE
         end = first + (count - 1) * stride + 1214 if count else first
-        allowed = (end, base + _align4(end - base))
+        allowed = (end, cdr_align(end, 4))
     else:
-        endian = "<"
-        if size < 20:
-            raise DecodeError(f"VelodyneScan: {size} bytes is too short for a ROS 1 header")
-        sec = int.from_bytes(bytes(buf[4:8]), "little")
-        nsec = int.from_bytes(bytes(buf[8:12]), "little")
-        flen = int.from_bytes(bytes(buf[12:16]), "little")
-        pos = 16 + flen
-        if pos + 4 > size:
-            raise DecodeError(f"VelodyneScan: frame_id length {flen} runs past {size} bytes")
-        frame = bytes(buf[16:pos])
-        count = int.from_bytes(bytes(buf[pos : pos + 4]), "little")
-        first = pos + 4
         stride = _ROS1_PACKET_STRIDE
         end = first + count * stride
         allowed = (end, end)
@@ -207,10 +189,6 @@ def _scan_layout(buf: NDArray[np.uint8], encoding: str) -> _ScanLayout:
         )
     if nsec >= 1_000_000_000:
         raise DecodeError(f"VelodyneScan: header nanoseconds {nsec} out of range")
-    try:
-        frame_id = frame.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise DecodeError("VelodyneScan: frame_id is not UTF-8") from exc
     return _ScanLayout(endian, sec * 1_000_000_000 + nsec, frame_id, count, first, stride)
 
 
