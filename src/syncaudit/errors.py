@@ -6,12 +6,6 @@ same table, and a test keeps the two equal.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from pydantic import ValidationError
-
-
 EXIT_OK = 0
 EXIT_USAGE = 64
 """A usage error: unknown option, bad option value, conflicting options (BSD's EX_USAGE)."""
@@ -144,10 +138,3 @@ def exit_code_table() -> str:
     rows = ["| code | meaning |", "| --- | --- |"]
     rows += [f"| {code} | {meaning} |" for code, meaning in EXIT_CODES]
     return "\n".join(rows)
-
-
-def validation_summary(exc: ValidationError) -> str:
-    """A pydantic ValidationError on one line (see `syncaudit.config.validation_summary`)."""
-    from syncaudit.config import validation_summary as one_line
-
-    return one_line(exc)

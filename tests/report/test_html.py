@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Callable
 from html.parser import HTMLParser
@@ -13,7 +14,8 @@ from typer.testing import CliRunner
 from syncaudit.audit.run import AuditResult
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.cli import app
-from syncaudit.report.html import render_audit_html, render_report_html
+from syncaudit.report.html import render_audit_html
+from syncaudit.report.report_page import render_report_html
 
 CAMERA_PLOTS = (
     "error",
@@ -179,7 +181,7 @@ def test_combined_report_of_audit_and_calibration(audit: AuditResult, calibratio
 
 def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> None:
     calib = tmp_path / "calib.json"
-    calibration("calib_turntable_32").write_json(calib)
+    calib.write_text(json.dumps(calibration("calib_turntable_32").to_json_dict(), indent=2))
     out = tmp_path / "report.html"
     result = CliRunner().invoke(
         app,

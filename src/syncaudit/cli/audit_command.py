@@ -111,7 +111,7 @@ def audit(
                 with outputs.writing(pairings):
                     write_pairings(result, pairings, overwrite=overwrite, outputs=outputs)
             if html_out:
-                from syncaudit.report.html import render_report_html
+                from syncaudit.report.report_page import render_report_html
 
                 outputs.write_text(html_out, render_report_html(result, calibration))
             if parquet[0] is not None and parquet[1] is not None:

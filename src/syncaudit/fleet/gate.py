@@ -23,7 +23,12 @@ from syncaudit.fleet.executor import DEFAULT_MAX_TRIES, DEFAULT_TIMEOUT_S, Execu
 from syncaudit.fleet.gate_outputs import GateOutputs
 from syncaudit.fleet.inputs import LogJob, discover, file_fingerprint, fingerprint
 from syncaudit.fleet.job import JobOptions, LogOutcome
-from syncaudit.fleet.log_pages import render_error_page, report_file_name, report_name
+from syncaudit.fleet.log_pages import (
+    render_error_page,
+    render_log_page,
+    report_file_name,
+    report_name,
+)
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.fleet.remote_job import run_any_log_job
@@ -106,7 +111,8 @@ def plan_outputs(inputs: list[str], options: GateOptions) -> GateOutputs:
 def _judge(
     outcome: LogOutcome, policy: Policy, fp: str, rig_fp: str | None, policy_fp: str
 ) -> JudgedLog:
-    checks = evaluate(outcome, policy, outcome.job.vehicle)
+    checks = evaluate(outcome, policy, outcome.job.vehicle)  # the policy's one evaluation
+    draft = outcome.report_draft
     job = outcome.job
     if is_url(job.path):  # the database and outputs never keep a query string (tokens)
         job = LogJob(public_url(job.path), job.vehicle, job.rig_path, job.tags, job.source)
@@ -125,7 +131,7 @@ def _judge(
         error_code=outcome.error_code,
         attempts=outcome.attempts,
         elapsed_s=outcome.elapsed_s,
-        html=outcome.html,
+        html=None if draft is None else render_log_page(draft, checks),
         camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
         remote_read=outcome.remote_read,
         duration_s=outcome.duration_s,

@@ -8,6 +8,7 @@ from rich.console import Console
 from rich.table import Table
 
 from syncaudit.calib.result import AlignmentOut, CalibrationResult, ExtrinsicOut, FitOut, LidarOut
+from syncaudit.report.calib_figures import calibration_figures
 
 _STYLE = """
 <style>
@@ -160,15 +161,8 @@ def _lidar_block(lidar: LidarOut) -> str:
     )
 
 
-def _figures(result: CalibrationResult) -> str:
-    """Mounts, residuals and degenerate directions drawn (syncaudit.report.calib_figures)."""
-    from syncaudit.report.calib_figures import calibration_figures
-
-    return calibration_figures(result)
-
-
 def html_section(result: CalibrationResult) -> str:
-    """A self-contained HTML fragment (inline style, no scripts) for the report."""
+    """The calibration's part of a report page: tables and figures (inline style, no script)."""
     css, label = _verdict(result)
     limits = result.limits
     notes = "".join(f"<li>{escape(n)}</li>" for n in result.notes)
@@ -199,7 +193,7 @@ def html_section(result: CalibrationResult) -> str:
         + _map_pair_rows(result)
         + "</table></details>"
         + "".join(_lidar_block(lidar) for lidar in result.lidars)
-        + _figures(result)
+        + calibration_figures(result)
         + (f"<ul>{notes}</ul>" if notes else "")
         + f'<p class="muted">{escape(timings)}; {libs}</p>'
         "</section>"
@@ -264,10 +258,3 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     console.print(table)
     for note in result.notes:
         console.print(f"[dim]note: {note}[/]")
-
-
-def render_calibration_html(result: CalibrationResult) -> str:
-    """A self-contained HTML page of a calibration result (what `calib --html` writes)."""
-    from syncaudit.report.html import render_report_html
-
-    return render_report_html(None, result)
