@@ -50,9 +50,18 @@ class ConfigError(SyncauditError, ValueError):
 
     Also a ValueError, as pydantic's ValidationError is: code that validated a config and
     caught ValueError keeps working now that every config model raises ConfigError.
+    A validation failure also says where (`key_path`, e.g. `("cameras", 0, "stamp")`) and
+    what (`detail`), so a command can name the option that set the key instead.
     """
 
     exit_code = 6
+
+    def __init__(
+        self, message: str, *, key_path: tuple[str | int, ...] = (), detail: str | None = None
+    ) -> None:
+        super().__init__(message)
+        self.key_path = key_path
+        self.detail = detail
 
 
 class NoDataError(SyncauditError):

@@ -229,3 +229,23 @@ def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> 
     assert bad.exit_code == 6, bad.output
     assert "not a calibration result" in bad.output and "Traceback" not in bad.output
     assert not (tmp_path / "x.html").exists()
+
+
+def test_no_none_in_a_calibration_without_reference_stop(calibration: Load) -> None:
+    """The console said "reference lidar_front at stop None" for a session never anchored."""
+    import io
+
+    from rich.console import Console
+
+    from syncaudit.report.calib_section import html_section, render_calibration
+
+    refused = calibration("calib_turntable_32").model_copy(update={"reference_stop": None})
+    buffer = io.StringIO()
+    render_calibration(refused, Console(file=buffer, width=200))
+    console_text = buffer.getvalue()
+    section = html_section(refused)
+    for text in (console_text, section):
+        assert "None" not in text
+        assert "no stop anchored" in text
+    anchored = calibration("calib_turntable_32")
+    assert "at stop 0" in html_section(anchored)

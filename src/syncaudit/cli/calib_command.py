@@ -35,7 +35,7 @@ def _topics(value: str | None) -> list[str] | None:
     return topics
 
 
-@app.command()
+@app.command(short_help="Calibrate LiDARs and check recorded extrinsics.")
 def calib(
     log: Annotated[Path, typer.Argument(help="Log with PointCloud2 of two or more LiDARs.")],
     config_file: Annotated[

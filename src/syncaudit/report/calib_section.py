@@ -48,6 +48,13 @@ def _verdict(result: CalibrationResult) -> tuple[str, str]:
     return ("pass", "PASS") if result.passed else ("fail", "FAIL")
 
 
+def _at_stop(result: CalibrationResult) -> str:
+    """Where the reference LiDAR's map is anchored: `at stop 3`, or why there is no stop."""
+    if result.reference_stop is None:
+        return "(no stop anchored: not calibrated)"
+    return f"at stop {result.reference_stop}"
+
+
 def _xyz_rpy(values: tuple[float, float, float], digits: int) -> str:
     return ", ".join(f"{v:.{digits}f}" for v in values)
 
@@ -175,7 +182,7 @@ def html_section(result: CalibrationResult) -> str:
         + f'<h3>LiDAR extrinsic calibration (non-overlapping views) <span class="{css}">{label}</span></h3>'
         + reason
         + f"<p>Log <code>{escape(result.log)}</code>; reference LiDAR "
-        f"<code>{escape(result.reference_frame_id)}</code> at stop {result.reference_stop}; "
+        f"<code>{escape(result.reference_frame_id)}</code> {_at_stop(result)}; "
         f"recorded extrinsics from <code>{escape(result.extrinsics_source)}</code> "
         f"(base <code>{escape(result.base_frame)}</code>); limits {limits.max_rotation_deg:g} deg, "
         f"{limits.max_translation_cm:g} cm. Transforms are reference_from_lidar "
@@ -228,7 +235,7 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     if result.reason:
         console.print(f"[yellow]{result.reason}[/]")
     console.print(
-        f"reference {result.reference_frame_id} at stop {result.reference_stop}; recorded "
+        f"reference {result.reference_frame_id} {_at_stop(result)}; recorded "
         f"extrinsics from {result.extrinsics_source}; limits {result.limits.max_rotation_deg:g} deg / "
         f"{result.limits.max_translation_cm:g} cm"
     )
