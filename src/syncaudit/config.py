@@ -62,9 +62,7 @@ class ConfigModel(BaseModel):
         except ValidationError as exc:
             if nested:  # inside another model's validation: let that one add the key path
                 raise
-            raise ConfigError(
-                f"invalid {type(self).__name__}: {validation_summary(exc, type(self))}"
-            ) from None
+            raise _config_error(exc, type(self)) from None
         finally:
             _DEPTH.reset(token)
 
@@ -78,7 +76,7 @@ class ConfigModel(BaseModel):
         except ValidationError as exc:
             if nested:
                 raise
-            raise ConfigError(f"invalid {cls.__name__}: {validation_summary(exc, cls)}") from None
+            raise _config_error(exc, cls) from None
         finally:
             _DEPTH.reset(token)
 
@@ -90,6 +88,17 @@ class ConfigModel(BaseModel):
                 f"invalid {cls.__name__}: expected a mapping, got {type(data).__name__}"
             )
         return cls.model_validate(data)
+
+
+def _config_error(exc: ValidationError, model: type[BaseModel]) -> ConfigError:
+    """A model's validation failure as a one-line ConfigError that keeps where and what."""
+    summary = validation_summary(exc, model)
+    first = exc.errors()[0]
+    return ConfigError(
+        f"invalid {model.__name__}: {summary}",
+        key_path=tuple(first["loc"]),
+        detail=summary.split(": ", 1)[-1],
+    )
 
 
 def validation_summary(exc: ValidationError, model: type[BaseModel] | None = None) -> str:
@@ -244,6 +253,6 @@ def validate_mapping(path: str | Path, raw: Any, model: type[M], *, what: str = 
         return model.model_validate(raw)
     except ConfigError as exc:
         detail = str(exc).removeprefix(f"invalid {model.__name__}: ")
-        raise ConfigError(f"{path}: {detail}") from None
+        raise ConfigError(f"{path}: {detail}", key_path=exc.key_path, detail=exc.detail) from None
     except RecursionError:
         raise ConfigError(f"{path}: {what} nested too deeply to be a config") from None

@@ -6,12 +6,6 @@ same table, and a test keeps the two equal.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from pydantic import ValidationError
-
-
 EXIT_OK = 0
 EXIT_USAGE = 64
 """A usage error: unknown option, bad option value, conflicting options (BSD's EX_USAGE)."""
@@ -56,9 +50,18 @@ class ConfigError(SyncauditError, ValueError):
 
     Also a ValueError, as pydantic's ValidationError is: code that validated a config and
     caught ValueError keeps working now that every config model raises ConfigError.
+    A validation failure also says where (`key_path`, e.g. `("cameras", 0, "stamp")`) and
+    what (`detail`), so a command can name the option that set the key instead.
     """
 
     exit_code = 6
+
+    def __init__(
+        self, message: str, *, key_path: tuple[str | int, ...] = (), detail: str | None = None
+    ) -> None:
+        super().__init__(message)
+        self.key_path = key_path
+        self.detail = detail
 
 
 class NoDataError(SyncauditError):
@@ -144,10 +147,3 @@ def exit_code_table() -> str:
     rows = ["| code | meaning |", "| --- | --- |"]
     rows += [f"| {code} | {meaning} |" for code, meaning in EXIT_CODES]
     return "\n".join(rows)
-
-
-def validation_summary(exc: ValidationError) -> str:
-    """A pydantic ValidationError on one line (see `syncaudit.config.validation_summary`)."""
-    from syncaudit.config import validation_summary as one_line
-
-    return one_line(exc)

@@ -35,9 +35,6 @@ from syncaudit.calib import (
     PoseGraphConfig,
     RegistrationConfig,
     calibrate_log,
-    html_section,
-    render_calibration,
-    render_calibration_html,
     se3,
 )
 from syncaudit.calib.settings import (
@@ -48,7 +45,10 @@ from syncaudit.calib.settings import (
     rig_preset,
 )
 from syncaudit.errors import ConfigError, NoDataError
+from syncaudit.report.calib_section import html_section, render_calibration
+from syncaudit.report.report_page import render_calibration_html
 from syncaudit.simulate.calib_session import MATRIX, matrix_tolerance, simulate_calib_session
+from syncaudit.writers.atomic import write_text_atomic
 
 FAST_STOPS = 8
 """Stops per driving session in the fast subset (the benchmark runs 12)."""
@@ -238,7 +238,7 @@ def test_result_json_html_and_console(matrix_runs: dict[str, Any], tmp_path: Pat
     (ext,) = data["extrinsics"]
     assert ext["map_pairs"] and ext["map_pairs"][0]["anchor_stop"] == data["reference_stop"]
     out = tmp_path / "calib.json"
-    result.write_json(out)
+    write_text_atomic(out, json.dumps(data, indent=2) + "\n")
     assert json.loads(out.read_text()) == data
     assert [p.name for p in tmp_path.iterdir()] == ["calib.json"]
     html = html_section(result)

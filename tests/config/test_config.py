@@ -133,3 +133,16 @@ def test_many_camera_rig_validates_in_linear_time(tmp_path: Path) -> None:
             runs.append(time.process_time() - started)
         timings.append(min(runs))
     assert timings[1] < 30 * timings[0] + 0.5  # 10x the cameras: about 10x the time
+
+
+def test_a_config_error_keeps_where_and_what(tmp_path: Path) -> None:
+    """The key path and the message apart, so a command can name the option behind a key."""
+    rig = _rig(
+        tmp_path,
+        "lidar: {topic: /l}\ncameras:\n- {name: front, image_topic: /i, stamp: exposure_begin}\n",
+    )
+    with pytest.raises(ConfigError) as caught:
+        load_rig(rig)
+    assert caught.value.key_path == ("cameras", 0, "stamp")
+    assert caught.value.detail is not None and caught.value.detail.startswith("Input should be")
+    assert str(caught.value) == f"{rig}: cameras.0.stamp: {caught.value.detail}"

@@ -137,7 +137,7 @@ def test_the_bar_is_drawn_with_each_logs_state_before_its_status_line(
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     monkeypatch.setattr(
         fleet_cli,
-        "_stderr",
+        "stderr_console",
         lambda: Console(file=out, force_terminal=True, width=WIDTH, soft_wrap=True),
     )
     original = rich.progress.Progress.__init__

@@ -16,9 +16,9 @@ from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.report.html import (
     frame_time_ns,
     render_audit_html,
-    render_report_html,
     time_origin_ns,
 )
+from syncaudit.report.report_page import render_report_html
 
 pytestmark = needs_chromium
 

@@ -12,7 +12,7 @@ import pytest
 from syncaudit.calib import se3
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut, StopPointsOut, TopViewOut
 from syncaudit.report.calib_figures import calibration_figures
-from syncaudit.report.html import render_report_html
+from syncaudit.report.report_page import render_report_html
 from syncaudit.report.topview import MAX_MAP_POINTS, stop_colour, thin_stops, top_view_svg
 
 Load = Callable[[str], CalibrationResult]

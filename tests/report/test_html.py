@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Callable
 from html.parser import HTMLParser
@@ -13,7 +14,8 @@ from typer.testing import CliRunner
 from syncaudit.audit.run import AuditResult
 from syncaudit.calib.result import CalibrationResult, DegeneracyOut
 from syncaudit.cli import app
-from syncaudit.report.html import render_audit_html, render_report_html
+from syncaudit.report.html import render_audit_html
+from syncaudit.report.report_page import render_report_html
 
 CAMERA_PLOTS = (
     "error",
@@ -179,7 +181,7 @@ def test_combined_report_of_audit_and_calibration(audit: AuditResult, calibratio
 
 def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> None:
     calib = tmp_path / "calib.json"
-    calibration("calib_turntable_32").write_json(calib)
+    calib.write_text(json.dumps(calibration("calib_turntable_32").to_json_dict(), indent=2))
     out = tmp_path / "report.html"
     result = CliRunner().invoke(
         app,
@@ -227,3 +229,23 @@ def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> 
     assert bad.exit_code == 6, bad.output
     assert "not a calibration result" in bad.output and "Traceback" not in bad.output
     assert not (tmp_path / "x.html").exists()
+
+
+def test_no_none_in_a_calibration_without_reference_stop(calibration: Load) -> None:
+    """The console said "reference lidar_front at stop None" for a session never anchored."""
+    import io
+
+    from rich.console import Console
+
+    from syncaudit.report.calib_section import html_section, render_calibration
+
+    refused = calibration("calib_turntable_32").model_copy(update={"reference_stop": None})
+    buffer = io.StringIO()
+    render_calibration(refused, Console(file=buffer, width=200))
+    console_text = buffer.getvalue()
+    section = html_section(refused)
+    for text in (console_text, section):
+        assert "None" not in text
+        assert "no stop anchored" in text
+    anchored = calibration("calib_turntable_32")
+    assert "at stop 0" in html_section(anchored)

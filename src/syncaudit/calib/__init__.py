@@ -2,6 +2,8 @@
 
 The registration stack (small_gicp, gtsam) is the optional extra `syncaudit[calib]`; it is
 imported only when `calibrate_log` runs, so the simulator and the report work without it.
+The result is rendered by `syncaudit.report` (`calib_section`, `report_page`), which sits
+above this package.
 """
 
 from syncaudit.calib.pipeline import calibrate_log
@@ -22,7 +24,6 @@ from syncaudit.calib.settings import (
     mount_preset,
     rig_preset,
 )
-from syncaudit.report.calib_section import html_section, render_calibration, render_calibration_html
 
 __all__ = [
     "AlignmentLimits",
@@ -38,10 +39,7 @@ __all__ = [
     "ValidationConfig",
     "calib_scene_config",
     "calibrate_log",
-    "html_section",
     "load_config",
     "mount_preset",
-    "render_calibration",
-    "render_calibration_html",
     "rig_preset",
 ]

@@ -6,9 +6,7 @@ Infinite errors (nothing overlapped) are stored as null.
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict
@@ -16,7 +14,6 @@ from pydantic import BaseModel, ConfigDict
 from syncaudit.calib import se3
 from syncaudit.calib.registration import Alignment, Conditioning, Fit
 from syncaudit.calib.se3 import Mat
-from syncaudit.writers.atomic import write_text_atomic
 
 
 class _Out(BaseModel):
@@ -286,7 +283,3 @@ class CalibrationResult(_Out):
     def to_json_dict(self) -> dict[str, Any]:
         """The result as plain JSON types."""
         return self.model_dump(mode="json")
-
-    def write_json(self, path: Path) -> None:
-        """Write the JSON atomically (temporary file beside `path`, then rename)."""
-        write_text_atomic(Path(path), json.dumps(self.to_json_dict(), indent=2) + "\n")

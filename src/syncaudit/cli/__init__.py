@@ -15,19 +15,18 @@ from __future__ import annotations
 from syncaudit.cli import (
     audit_command,
     calib_command,
+    fleet_commands,
     info_command,
     rig_command,
     simulate_command,
 )
 from syncaudit.cli.common import app, main
-from syncaudit.cli.fleet_commands import register as register_fleet
-
-register_fleet(app)  # syncaudit gate, syncaudit fleet report (src/syncaudit/cli/fleet_commands.py)
 
 __all__ = [
     "app",
     "audit_command",
     "calib_command",
+    "fleet_commands",
     "info_command",
     "main",
     "rig_command",

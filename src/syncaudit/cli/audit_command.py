@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -26,10 +27,12 @@ from syncaudit.cli.common import (
 from syncaudit.cli.startup import one_blas_thread
 
 if TYPE_CHECKING:
+    from syncaudit.audit.run import AuditResult
     from syncaudit.calib.result import CalibrationResult
+    from syncaudit.writers.outputs import OutputSet
 
 
-@app.command()
+@app.command(short_help="Audit LiDAR-camera sync per camera (Eq. 1-6).")
 def audit(
     log: LogArgument,
     rig: RigOption = None,
@@ -82,59 +85,119 @@ def audit(
     """Audit LiDAR-camera sync per camera (Eq 1-6), the recommended delay and the verdict."""
 
     def job() -> None:
-        pairings = _pairings_target(pairings_out) if pairings_out else None
-        parquet = _parquet_targets(parquet_out) if parquet_out else (None, None)
+        targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
         calibration = _load_calibration(calibration_json) if calibration_json else None
         with output_set(
-            overwrite=overwrite,
-            inputs=(log, rig, calibration_json),
-            targets=(json_out, html_out, csv_out, *parquet),
+            overwrite=overwrite, inputs=(log, rig, calibration_json), targets=targets.files()
         ) as outputs:
-            if pairings is not None:
-                outputs.add(pairings, kind="dir" if pairings.suffix == "" else "file")
-            from syncaudit.audit.run import audit_log
-            from syncaudit.rig import load_rig
-
-            result = audit_log(
-                log,
-                load_rig(rig) if rig else None,
-                jobs=jobs,
-                check_crc=check_crc,
-                meanwhile=None if as_json else _import_tables,
-            )
+            targets.claim_pairings(outputs)
+            result = _audit(log, rig, jobs=jobs, check_crc=check_crc, tables=not as_json)
             data = result.to_dict()
-            if json_out:
-                outputs.write_text(json_out, json_text(data))
-            if pairings is not None:
-                from syncaudit.writers.pairings import write_pairings
-
-                with outputs.writing(pairings):
-                    write_pairings(result, pairings, overwrite=overwrite, outputs=outputs)
-            if html_out:
-                from syncaudit.report.html import render_report_html
-
-                outputs.write_text(html_out, render_report_html(result, calibration))
-            if parquet[0] is not None and parquet[1] is not None:
-                from syncaudit.writers.parquet import cameras_parquet, frames_parquet
-
-                outputs.write_bytes(parquet[0], frames_parquet(result))
-                outputs.write_bytes(parquet[1], cameras_parquet(result))
-            if csv_out:
-                from syncaudit.writers.frames_csv import frames_csv
-
-                outputs.write_text(csv_out, frames_csv(result))
-        if as_json:
-            print_json(data)
-        else:
-            from syncaudit.report.console import render_audit
-
-            emit(lambda: render_audit(result, stdout_console()))
+            targets.write(outputs, result, data, calibration, overwrite=overwrite)
+        _show(result, data, as_json=as_json)
         if gate and not result.passed:
             from syncaudit.errors import GateFailedError
 
             raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
 
     run(job, imports=_import_audit)
+
+
+@dataclass(frozen=True, slots=True)
+class _Targets:
+    """The files an audit writes, checked from the command line before any work."""
+
+    json_out: Path | None
+    pairings: Path | None
+    """Where `--pairings` goes (a ROS 2 bag folder for `NAME.db3`)."""
+    html: Path | None
+    csv: Path | None
+    parquet: tuple[Path, Path] | None
+    """The per-frame table and the per-camera summary beside it."""
+
+    @classmethod
+    def of(
+        cls,
+        json_out: Path | None,
+        pairings_out: Path | None,
+        html: Path | None,
+        csv: Path | None,
+        parquet_out: Path | None,
+    ) -> _Targets:
+        """The targets of the options given; usage error (exit 64) or exit 8 now if wrong."""
+        return cls(
+            json_out=json_out,
+            pairings=_pairings_target(pairings_out) if pairings_out else None,
+            html=html,
+            csv=csv,
+            parquet=_parquet_targets(parquet_out) if parquet_out else None,
+        )
+
+    def files(self) -> tuple[Path | None, ...]:
+        """Every single-file target (the pairings may be a folder: `claim_pairings`)."""
+        return (self.json_out, self.html, self.csv, *(self.parquet or (None, None)))
+
+    def claim_pairings(self, outputs: OutputSet) -> None:
+        """Add the pairings log to the output set (a folder for a ROS 2 bag)."""
+        if self.pairings is not None:
+            outputs.add(self.pairings, kind="dir" if self.pairings.suffix == "" else "file")
+
+    def write(
+        self,
+        outputs: OutputSet,
+        result: AuditResult,
+        data: dict[str, Any],
+        calibration: CalibrationResult | None,
+        *,
+        overwrite: bool,
+    ) -> None:
+        """Write every asked-for output of the audit into the output set."""
+        if self.json_out:
+            outputs.write_text(self.json_out, json_text(data))
+        if self.pairings is not None:
+            from syncaudit.writers.pairings import write_pairings
+
+            with outputs.writing(self.pairings):
+                write_pairings(result, self.pairings, overwrite=overwrite, outputs=outputs)
+        if self.html:
+            from syncaudit.report.report_page import render_report_html
+
+            outputs.write_text(self.html, render_report_html(result, calibration))
+        if self.parquet is not None:
+            from syncaudit.writers.parquet import cameras_parquet, frames_parquet
+
+            outputs.write_bytes(self.parquet[0], frames_parquet(result))
+            outputs.write_bytes(self.parquet[1], cameras_parquet(result))
+        if self.csv:
+            from syncaudit.writers.frames_csv import frames_csv
+
+            outputs.write_text(self.csv, frames_csv(result))
+
+
+def _audit(
+    log: Path, rig: Path | None, *, jobs: int | None, check_crc: bool, tables: bool
+) -> AuditResult:
+    """The audit of `log`; the tables' modules are imported while the workers read."""
+    from syncaudit.audit.run import audit_log
+    from syncaudit.rig import load_rig
+
+    return audit_log(
+        log,
+        load_rig(rig) if rig else None,
+        jobs=jobs,
+        check_crc=check_crc,
+        meanwhile=_import_tables if tables else None,
+    )
+
+
+def _show(result: AuditResult, data: dict[str, Any], *, as_json: bool) -> None:
+    """The result on stdout: JSON, or the tables."""
+    if as_json:
+        print_json(data)
+    else:
+        from syncaudit.report.console import render_audit
+
+        emit(lambda: render_audit(result, stdout_console()))
 
 
 def _import_audit() -> None:

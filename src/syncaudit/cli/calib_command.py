@@ -35,7 +35,7 @@ def _topics(value: str | None) -> list[str] | None:
     return topics
 
 
-@app.command()
+@app.command(short_help="Calibrate LiDARs and check recorded extrinsics.")
 def calib(
     log: Annotated[Path, typer.Argument(help="Log with PointCloud2 of two or more LiDARs.")],
     config_file: Annotated[
@@ -75,7 +75,7 @@ def calib(
             if json_out:
                 outputs.write_text(json_out, json_text(result.to_json_dict()))
             if html_out:
-                from syncaudit.report.calib_section import render_calibration_html
+                from syncaudit.report.report_page import render_calibration_html
 
                 outputs.write_text(html_out, render_calibration_html(result))
         if as_json:

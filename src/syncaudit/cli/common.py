@@ -8,25 +8,29 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import difflib
+import functools
 import json
 import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperArgument, TyperGroup
 from typer.main import get_command_name
 from typer.models import CommandInfo
 
 try:  # typer >= 0.22 vendors click
     from typer._click import exceptions as click_errors
+    from typer._click import utils as click_utils
 except ImportError:  # pragma: no cover - older typer on the click package
     from click import exceptions as click_errors  # type: ignore[no-redef,import-not-found,unused-ignore]
+    from click import utils as click_utils  # type: ignore[no-redef,import-not-found,unused-ignore]
 
 
 from syncaudit import __version__
@@ -35,9 +39,11 @@ from syncaudit.errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_USAGE,
+    ConfigError,
     Interrupted,
     OutputError,
     SyncauditError,
+    UsageError,
 )
 
 if TYPE_CHECKING:
@@ -81,11 +87,83 @@ def signals_raise() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+HELP_OPTIONS = ["-h", "--help"]
+"""Help on every command and group (click contexts pass them on to their children)."""
+
+
 def _usage_line(exc: click_errors.UsageError) -> str:
     """A click usage error as one line naming the option, with where to find help."""
-    message = " ".join(exc.format_message().split())
+    if isinstance(exc, click_errors.NoSuchOption):
+        message = f"No such option: {exc.option_name}"
+        nearest = nearest_option(exc.option_name, exc.ctx)
+        if nearest is not None:
+            message += f" (did you mean {nearest}?)"
+    else:
+        message = " ".join(exc.format_message().split())
     where = exc.ctx.command_path if exc.ctx is not None else "syncaudit"
     return f"error: {message} (see '{where} --help')"
+
+
+def nearest_option(typed: str, ctx: Any) -> str | None:
+    """The command's option nearest to an unknown one (`--overwite` -> `--overwrite`), if any.
+
+    Names are compared without their dashes, so that `--` alone makes nothing close (click
+    offers `--jobs` for `--bogus`).
+    """
+    if ctx is None:
+        return None
+    names = [
+        name
+        for param in ctx.command.get_params(ctx)
+        for name in (*param.opts, *param.secondary_opts)
+        if name.startswith("-")
+    ]
+    by_word = {name.lstrip("-"): name for name in names}
+    close = difflib.get_close_matches(typed.lstrip("-"), list(by_word), n=1, cutoff=0.6)
+    return by_word[close[0]] if close else None
+
+
+def first_sentence(text: str) -> str:
+    """A help text's first sentence, whole: up to a full stop before a capital or the end.
+
+    click cuts at the first full stop (`Eq. 5` became `Eq.`) and past 45 characters.
+    """
+    flat = " ".join(text.split("\n\n", 1)[0].split())
+    for index, char in enumerate(flat):
+        rest = flat[index + 1 :]
+        if char == "." and (not rest or (rest.startswith(" ") and rest[1:2].isupper())):
+            return flat[: index + 1]
+    return flat
+
+
+class _UsageArgument(TyperArgument):
+    """An argument the usage line names as users type it: `LOG`, `LOG...`, `[OUT]`.
+
+    typer writes a required argument as `{log}`.
+    """
+
+    def _usage_display_name(self) -> str:
+        name = self.metavar or (self.name or "arg").upper()
+        if self.nargs != 1:
+            name += "..."
+        return name if self.required else f"[{name}]"
+
+
+def _polish(command: Any) -> None:
+    """The help of every command of the tree as users read it.
+
+    A command without a `short_help` gets its first sentence uncut; arguments are named
+    in capitals on the usage line (`_UsageArgument`).
+    """
+    for param in getattr(command, "params", []):
+        if type(param) is TyperArgument:
+            if param.metavar is None:
+                param.metavar = (param.name or "arg").upper()
+            param.__class__ = _UsageArgument
+    for child in getattr(command, "commands", {}).values():
+        if not child.short_help and child.help:
+            child.short_help = first_sentence(child.help)
+        _polish(child)
 
 
 _NO_ARGS_IS_HELP: type[click_errors.UsageError] = getattr(
@@ -105,6 +183,7 @@ class SyncauditGroup(TyperGroup):
         **extra: Any,
     ) -> Any:
         """Run the command line; in standalone mode exit with the documented code."""
+        _polish(self)
         try:
             with signals_raise():
                 code = super().main(
@@ -116,17 +195,25 @@ class SyncauditGroup(TyperGroup):
                 )
         except _NO_ARGS_IS_HELP as exc:
             if exc.ctx is not None:
-                typer.echo(exc.ctx.get_help())
+                help_text = exc.ctx.get_help()
+                emit(lambda: typer.echo(help_text))
             code = EXIT_USAGE
         except click_errors.UsageError as exc:
-            typer.echo(_usage_line(exc), err=True)
+            say(_usage_line(exc))
             code = EXIT_USAGE
         except (typer.Abort, KeyboardInterrupt, Interrupted):
-            typer.echo("error: interrupted", err=True)
+            say("error: interrupted")
             code = EXIT_INTERRUPTED
         except click_errors.ClickException as exc:
-            typer.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
+            say(f"error: {' '.join(exc.format_message().split())}")
             code = EXIT_USAGE
+        except SystemExit as exc:
+            # click exits 1 when its own printing (a help text) meets a closed pipe, after
+            # wrapping the streams; the command bodies print through `emit` and `say`.
+            if exc.code != 1 or not isinstance(sys.stdout, click_utils.PacifyFlushWrapper):
+                raise
+            reader_gone()
+            code = 0
         if not standalone_mode:
             return code
         sys.exit(code if isinstance(code, int) else 0)
@@ -140,6 +227,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
+    context_settings={"help_option_names": HELP_OPTIONS},
 )
 
 
@@ -190,18 +278,32 @@ OverwriteFlag = Annotated[
 # -- running a command ---------------------------------------------------------------------
 
 
+def say(line: str) -> None:
+    """One line on stderr; a reader that went away (`2>&1 | head`) is not an error.
+
+    The exit code is decided by the caller, never by the pipe.
+    """
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except (BrokenPipeError, ValueError):  # ValueError: the stream is closed
+        reader_gone()
+
+
 def fail(message: str, code: int) -> NoReturn:
     """Print one `error:` line on stderr and exit with `code`."""
-    typer.echo(f"error: {message}", err=True)
+    say(f"error: {message}")
     raise typer.Exit(code)
 
 
 def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) -> T:
     """Run a command body: known errors become one line on stderr and their exit code.
 
+    The one mapping of the command line from errors to exit codes (`errors.EXIT_CODES`).
     `imports` (the modules the body needs whatever its options) run first, still within
     the console script's start-up pause of the garbage collector (`cli.startup`), which
-    ends before `job`.
+    ends before `job`. A reader that went away is not an error: printing stops, the exit
+    code stays the one the command reached (`emit`, `say`).
     """
     try:
         if imports is not None:
@@ -214,8 +316,8 @@ def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) ->
         fail(" ".join(str(exc).split()), exc.exit_code)
     except (KeyboardInterrupt, Interrupted):
         fail("interrupted", EXIT_INTERRUPTED)
-    except BrokenPipeError:
-        quiet_stdout()
+    except BrokenPipeError:  # printed without `emit`: nothing else is known to have failed
+        reader_gone()
         raise typer.Exit(0) from None
     except OSError as exc:  # an output the OutputSet did not name (should not happen)
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
@@ -230,14 +332,18 @@ def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) ->
         )
 
 
-def quiet_stdout() -> None:
-    """Point stdout at /dev/null after its reader went away (`| head`), so exit is quiet."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError, AttributeError):
-        pass  # not a real file (a test runner's buffer): nothing to silence
+def reader_gone() -> None:
+    """Point stdout and stderr at /dev/null once a reader went away (`| head`, `2>&1 | head`).
+
+    Both: with `2>&1` they are one pipe, and the next line on either would fail again.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):
+            pass  # not a real file (a test runner's buffer): nothing to silence
 
 
 def emit(show: Callable[[], None]) -> None:
@@ -246,22 +352,42 @@ def emit(show: Callable[[], None]) -> None:
         show()
         sys.stdout.flush()
     except BrokenPipeError:
-        quiet_stdout()
+        reader_gone()
 
 
-def stdout_console() -> Console:
-    """A rich console on stdout: styled on a terminal; plain, unwrapped, full width otherwise."""
+def _console_class() -> type[Console]:
+    """rich's Console, but a reader that went away raises BrokenPipeError (rich's exits 1)."""
     from rich.console import Console
 
     class _Console(Console):
         def on_broken_pipe(self) -> None:
-            """A reader that went away: stop printing (rich's own exits 1)."""
+            """Stop printing and let `emit` / `say` carry on (the exit code is not the pipe's)."""
             self.quiet = True
             raise BrokenPipeError
 
+    return _Console
+
+
+def stdout_console() -> Console:
+    """A rich console on stdout: styled on a terminal; plain, unwrapped, full width otherwise."""
+    console = _console_class()
     if sys.stdout.isatty():
-        return _Console(highlight=False)
-    return _Console(width=PIPE_WIDTH, soft_wrap=True, highlight=False, no_color=True)
+        return console(highlight=False)
+    return console(width=PIPE_WIDTH, soft_wrap=True, highlight=False, no_color=True)
+
+
+@functools.cache
+def stderr_console() -> Console:
+    """The rich console on stderr (progress, warnings), made on first use."""
+    return _console_class()(stderr=True, soft_wrap=True)
+
+
+def note(markup: str) -> None:
+    """One rich-markup line on stderr; a reader that went away is not an error."""
+    try:
+        stderr_console().print(markup, highlight=False)
+    except BrokenPipeError:
+        reader_gone()
 
 
 def print_json(data: Any) -> None:
@@ -344,3 +470,17 @@ def main() -> None:
     with contextlib.suppress(OSError):
         sys.stderr.flush()
     os._exit(code)
+
+
+def option_error(exc: ConfigError, options: Mapping[str, str]) -> UsageError:
+    """A config refused by its model, worded with the option that set the bad key.
+
+    `options` maps config fields to the options setting them (`stamp_semantics` ->
+    `--stamp`). A key no option sets keeps its path as the config names it; the path is
+    never rewritten piecewise (that made `cameras.0.--stamp`).
+    """
+    for key in reversed(exc.key_path):
+        if isinstance(key, str) and key in options:
+            return UsageError(f"{options[key]}: {exc.detail or exc}")
+    detail = str(exc).split(": ", 1)[-1] if str(exc).startswith("invalid ") else str(exc)
+    return UsageError(detail.removeprefix("(top level): "))

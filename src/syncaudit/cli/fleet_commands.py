@@ -2,31 +2,19 @@
 
 from __future__ import annotations
 
-import os
 import sys
-from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from syncaudit.cli.startup import resume_gc
-from syncaudit.errors import ConfigError, Interrupted, OutputError, SyncauditError, UsageError
+from syncaudit.cli.common import app, note, run, say, stderr_console
+from syncaudit.errors import ConfigError, UsageError
 
 if TYPE_CHECKING:
-    from rich.console import Console
+    from syncaudit.fleet.gate import GateOptions
 
-EXIT_USAGE = UsageError.exit_code
-EXIT_INTERNAL = 70
 MAX_WARNING_LINES = 10
-
-
-@cache
-def _stderr() -> Console:
-    """The rich console on stderr, made on first use (`syncaudit --help` stays light)."""
-    from rich.console import Console
-
-    return Console(stderr=True, soft_wrap=True)
 
 
 def _escape(text: str) -> str:
@@ -34,35 +22,6 @@ def _escape(text: str) -> str:
     from rich.markup import escape
 
     return escape(text)
-
-
-def _fail(code: int, message: str) -> typer.Exit:
-    for line in message.splitlines():
-        typer.echo(f"error: {line}", err=True)
-    return typer.Exit(code)
-
-
-def _guarded(body: Any) -> Any:
-    """Known errors: their lines and exit codes; anything else: exit 70, never a traceback."""
-    resume_gc()  # the console script's start-up pause (syncaudit.cli.startup)
-    try:
-        return body()
-    except typer.Exit:
-        raise
-    except SyncauditError as exc:
-        raise _fail(exc.exit_code, str(exc)) from None
-    except (KeyboardInterrupt, Interrupted):
-        raise _fail(130, "interrupted") from None
-    except OSError as exc:
-        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
-        raise _fail(OutputError.exit_code, f"{where}{exc.strerror or exc}") from None
-    except Exception as exc:
-        if os.environ.get("SYNCAUDIT_DEBUG"):
-            raise
-        raise _fail(
-            EXIT_INTERNAL,
-            f"internal error: {type(exc).__name__}: {exc} (set SYNCAUDIT_DEBUG=1 for a traceback)",
-        ) from None
 
 
 def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
@@ -82,7 +41,7 @@ def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             TextColumn("{task.description}"),
-            console=_stderr(),
+            console=stderr_console(),
             transient=False,
         )
         task = bar.add_task("", total=total_hint)
@@ -104,146 +63,152 @@ def _progress_printer(total_hint: int | None = None) -> tuple[Any, Any]:
         return update, bar.stop
 
     def line(log: Any, done: int, total: int) -> None:
-        note = " (unchanged, from the database)" if log.skipped else ""
+        skipped = " (unchanged, from the database)" if log.skipped else ""
         error = f": {log.error}" if log.error else ""
-        sys.stderr.write(f"[{done}/{total}] {log.verdict} {log.path}{note}{error}\n")
-        sys.stderr.flush()
+        say(f"[{done}/{total}] {log.verdict} {log.path}{skipped}{error}")
 
     return line, lambda: None
 
 
-def register(app: typer.Typer) -> None:
-    """Add `gate` and `fleet report` to the syncaudit command line."""
+@app.command(
+    short_help="Judge many logs against a policy (CI gate).",
+)
+def gate(
+    inputs: Annotated[
+        list[str],
+        typer.Argument(
+            metavar="LOG",
+            help="Logs, ROS 2 bag folders, directories (searched recursively), globs, "
+            "or CSV/JSONL manifests (path, vehicle, rig, tags).",
+            show_default=False,
+        ),
+    ],
+    policy: Annotated[Path | None, typer.Option("--policy", help="Policy file (YAML).")] = None,
+    init: Annotated[
+        bool,
+        typer.Option("--init", help="Write a policy from these known-good logs (to -o)."),
+    ] = False,
+    output: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="With --init: the policy file to write."),
+    ] = None,
+    db: Annotated[
+        Path, typer.Option("--db", help="Results database (DuckDB file), created if absent.")
+    ] = Path("fleet.duckdb"),
+    no_db: Annotated[
+        bool, typer.Option("--no-db", help="Record nothing (no skipping of unchanged logs).")
+    ] = False,
+    junit: Annotated[Path | None, typer.Option("--junit", help="Write JUnit XML here.")] = None,
+    summary: Annotated[
+        Path | None, typer.Option("--summary", help="Write a Markdown summary here.")
+    ] = None,
+    json_out: Annotated[
+        Path | None, typer.Option("--json-out", help="Write the JSON summary here.")
+    ] = None,
+    html: Annotated[
+        Path | None,
+        typer.Option("--html", help="Write per-log HTML reports and index.html here."),
+    ] = None,
+    jobs: Annotated[
+        int | None, typer.Option("--jobs", "-j", help="Worker processes (default: cores).")
+    ] = None,
+    timeout: Annotated[
+        float, typer.Option("--timeout", help="Per-log timeout in seconds.")
+    ] = 3600.0,
+    tries: Annotated[int, typer.Option("--tries", help="Tries per log when its worker dies.")] = 2,
+    force: Annotated[
+        bool, typer.Option("--force", help="Judge again logs already in the database.")
+    ] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace existing output files.")
+    ] = False,
+    cluster: Annotated[
+        str | None,
+        typer.Option(
+            "--cluster",
+            help="Run the audits on this Dask scheduler (tcp://host:8786); "
+            "needs syncaudit[cluster] here and on the workers.",
+        ),
+    ] = None,
+) -> None:
+    """Judge many logs against a policy: JUnit, summaries, reports, results database."""
 
-    @app.command()
-    def gate(
-        inputs: Annotated[
-            list[str],
-            typer.Argument(
-                help="Logs, ROS 2 bag folders, directories (searched recursively), globs, "
-                "or CSV/JSONL manifests (path, vehicle, rig, tags).",
-                show_default=False,
-            ),
-        ],
-        policy: Annotated[Path | None, typer.Option("--policy", help="Policy file (YAML).")] = None,
-        init: Annotated[
-            bool,
-            typer.Option("--init", help="Write a policy from these known-good logs (to -o)."),
-        ] = False,
-        output: Annotated[
-            Path | None,
-            typer.Option("--output", "-o", help="With --init: the policy file to write."),
-        ] = None,
-        db: Annotated[
-            Path, typer.Option("--db", help="Results database (DuckDB file), created if absent.")
-        ] = Path("fleet.duckdb"),
-        no_db: Annotated[
-            bool, typer.Option("--no-db", help="Record nothing (no skipping of unchanged logs).")
-        ] = False,
-        junit: Annotated[Path | None, typer.Option("--junit", help="Write JUnit XML here.")] = None,
-        summary: Annotated[
-            Path | None, typer.Option("--summary", help="Write a Markdown summary here.")
-        ] = None,
-        json_out: Annotated[
-            Path | None, typer.Option("--json-out", help="Write the JSON summary here.")
-        ] = None,
-        html: Annotated[
-            Path | None,
-            typer.Option("--html", help="Write per-log HTML reports and index.html here."),
-        ] = None,
-        jobs: Annotated[
-            int | None, typer.Option("--jobs", "-j", help="Worker processes (default: cores).")
-        ] = None,
-        timeout: Annotated[
-            float, typer.Option("--timeout", help="Per-log timeout in seconds.")
-        ] = 3600.0,
-        tries: Annotated[
-            int, typer.Option("--tries", help="Tries per log when its worker dies.")
-        ] = 2,
-        force: Annotated[
-            bool, typer.Option("--force", help="Judge again logs already in the database.")
-        ] = False,
-        overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Replace existing output files.")
-        ] = False,
-        cluster: Annotated[
-            str | None,
-            typer.Option(
-                "--cluster",
-                help="Run the audits on this Dask scheduler (tcp://host:8786); "
-                "needs syncaudit[cluster] here and on the workers.",
-            ),
-        ] = None,
-    ) -> None:
-        """Judge many logs against a policy: JUnit, summaries, reports, results database."""
+    def job() -> int:
         if jobs is not None and jobs < 1:
-            raise _fail(EXIT_USAGE, "--jobs must be at least 1")
+            raise UsageError("--jobs must be at least 1")
         if timeout <= 0 or tries < 1:
-            raise _fail(EXIT_USAGE, "--timeout must be positive and --tries at least 1")
+            raise UsageError("--timeout must be positive and --tries at least 1")
         if init:
-            if output is None:
-                raise _fail(EXIT_USAGE, "--init needs -o/--output (the policy file to write)")
-            if policy is not None:
-                raise _fail(EXIT_USAGE, "--init writes a policy: it does not take --policy")
-            _guarded(lambda: _init(inputs, output, overwrite, jobs, timeout))
-            return
+            _init(inputs, _init_target(output, policy), overwrite, jobs, timeout)
+            return 0
         if policy is None:
-            raise _fail(
-                EXIT_USAGE, "missing --policy (write one with --init LOG... -o policy.yaml)"
-            )
+            raise UsageError("missing --policy (write one with --init LOG... -o policy.yaml)")
         if output is not None:
-            raise _fail(EXIT_USAGE, "-o/--output is for --init; use --junit/--summary/--json-out")
-        code = _guarded(
-            lambda: _gate(
-                inputs,
-                policy,
-                None if no_db else db,
-                junit,
-                summary,
-                json_out,
-                html,
-                jobs,
-                timeout,
-                tries,
-                force,
-                overwrite,
-                cluster,
-            )
+            raise UsageError("-o/--output is for --init; use --junit/--summary/--json-out")
+        from syncaudit.fleet.gate import GateOptions
+
+        options = GateOptions(
+            db=None if no_db else db,
+            junit=junit,
+            summary=summary,
+            json_out=json_out,
+            html_dir=html,
+            jobs=jobs,
+            timeout_s=timeout,
+            max_tries=tries,
+            force=force,
+            overwrite=overwrite,
+            cluster=cluster,
+            policy_path=policy,
         )
-        raise typer.Exit(code)
+        return _gate(inputs, policy, options)
 
-    fleet = typer.Typer(help="Fleet results: dashboards and exports from the results database.")
+    raise typer.Exit(run(job))
 
-    @fleet.command("report")
-    def report(
-        db: Annotated[Path, typer.Option("--db", help="Results database (DuckDB file).")],
-        html: Annotated[
-            Path | None, typer.Option("--html", help="Write the dashboard (index.html) here.")
-        ] = None,
-        parquet: Annotated[
-            Path | None, typer.Option("--parquet", help="Export the per-camera table as Parquet.")
-        ] = None,
-        csv: Annotated[
-            Path | None, typer.Option("--csv", help="Export the per-camera table as CSV.")
-        ] = None,
-        overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Replace existing outputs.")
-        ] = False,
-    ) -> None:
-        """Dashboard of Eq. 5 error, delays and t1..t4 per vehicle and camera over time."""
+
+def _init_target(output: Path | None, policy: Path | None) -> Path:
+    """The policy file `--init` writes: it needs -o and takes no --policy."""
+    if output is None:
+        raise UsageError("--init needs -o/--output (the policy file to write)")
+    if policy is not None:
+        raise UsageError("--init writes a policy: it does not take --policy")
+    return output
+
+
+fleet_app = typer.Typer(
+    help="Fleet results: dashboards and exports from the results database.",
+    no_args_is_help=True,
+)
+app.add_typer(fleet_app, name="fleet", short_help="Fleet dashboards and exports.")
+
+
+@fleet_app.command("report", short_help="Dashboard and tables of the results database.")
+def report(
+    db: Annotated[Path, typer.Option("--db", help="Results database (DuckDB file).")],
+    html: Annotated[
+        Path | None, typer.Option("--html", help="Write the dashboard (index.html) here.")
+    ] = None,
+    parquet: Annotated[
+        Path | None, typer.Option("--parquet", help="Export the per-camera table as Parquet.")
+    ] = None,
+    csv: Annotated[
+        Path | None, typer.Option("--csv", help="Export the per-camera table as CSV.")
+    ] = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace existing outputs.")
+    ] = False,
+) -> None:
+    """Dashboard of Eq. 5 error, delays and t1..t4 per vehicle and camera over time."""
+
+    def job() -> None:
         if html is None and parquet is None and csv is None:
-            raise _fail(EXIT_USAGE, "nothing to do: give --html, --parquet and/or --csv")
-
+            raise UsageError("nothing to do: give --html, --parquet and/or --csv")
         _need_duckdb()
+        from syncaudit.fleet.dashboard import write_report
 
-        def body() -> None:
-            from syncaudit.fleet.dashboard import write_report
+        write_report(db, html_dir=html, parquet=parquet, csv=csv, overwrite=overwrite)
 
-            write_report(db, html_dir=html, parquet=parquet, csv=csv, overwrite=overwrite)
-
-        _guarded(body)
-
-    app.add_typer(fleet, name="fleet")
+    run(job)
 
 
 def _need_duckdb() -> None:
@@ -251,9 +216,8 @@ def _need_duckdb() -> None:
     try:
         import duckdb  # noqa: F401
     except ImportError:
-        raise _fail(
-            EXIT_USAGE,
-            "the results database needs DuckDB: pip install 'syncaudit[fleet]' (or pass --no-db)",
+        raise UsageError(
+            "the results database needs DuckDB: pip install 'syncaudit[fleet]' (or pass --no-db)"
         ) from None
 
 
@@ -280,73 +244,37 @@ def _init(
         outcomes = list(executor.run(found.jobs, JobOptions(audit_jobs=audit_jobs)))
         bad = [o for o in outcomes if not o.ok]
         for outcome in bad:
-            _stderr().print(
-                f"[yellow]skipped:[/] {_escape(f'{outcome.job.path}: {outcome.error}')}",
-                highlight=False,
-            )
+            note(f"[yellow]skipped:[/] {_escape(f'{outcome.job.path}: {outcome.error}')}")
         if len(bad) == len(outcomes):
             from syncaudit.errors import LogReadError
 
             raise LogReadError("--init: no log could be audited")
         out.write_text(output, init_policy_yaml(outcomes))
-    _stderr().print(
-        f"policy from {len(outcomes) - len(bad)} log(s) written to {output}", highlight=False
-    )
+    note(_escape(f"policy from {len(outcomes) - len(bad)} log(s) written to {output}"))
 
 
-def _gate(
-    inputs: list[str],
-    policy_path: Path,
-    db: Path | None,
-    junit: Path | None,
-    summary: Path | None,
-    json_out: Path | None,
-    html: Path | None,
-    jobs: int | None,
-    timeout: float,
-    tries: int,
-    force: bool,
-    overwrite: bool,
-    cluster: str | None = None,
-) -> int:
-    from syncaudit.fleet.gate import GateOptions, run_gate
+def _gate(inputs: list[str], policy_path: Path, options: GateOptions) -> int:
+    """Run the gate with its progress on stderr; the exit code its verdicts make."""
+    from syncaudit.fleet.gate import run_gate
     from syncaudit.fleet.policy import load_policy
 
     policy = load_policy(policy_path)
-    if db is not None:
+    if options.db is not None:
         _need_duckdb()
-    options = GateOptions(
-        db=db,
-        junit=junit,
-        summary=summary,
-        json_out=json_out,
-        html_dir=html,
-        jobs=jobs,
-        timeout_s=timeout,
-        max_tries=tries,
-        force=force,
-        overwrite=overwrite,
-        cluster=cluster,
-        policy_path=policy_path,
-    )
     update, finish = _progress_printer()
     try:
-        run = run_gate(inputs, policy, options, progress=update)
+        result = run_gate(inputs, policy, options, progress=update)
     finally:
         finish()
-    for line in run.warnings[:MAX_WARNING_LINES]:
-        _stderr().print(f"[yellow]warning:[/] {_escape(line)}", highlight=False)
-    if len(run.warnings) > MAX_WARNING_LINES:
-        _stderr().print(
-            f"[yellow]warning:[/] ... and {len(run.warnings) - MAX_WARNING_LINES} more "
-            "log(s) without a vehicle id (all listed in --summary / --json-out)",
-            highlight=False,
+    for line in result.warnings[:MAX_WARNING_LINES]:
+        note(f"[yellow]warning:[/] {_escape(line)}")
+    if len(result.warnings) > MAX_WARNING_LINES:
+        note(
+            f"[yellow]warning:[/] ... and {len(result.warnings) - MAX_WARNING_LINES} more "
+            "log(s) without a vehicle id (all listed in --summary / --json-out)"
         )
     counts = {
-        v: sum(log.verdict == v for log in run.logs) for v in ("pass", "warn", "fail", "error")
+        v: sum(log.verdict == v for log in result.logs) for v in ("pass", "warn", "fail", "error")
     }
-    _stderr().print(
-        f"gate: {len(run.logs)} log(s): " + ", ".join(f"{n} {v}" for v, n in counts.items()),
-        highlight=False,
-    )
-    return run.exit_code
+    note(f"gate: {len(result.logs)} log(s): " + ", ".join(f"{n} {v}" for v, n in counts.items()))
+    return result.exit_code

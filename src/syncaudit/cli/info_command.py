@@ -15,7 +15,7 @@ from syncaudit.cli.common import (
 from syncaudit.cli.startup import one_blas_thread
 
 
-@app.command()
+@app.command(short_help="Summarise a log: topics, LiDARs, cameras.")
 def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> None:
     """Summarise a log: topics, each LiDAR (measured RPM, drops, clock) and each camera.
 

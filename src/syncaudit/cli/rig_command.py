@@ -15,7 +15,7 @@ def _write_stdout(text: str) -> None:
     sys.stdout.write(text)
 
 
-@app.command()
+@app.command(short_help="Write a starter rig file guessed from a log.")
 def rig(
     log: LogArgument,
     out: Annotated[

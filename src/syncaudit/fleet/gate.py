@@ -22,7 +22,12 @@ from syncaudit.fleet.executor import DEFAULT_MAX_TRIES, DEFAULT_TIMEOUT_S, Execu
 from syncaudit.fleet.gate_outputs import GateOutputs
 from syncaudit.fleet.inputs import LogJob, discover, file_fingerprint, fingerprint
 from syncaudit.fleet.job import JobOptions, LogOutcome
-from syncaudit.fleet.log_pages import render_error_page, report_file_name, report_name
+from syncaudit.fleet.log_pages import (
+    render_error_page,
+    render_log_page,
+    report_file_name,
+    report_name,
+)
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.fleet.remote_job import run_any_log_job
@@ -106,7 +111,8 @@ def plan_outputs(inputs: list[str], options: GateOptions) -> GateOutputs:
 def _judge(
     outcome: LogOutcome, policy: Policy, fp: str, rig_fp: str | None, policy_fp: str
 ) -> JudgedLog:
-    checks = evaluate(outcome, policy, outcome.job.vehicle)
+    checks = evaluate(outcome, policy, outcome.job.vehicle)  # the policy's one evaluation
+    draft = outcome.report_draft
     job = outcome.job
     if is_url(job.path):  # the database and outputs never keep a query string (tokens)
         job = LogJob(public_url(job.path), job.vehicle, job.rig_path, job.tags, job.source)
@@ -125,7 +131,7 @@ def _judge(
         error_code=outcome.error_code,
         attempts=outcome.attempts,
         elapsed_s=outcome.elapsed_s,
-        html=outcome.html,
+        html=None if draft is None else render_log_page(draft, checks),
         camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
         remote_read=outcome.remote_read,
         duration_s=outcome.duration_s,
@@ -198,6 +204,21 @@ def run_gate(
     return run
 
 
+@dataclass(frozen=True, slots=True)
+class _Pending:
+    """A log to audit: its job, its content's and its rig's fingerprints."""
+
+    job: LogJob
+    fingerprint: str
+    rig_fingerprint: str | None
+
+    def key(self, policy_fp: str) -> str:
+        """The database key its verdict will have."""
+        return log_key(
+            self.fingerprint, _stored(self.job.path), __version__, self.rig_fingerprint, policy_fp
+        )
+
+
 def _run(
     inputs: list[str],
     policy: Policy,
@@ -206,14 +227,40 @@ def _run(
     executor: Executor | None,
     progress: Progress | None,
 ) -> GateRun:
+    """Find, fingerprint, skip what the database knows, plan reports, audit the rest."""
     found = discover(inputs, policy)
     policy_fp = policy.fingerprint()
+    judged, pending = _fingerprint(found.problems, found.jobs, policy_fp)
+    db = ResultsDB(options.db) if options.db is not None else None
+    if db is not None and not options.force:
+        known, pending = _known(db, pending, policy_fp, options.html_dir is not None)
+        judged.extend(known)
+    if options.html_dir is not None:  # every report's target checked before the audits
+        _plan_reports(outputs, judged, pending, policy_fp)
+    total = len(judged) + len(pending)
+    for index, log in enumerate(judged, 1):
+        if progress:
+            progress(log, index, total)
+    unsaved: list[JudgedLog] = [log for log in judged if not log.skipped]
+    if pending:
+        unsaved = _audit(pending, policy, options, outputs, db, executor, progress, judged, unsaved)
+    run = GateRun(sorted(judged, key=lambda log: log.path), found.warnings)
+    _save_reports(unsaved, outputs)
+    if db is not None:
+        db.write(unsaved)
+    return run
+
+
+def _fingerprint(
+    problems: list[str], jobs: list[LogJob], policy_fp: str
+) -> tuple[list[JudgedLog], list[_Pending]]:
+    """Error rows for what discovery could not use or read; the rest, fingerprinted."""
     judged: list[JudgedLog] = []
-    pending: list[tuple[LogJob, str, str | None]] = []
-    for problem in found.problems:
+    pending: list[_Pending] = []
+    for problem in problems:
         item = problem.split(": ", 1)[0]
         judged.append(_error_log(LogJob(path=item), LogReadError(problem), policy_fp))
-    for job in found.jobs:
+    for job in jobs:
         try:
             fp = fingerprint(job.path)
         except SyncauditError as exc:
@@ -224,84 +271,96 @@ def _run(
                 _error_log(job, LogReadError(f"{job.path}: {exc.strerror or exc}"), policy_fp)
             )
             continue
-        pending.append((job, fp, file_fingerprint(job.rig_path)))
-    db = ResultsDB(options.db) if options.db is not None else None
-    if db is not None and not options.force:
-        keys = {
-            log_key(fp, _stored(job.path), __version__, rig, policy_fp): job
-            for job, fp, rig in pending
-        }
-        # Error rows are judged again: a timeout or a dead worker may not recur. So is a
-        # log whose report is asked for (--html) but gone (e.g. an interrupted run's).
-        known = {
-            k: v
-            for k, v in db.known(keys).items()
-            if v.verdict != "error"
-            and (options.html_dir is None or (v.report is not None and Path(v.report).is_file()))
-        }
-        for key, stored in known.items():
-            job = keys[key]
-            stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
-            judged.append(stored)
-        pending = [
-            p
-            for p in pending
-            if log_key(p[1], _stored(p[0].path), __version__, p[2], policy_fp) not in known
-        ]
-    if options.html_dir is not None:  # every report's target checked before the audits
-        for log in judged:
-            if not log.skipped:
-                outputs.plan_report(report_name(log))
-        for job, fp, rig in pending:
-            key = log_key(fp, _stored(job.path), __version__, rig, policy_fp)
-            outputs.plan_report(report_file_name(display_path(_shown(job.path)), key))
+        pending.append(_Pending(job, fp, file_fingerprint(job.rig_path)))
+    return judged, pending
+
+
+def _known(
+    db: ResultsDB, pending: list[_Pending], policy_fp: str, wants_reports: bool
+) -> tuple[list[JudgedLog], list[_Pending]]:
+    """Verdicts the database holds for unchanged logs (skipped), and the logs still to audit.
+
+    Error rows are judged again: a timeout or a dead worker may not recur. So is a log
+    whose report is asked for (--html) but gone (e.g. an interrupted run's).
+    """
+    keys = {p.key(policy_fp): p.job for p in pending}
+    known = {
+        k: v
+        for k, v in db.known(keys).items()
+        if v.verdict != "error"
+        and (not wants_reports or (v.report is not None and Path(v.report).is_file()))
+    }
+    skipped = []
+    for key, stored in known.items():
+        job = keys[key]
+        stored.job = LogJob(job.path, job.vehicle, job.rig_path, job.tags, job.source)
+        skipped.append(stored)
+    return skipped, [p for p in pending if p.key(policy_fp) not in known]
+
+
+def _plan_reports(
+    outputs: GateOutputs, judged: list[JudgedLog], pending: list[_Pending], policy_fp: str
+) -> None:
+    """Check every report's target before any audit (exists without --overwrite: exit 8)."""
+    for log in judged:
+        if not log.skipped:
+            outputs.plan_report(report_name(log))
+    for p in pending:
+        outputs.plan_report(report_file_name(display_path(_shown(p.job.path)), p.key(policy_fp)))
+
+
+def _audit(
+    pending: list[_Pending],
+    policy: Policy,
+    options: GateOptions,
+    outputs: GateOutputs,
+    db: ResultsDB | None,
+    executor: Executor | None,
+    progress: Progress | None,
+    judged: list[JudgedLog],
+    unsaved: list[JudgedLog],
+) -> list[JudgedLog]:
+    """Audit the pending logs, judge each as it comes, save to the database in batches.
+
+    Appends every verdict to `judged`; returns the verdicts not saved yet.
+    """
+    policy_fp = policy.fingerprint()
     total = len(judged) + len(pending)
-    for index, log in enumerate(judged, 1):
-        if progress:
-            progress(log, index, total)
-    by_path = {job.path: (fp, rig) for job, fp, rig in pending}
-    unsaved: list[JudgedLog] = [log for log in judged if not log.skipped]
-    if pending:
-        own = executor is None
-        if executor is None:
-            executor, audit_jobs = make_executor(
-                options, len(pending), calibrates=policy.calibrates()
-            )
-        else:
-            audit_jobs = 1
-        job_options = JobOptions(
-            audit_jobs=audit_jobs,
-            calibrate=policy.calibrates(),
-            html=options.html_dir is not None,
-            policy=policy,
-        )
-        last_save = time.monotonic()
-        try:
-            for outcome in executor.run([p[0] for p in pending], job_options):
-                fp, rig = by_path[outcome.job.path]
-                log = _judge(outcome, policy, fp, rig, policy_fp)
-                if db is None:
-                    log.audit = None  # only the database needs it: memory flat in the logs
-                judged.append(log)
-                unsaved.append(log)
-                if progress:
-                    progress(log, len(judged), total)
-                if db is not None and (
-                    len(unsaved) >= DB_BATCH_LOGS or time.monotonic() - last_save > DB_BATCH_S
-                ):
-                    _save_reports(unsaved, outputs)
-                    db.write(unsaved)
-                    for saved in unsaved:
-                        saved.audit = None  # in the database now: memory flat in the logs
-                    unsaved, last_save = [], time.monotonic()
-        finally:
-            if own:
-                executor.close()
-    run = GateRun(sorted(judged, key=lambda log: log.path), found.warnings)
-    _save_reports(unsaved, outputs)
-    if db is not None:
-        db.write(unsaved)
-    return run
+    by_path = {p.job.path: p for p in pending}
+    own = executor is None
+    if executor is None:
+        executor, audit_jobs = make_executor(options, len(pending), calibrates=policy.calibrates())
+    else:
+        audit_jobs = 1
+    job_options = JobOptions(
+        audit_jobs=audit_jobs,
+        calibrate=policy.calibrates(),
+        html=options.html_dir is not None,
+        policy=policy,
+    )
+    last_save = time.monotonic()
+    try:
+        for outcome in executor.run([p.job for p in pending], job_options):
+            p = by_path[outcome.job.path]
+            log = _judge(outcome, policy, p.fingerprint, p.rig_fingerprint, policy_fp)
+            if db is None:
+                log.audit = None  # only the database needs it: memory flat in the logs
+            judged.append(log)
+            unsaved.append(log)
+            if progress:
+                progress(log, len(judged), total)
+            if db is not None and (
+                len(unsaved) >= DB_BATCH_LOGS or time.monotonic() - last_save > DB_BATCH_S
+            ):
+                _save_reports(unsaved, outputs)
+                db.write(unsaved)
+                for saved in unsaved:
+                    saved.audit = None  # in the database now: memory flat in the logs
+                unsaved, last_save = [], time.monotonic()
+    finally:
+        if own:
+            executor.close()
+    return unsaved
 
 
 def _shown(path: str) -> str:

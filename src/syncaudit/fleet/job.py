@@ -41,9 +41,21 @@ class JobOptions:
     """Run the extrinsic calibration where the log has two or more point-cloud topics (and
     `policy`, when given, has a calibration check on for the log's vehicle)."""
     html: bool = False
-    """Render the per-log HTML report (returned as text; the driver writes it)."""
+    """Render the per-log HTML report's sections (returned as text; the driver, which judges
+    the log, adds its policy checks and writes the page)."""
     policy: Policy | None = None
-    """The policy, for the checks section of the HTML report."""
+    """The policy, for which vehicles' logs are worth calibrating."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReportDraft:
+    """A log's report page without its policy checks (`fleet.log_pages.render_log_page`)."""
+
+    title: str
+    body: str
+    """The audit's and/or the calibration's sections (HTML)."""
+    t0_ns: float | None = None
+    """The audit's time origin (wall-clock labels of the time plots); None without audit."""
 
 
 @dataclass(slots=True)
@@ -61,7 +73,7 @@ class LogOutcome:
     """Point clouds but no LiDAR packets: calibrated, not sync-audited (`audit` is None)."""
     duration_s: float | None = None
     container: str | None = None
-    html: str | None = None
+    report_draft: ReportDraft | None = None
     error: str | None = None
     error_code: int | None = None
     attempts: int = 1
@@ -132,32 +144,24 @@ def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
         )
     calibration = _calibrate_into(outcome, job) if calibrate else None
     if options.html:
-        outcome.html = _report_html(outcome, job, options, result, calibration)
+        outcome.report_draft = _report_draft(outcome, job, result, calibration)
 
 
-def _report_html(
-    outcome: LogOutcome,
-    job: LogJob,
-    options: JobOptions,
-    result: Any,
-    calibration: CalibrationResult | None,
-) -> str:
-    """The log's report page: its audit and/or calibration, then the policy checks."""
-    from syncaudit.fleet.checks import evaluate
-    from syncaudit.fleet.log_pages import checks_section
-    from syncaudit.report.html import audit_sections, page, time_origin_ns
+def _report_draft(
+    outcome: LogOutcome, job: LogJob, result: Any, calibration: CalibrationResult | None
+) -> ReportDraft:
+    """The log's report page but its policy checks: its audit and/or calibration."""
+    from syncaudit.report.html import audit_sections, time_origin_ns
 
-    checks = evaluate(outcome, options.policy, job.vehicle) if options.policy else []
     parts = [] if result is None else [audit_sections(result)]
     if calibration is not None:
-        from syncaudit.report.calib_figures import calibration_section
+        from syncaudit.report.calib_section import html_section
 
-        parts.append(calibration_section(calibration))
+        parts.append(html_section(calibration))
     elif outcome.calibration_error is not None:
         parts.append(f"<h2>Calibration</h2><p>{html.escape(outcome.calibration_error)}</p>")
-    parts.append(checks_section(checks))
     t0 = time_origin_ns(result) if result is not None else None
-    return page(f"syncaudit: {job.path}", "".join(parts), t0_ns=t0)
+    return ReportDraft(f"syncaudit: {job.path}", "".join(parts), t0)
 
 
 def _calibrate_into(outcome: LogOutcome, job: LogJob) -> CalibrationResult | None:

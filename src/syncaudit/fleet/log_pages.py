@@ -8,6 +8,7 @@ import re
 from collections import Counter
 
 from syncaudit.fleet.checks import CheckResult
+from syncaudit.fleet.job import ReportDraft
 from syncaudit.fleet.record import JudgedLog
 
 _STYLE = """
@@ -38,6 +39,13 @@ def checks_section(checks: list[CheckResult]) -> str:
         "<h2>Policy checks</h2><table><tr><th>scope</th><th>subject</th><th>check</th>"
         f"<th>value</th><th>limit</th><th>severity</th><th>result</th></tr>{rows}</table>"
     )
+
+
+def render_log_page(draft: ReportDraft, checks: list[CheckResult]) -> str:
+    """A judged log's report page: the worker's sections, then its policy checks."""
+    from syncaudit.report.html import page
+
+    return page(draft.title, draft.body + checks_section(checks), t0_ns=draft.t0_ns)
 
 
 def report_name(log: JudgedLog) -> str:

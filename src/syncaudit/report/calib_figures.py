@@ -247,13 +247,3 @@ def calibration_figures(result: CalibrationResult) -> str:
         if len(refused) > 12:
             parts.append(f"<p>… and {len(refused) - 12} more refused alignments.</p>")
     return '<div class="row calib-figures">' + "".join(parts) + "</div>"
-
-
-def calibration_section(result: CalibrationResult) -> str:
-    """The calibration's part of a report page: its tables and figures."""
-    from syncaudit.report.calib_section import html_section
-
-    section = html_section(result)
-    if 'class="row calib-figures"' not in section:
-        section += calibration_figures(result)
-    return section

@@ -8,6 +8,7 @@ from rich.console import Console
 from rich.table import Table
 
 from syncaudit.calib.result import AlignmentOut, CalibrationResult, ExtrinsicOut, FitOut, LidarOut
+from syncaudit.report.calib_figures import calibration_figures
 
 _STYLE = """
 <style>
@@ -45,6 +46,13 @@ def _verdict(result: CalibrationResult) -> tuple[str, str]:
     if not result.calibratable:
         return "warn", "NOT CALIBRATABLE"
     return ("pass", "PASS") if result.passed else ("fail", "FAIL")
+
+
+def _at_stop(result: CalibrationResult) -> str:
+    """Where the reference LiDAR's map is anchored: `at stop 3`, or why there is no stop."""
+    if result.reference_stop is None:
+        return "(no stop anchored: not calibrated)"
+    return f"at stop {result.reference_stop}"
 
 
 def _xyz_rpy(values: tuple[float, float, float], digits: int) -> str:
@@ -160,15 +168,8 @@ def _lidar_block(lidar: LidarOut) -> str:
     )
 
 
-def _figures(result: CalibrationResult) -> str:
-    """Mounts, residuals and degenerate directions drawn (syncaudit.report.calib_figures)."""
-    from syncaudit.report.calib_figures import calibration_figures
-
-    return calibration_figures(result)
-
-
 def html_section(result: CalibrationResult) -> str:
-    """A self-contained HTML fragment (inline style, no scripts) for the report."""
+    """The calibration's part of a report page: tables and figures (inline style, no script)."""
     css, label = _verdict(result)
     limits = result.limits
     notes = "".join(f"<li>{escape(n)}</li>" for n in result.notes)
@@ -181,7 +182,7 @@ def html_section(result: CalibrationResult) -> str:
         + f'<h3>LiDAR extrinsic calibration (non-overlapping views) <span class="{css}">{label}</span></h3>'
         + reason
         + f"<p>Log <code>{escape(result.log)}</code>; reference LiDAR "
-        f"<code>{escape(result.reference_frame_id)}</code> at stop {result.reference_stop}; "
+        f"<code>{escape(result.reference_frame_id)}</code> {_at_stop(result)}; "
         f"recorded extrinsics from <code>{escape(result.extrinsics_source)}</code> "
         f"(base <code>{escape(result.base_frame)}</code>); limits {limits.max_rotation_deg:g} deg, "
         f"{limits.max_translation_cm:g} cm. Transforms are reference_from_lidar "
@@ -199,7 +200,7 @@ def html_section(result: CalibrationResult) -> str:
         + _map_pair_rows(result)
         + "</table></details>"
         + "".join(_lidar_block(lidar) for lidar in result.lidars)
-        + _figures(result)
+        + calibration_figures(result)
         + (f"<ul>{notes}</ul>" if notes else "")
         + f'<p class="muted">{escape(timings)}; {libs}</p>'
         "</section>"
@@ -234,7 +235,7 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     if result.reason:
         console.print(f"[yellow]{result.reason}[/]")
     console.print(
-        f"reference {result.reference_frame_id} at stop {result.reference_stop}; recorded "
+        f"reference {result.reference_frame_id} {_at_stop(result)}; recorded "
         f"extrinsics from {result.extrinsics_source}; limits {result.limits.max_rotation_deg:g} deg / "
         f"{result.limits.max_translation_cm:g} cm"
     )
@@ -264,10 +265,3 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
     console.print(table)
     for note in result.notes:
         console.print(f"[dim]note: {note}[/]")
-
-
-def render_calibration_html(result: CalibrationResult) -> str:
-    """A self-contained HTML page of a calibration result (what `calib --html` writes)."""
-    from syncaudit.report.html import render_report_html
-
-    return render_report_html(None, result)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,9 +28,6 @@ from syncaudit.report.plot import (
     time_plot_svg,
 )
 from syncaudit.report.script import SCRIPT, STYLE
-
-if TYPE_CHECKING:
-    from syncaudit.calib.result import CalibrationResult
 
 _e = esc
 
@@ -441,25 +437,4 @@ def render_audit_html(result: AuditResult, extra_sections: Sequence[str] = ()) -
         f"syncaudit: {result.path}",
         audit_sections(result) + "".join(extra_sections),
         t0_ns=time_origin_ns(result),
-    )
-
-
-def render_report_html(
-    audit: AuditResult | None = None, calibration: CalibrationResult | None = None
-) -> str:
-    """One page with the audit and/or the calibration of a log."""
-    from syncaudit.report.calib_figures import calibration_section
-
-    if audit is None and calibration is None:
-        raise ValueError("render_report_html needs an audit or a calibration result")
-    parts = []
-    if audit is not None:
-        parts.append(audit_sections(audit))
-    if calibration is not None:
-        parts.append(calibration_section(calibration))
-    title = audit.path if audit is not None else calibration.log if calibration else ""
-    return page(
-        f"syncaudit: {title}",
-        "".join(parts),
-        t0_ns=time_origin_ns(audit) if audit is not None else None,
     )
