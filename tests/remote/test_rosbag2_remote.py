@@ -16,8 +16,8 @@ from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
 from syncaudit.logs import open_log
 from syncaudit.logs.mcap import remote as mcap_remote
-from syncaudit.logs.mcap.remote import RemoteUnindexedError
 from syncaudit.logs.ros2.remote import SQLITE_REASON, RemoteMcapBag, file_url
+from syncaudit.remote.file import RemoteUnindexedError
 from syncaudit.remote.ranges import tracking
 from syncaudit.rig import Rig
 from syncaudit.simulate.rig_file import rig_from_truth

@@ -18,6 +18,8 @@ from syncaudit.cli.common import (
     app,
     emit,
     json_text,
+    local_paths,
+    log_location,
     output_set,
     print_json,
     run,
@@ -81,13 +83,15 @@ def audit(
 ) -> None:
     """Audit LiDAR-camera sync per camera (Eq 1-6), the recommended delay and the verdict."""
 
+    source = log_location(log)
+
     def job() -> None:
         pairings = _pairings_target(pairings_out) if pairings_out else None
         parquet = _parquet_targets(parquet_out) if parquet_out else (None, None)
         calibration = _load_calibration(calibration_json) if calibration_json else None
         with output_set(
             overwrite=overwrite,
-            inputs=(log, rig, calibration_json),
+            inputs=(*local_paths(source), rig, calibration_json),
             targets=(json_out, html_out, csv_out, *parquet),
         ) as outputs:
             if pairings is not None:
@@ -96,7 +100,7 @@ def audit(
             from syncaudit.rig import load_rig
 
             result = audit_log(
-                log,
+                source,
                 load_rig(rig) if rig else None,
                 jobs=jobs,
                 check_crc=check_crc,
@@ -132,7 +136,7 @@ def audit(
         if gate and not result.passed:
             from syncaudit.errors import GateFailedError
 
-            raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
+            raise GateFailedError(f"{source}: sync audit failed ({data['verdict']})")
 
     run(job, imports=_import_audit)
 

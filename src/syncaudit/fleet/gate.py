@@ -27,7 +27,7 @@ from syncaudit.fleet.log_pages import render_error_page, report_file_name, repor
 from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.fleet.remote_job import run_any_log_job
-from syncaudit.remote.fetch import is_url, public_url
+from syncaudit.remote.urls import is_url, public_url
 
 DB_BATCH_LOGS = 32
 DB_BATCH_S = 5.0

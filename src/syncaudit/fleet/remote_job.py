@@ -19,8 +19,9 @@ from pathlib import Path
 from syncaudit.errors import SyncauditError
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.job import JobOptions, LogOutcome, run_log_job
-from syncaudit.remote.fetch import fetch_log, is_url
+from syncaudit.remote.fetch import fetch_log
 from syncaudit.remote.ranges import tracking
+from syncaudit.remote.urls import is_url
 
 
 def rig_topics(rig_path: str | None) -> frozenset[str] | None:

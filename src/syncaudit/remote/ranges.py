@@ -35,6 +35,7 @@ from typing import Any, Protocol
 from urllib.parse import unquote, urljoin, urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.remote.urls import filesystem, public_url
 
 TRIES = 3
 """Attempts per range before the read is an error (the first and two retries)."""
@@ -49,15 +50,6 @@ browsers ~20: a log behind more than a few is a misconfigured server or a loop).
 REDIRECTS = frozenset({301, 302, 303, 307, 308})
 PERMANENT_REDIRECTS = frozenset({301, 308})
 _CONTENT_RANGE = re.compile(r"bytes (\d+)-(\d+)/(\d+|\*)$")
-
-
-def public_url(url: str) -> str:
-    """The URL without query string, fragment or user info (no credentials, no tokens)."""
-    parts = urlsplit(url)
-    host = parts.hostname or ""
-    if parts.port:
-        host = f"{host}:{parts.port}"
-    return f"{parts.scheme}://{host}{parts.path}"
 
 
 def _one_line(exc: BaseException) -> str:
@@ -401,11 +393,16 @@ class FsspecObject:
     """An object in a store fsspec reads: each range is one `cat_file`."""
 
     def __init__(self, url: str) -> None:
-        from syncaudit.remote.fetch import filesystem
-
         self.name = public_url(url)
         self._fs, self._path = filesystem(url)
         self._size: int | None = None
+
+    @classmethod
+    def of(cls, fs: Any, path: str, name: str, size: int | None = None) -> FsspecObject:
+        """An object of a filesystem already open (a fetch's), named `name` in messages."""
+        obj = cls.__new__(cls)
+        obj.name, obj._fs, obj._path, obj._size = name, fs, path, size
+        return obj
 
     def open(self, start: int, end: int) -> tuple[Body, int]:
         """The range fetched whole into memory (the backends read ranges whole anyway)."""

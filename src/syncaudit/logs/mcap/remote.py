@@ -18,19 +18,15 @@ usable index (cut off, no summary) cannot be read by chunks and is refused with
 
 from __future__ import annotations
 
-import io
 import struct
 import zlib
 from collections.abc import Iterator
-from pathlib import PosixPath
 from typing import BinaryIO, cast
-from urllib.parse import urlsplit
 
 from mcap.reader import SeekingReader
 from mcap.summary import Summary
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.base import LogReader
 from syncaudit.logs.mcap.chunks import (
     MAX_LOG_TIME_NS,
     OP_CHUNK,
@@ -43,27 +39,25 @@ from syncaudit.logs.mcap.chunks import (
 from syncaudit.logs.mcap.reader import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog, _Scan
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.typesys import one_line
+from syncaudit.remote.file import RemoteFile, RemoteUnindexedError, RunStream
 from syncaudit.remote.ranges import (
-    RangeStream,
     RemoteObject,
     Tracker,
     acquire_tracker,
     find_tracker,
     open_object,
-    public_url,
     read_head,
     read_range,
     release_tracker,
     signed_url,
 )
+from syncaudit.remote.urls import UrlPath, public_url
 
 KIND = "mcap-remote-chunks"
 HEAD_BYTES = 1 << 10
 """First read: the magic and the head of the header record (all `McapLog` checks)."""
 TAIL_BYTES = 16 << 10
 """Second read: the footer, and for most logs the whole summary section."""
-MISS_BYTES = 4 << 10
-"""Smallest read of the parent outside head, tail and summary (message indexes)."""
 RANGE_BYTES = 24 << 20
 """Largest run of chunks one GET reads (and one worker task holds): as `collect`'s
 GROUP_BYTES, so tasks are as many as for the local file."""
@@ -74,104 +68,6 @@ PARENT_CACHE_BYTES = 64 << 20
 so that the workers' runs do not fetch them again."""
 _FOOTER_SUMMARY_START = 28
 """Bytes from the end of the file to the footer's summary_start field (u64)."""
-
-
-class RemoteUnindexedError(LogOpenError):
-    """A remote MCAP without a usable chunk index: it can only be read whole."""
-
-
-class UrlPath(PosixPath):
-    """A URL where `McapLog` keeps a path: `str()` gives the URL back (scheme://host/path),
-    so every message it writes names the log by its URL."""
-
-    def __str__(self) -> str:
-        parts = self.parts
-        return f"{parts[0]}//{'/'.join(parts[1:])}" if parts else ""
-
-
-class RemoteFile:
-    """A read-only, seekable view of a remote object (for the mcap library, the ROS 1 bag
-    reader): the bytes the parent fetched (head, tail, summary, index), anything else by a
-    ranged read.
-
-    Not an `io.RawIOBase`: the mcap library wraps those in a BufferedReader, which reads
-    ahead past what is needed and closes the file when it is dropped.
-    """
-
-    def __init__(
-        self, obj: RemoteObject, size: int, tracker: Tracker, *, keep: bool = True
-    ) -> None:
-        self._obj, self._size, self._tracker = obj, size, tracker
-        self._keep = keep
-        """Keep what a miss fetched (the parent's index reads; not a worker's chunks)."""
-        self._pos = 0
-        self.closed = False
-
-    def readable(self) -> bool:
-        """Yes."""
-        return True
-
-    def seekable(self) -> bool:
-        """Yes."""
-        return True
-
-    def tell(self) -> int:
-        """The read position."""
-        return self._pos
-
-    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
-        """Move the read position."""
-        base = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self._size}[whence]
-        self._pos = max(0, base + offset)
-        return self._pos
-
-    def read(self, size: int = -1) -> bytes | bytearray:
-        """Up to `size` bytes from the read position (to the end if negative)."""
-        end = self._size if size < 0 else min(self._size, self._pos + size)
-        if end <= self._pos:
-            return b""
-        start, self._pos = self._pos, end
-        if not self._keep and self._held(start, end) is None:
-            # A worker's chunk: streamed straight into the buffer returned (no second copy).
-            out = bytearray(end - start)
-            stream = RunStream(self._obj, start, end, self._tracker)
-            try:
-                stream.readinto(memoryview(out))
-            finally:
-                stream.close()
-            return out
-        return bytes(self._slice(start, end))
-
-    def readinto(self, buffer: bytearray | memoryview) -> int:
-        """Fill a prefix of `buffer`; the bytes read."""
-        n = min(len(buffer), self._size - self._pos)
-        if n <= 0:
-            return 0
-        buffer[:n] = self._slice(self._pos, self._pos + n)
-        self._pos += n
-        return n
-
-    def close(self) -> None:
-        """Nothing held open (the fetched bytes belong to the tracker)."""
-        self.closed = True
-
-    def _held(self, start: int, end: int) -> memoryview | None:
-        """Bytes start..end-1 if one fetched segment holds them all."""
-        for at, data in self._tracker.segments.items():
-            if at <= start and end <= at + len(data):
-                return memoryview(data)[start - at : end - at]
-        return None
-
-    def _slice(self, start: int, end: int) -> memoryview:
-        held = self._held(start, end)
-        if held is not None:
-            return held
-        stop = min(self._size, max(end, start + MISS_BYTES))
-        if not self._keep:
-            return memoryview(read_range(self._obj, start, end, self._tracker.counter))
-        data = read_range(self._obj, start, stop, self._tracker.counter)
-        self._tracker.segments[start] = data
-        return memoryview(data)[: end - start]
 
 
 class RemoteChunkReader(ChunkReader):
@@ -442,53 +338,6 @@ class RemoteChunksUnitReader:
         """Nothing to release: the connection belongs to the worker process."""
 
 
-class RunStream:
-    """The bytes of a run, in order: those the parent already holds (head, tail, chunks
-    its own `messages()` read) from memory, each stretch between them by one ranged GET."""
-
-    def __init__(self, obj: RemoteObject, start: int, end: int, tracker: Tracker | None) -> None:
-        self.pos = start
-        segments = tracker.segments.items() if tracker is not None else ()
-        self._held = sorted(
-            (at, data) for at, data in segments if at < end and start < at + len(data)
-        )
-        self._obj = obj
-        self._counter = tracker.counter if tracker is not None else None
-        self._net: RangeStream | None = None
-        self._gaps: list[tuple[int, int]] = []
-        at = start
-        for seg_start, data in self._held:
-            if seg_start > at:
-                self._gaps.append((at, min(seg_start, end)))
-            at = max(at, seg_start + len(data))
-        if at < end:
-            self._gaps.append((at, end))
-
-    def readinto(self, buffer: memoryview) -> None:
-        """Fill `buffer` exactly with the next bytes of the run."""
-        while len(buffer):
-            gap = next(((a, b) for a, b in self._gaps if a <= self.pos < b), None)
-            if gap is not None:
-                net = self._net
-                if net is None or net.start != gap[0]:
-                    self.close()
-                    net = self._net = RangeStream(self._obj, gap[0], gap[1], self._counter)
-                n = min(len(buffer), gap[1] - self.pos)
-                net.readinto(buffer[:n])
-            else:
-                at, data = next((a, d) for a, d in self._held if a <= self.pos < a + len(d))
-                n = min(len(buffer), at + len(data) - self.pos)
-                buffer[:n] = data[self.pos - at : self.pos - at + n]
-            buffer = buffer[n:]
-            self.pos += n
-
-    def close(self) -> None:
-        """Drop the reply."""
-        if self._net is not None:
-            self._net.close()
-            self._net = None
-
-
 def _skip(stream: RunStream, length: int) -> None:
     """Read past `length` bytes of the stream."""
     scratch = memoryview(bytearray(min(length, 1 << 16)))
@@ -496,27 +345,3 @@ def _skip(stream: RunStream, length: int) -> None:
         step = min(length, len(scratch))
         stream.readinto(scratch[:step])
         length -= step
-
-
-def open_remote_log(url: str) -> LogReader:
-    """A log behind a URL, read by ranges: an indexed MCAP file, a ROS 1 bag, or a ROS 2 bag
-    prefix with MCAP storage (any other URL: the prefix of a bag, its metadata.yaml read
-    first). What cannot be read by ranges raises `RemoteUnindexedError`, for the caller
-    (the fleet gate) to download the log whole."""
-    path = urlsplit(url).path.lower()
-    if path.endswith(".mcap"):
-        return RemoteMcapLog(url)
-    if path.endswith(".bag"):
-        from syncaudit.logs.ros1.remote import RemoteRosbag1Log
-
-        return RemoteRosbag1Log(url)
-    if path.endswith(".db3"):
-        from syncaudit.logs.ros2.remote import SQLITE_REASON
-
-        tracker = acquire_tracker(url)  # (the caller's, if it tracks this URL)
-        tracker.ranged, tracker.whole_reason = False, SQLITE_REASON
-        release_tracker(tracker)
-        raise RemoteUnindexedError(f"{public_url(url)}: not read by ranges: {SQLITE_REASON}")
-    from syncaudit.logs.ros2.remote import open_remote_bag
-
-    return open_remote_bag(url)

@@ -23,7 +23,6 @@ from collections.abc import Iterator
 from typing import BinaryIO, cast
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.mcap.remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.ros1.format import (
     MAGIC,
@@ -38,17 +37,18 @@ from syncaudit.logs.ros1.format import (
 )
 from syncaudit.logs.ros1.reader import Rosbag1Log
 from syncaudit.logs.typesys import one_line
+from syncaudit.remote.file import RemoteFile, RemoteUnindexedError, RunStream
 from syncaudit.remote.ranges import (
     Tracker,
     acquire_tracker,
     find_tracker,
     open_object,
-    public_url,
     read_head,
     read_range,
     release_tracker,
     signed_url,
 )
+from syncaudit.remote.urls import UrlPath, public_url
 
 KIND = "rosbag1-remote-chunk"
 RANGE_BYTES = 24 << 20

@@ -24,19 +24,20 @@ import yaml
 
 from syncaudit.errors import LogOpenError, SyncauditError
 from syncaudit.logs.mcap.reader import McapLog
-from syncaudit.logs.mcap.remote import RemoteMcapLog, RemoteUnindexedError, UrlPath
+from syncaudit.logs.mcap.remote import RemoteMcapLog
 from syncaudit.logs.model import LogWarning, ReadUnit
 from syncaudit.logs.ros2.mcap_storage import McapBag
 from syncaudit.logs.typesys import one_line
+from syncaudit.remote.file import RemoteUnindexedError
 from syncaudit.remote.ranges import (
     Tracker,
     acquire_tracker,
     open_object,
-    public_url,
     read_head,
     read_range,
     release_tracker,
 )
+from syncaudit.remote.urls import UrlPath, public_url
 
 METADATA_BYTES = 256 << 10
 """First read of metadata.yaml (a few KiB for most bags; read on if longer)."""
