@@ -7,7 +7,6 @@ deployment sets); nothing is passed on the command line or stored.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -15,41 +14,13 @@ import pytest
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
 
+from .conftest import SECRET
+
 moto_server = pytest.importorskip("moto.server")
 pytest.importorskip("s3fs")
 boto3 = pytest.importorskip("boto3")
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
-SECRET = "not-a-real-secret-0123456789"
-
-
-@pytest.fixture()
-def s3_endpoint(monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
-    """moto's S3 server on 127.0.0.1 with a bucket holding two sample logs."""
-    server = moto_server.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
-    server.start()
-    host, port = server.get_host_and_port()
-    endpoint = f"http://{host}:{port}"
-    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "testing")
-    monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", SECRET)
-    monkeypatch.setenv("AWS_DEFAULT_REGION", "us-east-1")
-    monkeypatch.setenv("AWS_ENDPOINT_URL", endpoint)
-    # fsspec caches filesystems by their arguments: one made for an earlier test's server
-    # (same environment-given arguments, another port) must not be reused.
-    import s3fs
-
-    s3fs.S3FileSystem.clear_instance_cache()
-    try:
-        client = boto3.client("s3", endpoint_url=endpoint)
-        client.create_bucket(Bucket="fleet")
-        for key, name in (
-            ("uploads/car1/a.mcap", "vlp16_three_cameras.mcap"),
-            ("uploads/car2/b.bag", "vlp16_short.bag"),
-        ):
-            client.upload_file(str(SAMPLES / name), "fleet", key)
-        yield endpoint
-    finally:
-        server.stop()
 
 
 def test_gate_on_an_s3_prefix(s3_endpoint: str, tmp_path: Path) -> None:
