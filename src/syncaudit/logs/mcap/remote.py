@@ -145,7 +145,6 @@ class RemoteMcapLog(McapLog):
         self.warnings = []
         self._schemas = {}
         self._channels = {}
-        self._registries = {}
         self._cut = None
         self._scan = _Scan()
         self._tracker = acquire_tracker(url)

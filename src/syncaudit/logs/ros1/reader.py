@@ -23,11 +23,11 @@ from syncaudit.logs.ros1.format import (
     read_index,
     scan_chunks,
 )
-from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
+from syncaudit.logs.typesys import Definition, one_line
 from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
 
 if TYPE_CHECKING:
-    from rosbags.interfaces.typing import Typesdict
+    pass
 
 
 class Rosbag1Log(LogReader):
@@ -36,7 +36,6 @@ class Rosbag1Log(LogReader):
     def __init__(self, path: Path) -> None:
         self.path = path
         self.warnings = []
-        self._registry: TypeRegistry | None = None
         self._fallback = ""
         """Why the index was not used ('' where it was)."""
         try:
@@ -232,23 +231,13 @@ class Rosbag1Log(LogReader):
             info = channels[conn_id]
             yield RawMessage(info.topic, info.msgtype, t, payload, "ros1")
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from the bag's connection definitions, then schemas/ and ROS 1 defaults."""
-        if self._registry is None:
-            log_types: Typesdict = {}
-            for conn in self._index.connections.values():
-                if not conn.definition or conn.msgtype in log_types:
-                    continue
-                try:
-                    parsed = parse_definition("msg", conn.definition, conn.msgtype)
-                except Exception as exc:  # a bad definition must not stop the audit
-                    self.warn(
-                        "bad-schema", f"definition of {conn.msgtype!r} unreadable: {one_line(exc)}"
-                    )
-                    continue
-                log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registry = TypeRegistry(ros1=True, log_types=log_types)
-        return self._registry
+    def _definitions(self, encoding: str) -> Iterator[Definition]:
+        """The bag's connection definitions (ROS 1 defaults under them, whatever is asked)."""
+        for c in self._index.connections.values():
+            yield Definition(c.msgtype, "msg", c.definition, f"definition of {c.msgtype!r}")
+
+    def _ros1_types(self, encoding: str) -> bool:
+        return True
 
     def _close(self) -> None:
         self._chunk_reader.close()

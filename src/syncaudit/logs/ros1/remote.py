@@ -96,7 +96,6 @@ class RemoteRosbag1Log(Rosbag1Log):
         self.url = url
         self.path = UrlPath(public_url(url))
         self.warnings = []
-        self._registry = None
         self._fallback = ""
         self._tracker = acquire_tracker(url)
         try:

@@ -67,7 +67,6 @@ class RemoteMcapBag(McapBag):
         self.path = UrlPath(public_url(file_url(url, "")).rstrip("/"))
         self.warnings = []
         self._logs: list[McapLog] = []
-        self._registries = {}
         self._tracker = acquire_tracker(url)
         try:
             files = self._files()
