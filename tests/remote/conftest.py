@@ -23,6 +23,16 @@ from typing import Any
 
 import pytest
 
+from syncaudit.logs import LogReader
+
+
+def fetched(log: LogReader) -> dict[str, Any]:
+    """What reading a remote log has fetched so far (its `remote_read`), as a dict."""
+    stats = log.fetch_stats
+    assert stats is not None, f"{log.summary.path} is not a remote log"
+    return stats.to_dict()
+
+
 RANGE = re.compile(r"bytes=(\d+)-(\d*)$")
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
 SECRET = "not-a-real-secret-0123456789"

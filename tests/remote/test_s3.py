@@ -14,7 +14,7 @@ import pytest
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
 
-from .conftest import SECRET
+from .conftest import SECRET, fetched
 
 moto_server = pytest.importorskip("moto.server")
 pytest.importorskip("s3fs")
@@ -53,7 +53,6 @@ def test_a_ros2_mcap_bag_prefix_on_s3_is_read_by_ranges(s3_endpoint: str, tmp_pa
     from syncaudit.audit.run import audit_log
     from syncaudit.logs import open_log
     from syncaudit.logs.ros2.remote import RemoteMcapBag
-    from syncaudit.remote.ranges import tracking
     from syncaudit.simulate.rig_file import rig_from_truth
     from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
@@ -68,9 +67,9 @@ def test_a_ros2_mcap_bag_prefix_on_s3_is_read_by_ranges(s3_endpoint: str, tmp_pa
     url = "s3://fleet/bags/car3/bag"
     with open_log(url) as log:
         assert isinstance(log, RemoteMcapBag) and len(log._logs) == 2
-    with tracking(url) as tracker:
+    with open_log(url) as log:  # its fetch statistics cover the audit's own open
         remote = audit_log(url, rig, jobs=2).to_dict()
-        stats = tracker.stats()
+        stats = fetched(log)
     local = audit_log(folder, rig, jobs=2).to_dict()
     remote.pop("path"), local.pop("path")
     assert remote == local

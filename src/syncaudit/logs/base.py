@@ -20,6 +20,8 @@ from syncaudit.logs.typesys import Definition, TypeRegistry, log_types
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
 
+    from syncaudit.remote.ranges import FetchStats
+
 
 class LogReader(ABC):
     """An open log. Use as a context manager; messages stream in log-time order."""
@@ -60,6 +62,12 @@ class LogReader(ABC):
         self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None
     ) -> Iterator[RawMessage]:
         """Backend part of `messages`, with the selection already normalised."""
+
+    @property
+    def fetch_stats(self) -> FetchStats | None:
+        """For a log read from a URL: what reading it has fetched so far, by this process
+        and its workers, against its size and needed chunks (None for a local file)."""
+        return None
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Pieces of the log holding `topics` that workers can read on their own.

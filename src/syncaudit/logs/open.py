@@ -66,11 +66,9 @@ def _remote_log(url: str) -> LogReader:
 
     if path.endswith(".db3"):
         from syncaudit.remote.file import RemoteUnindexedError
-        from syncaudit.remote.ranges import tracking
 
-        with tracking(url) as tracker:  # (the caller's, if it tracks this URL)
-            tracker.ranged, tracker.whole_reason = False, SQLITE_REASON
-        raise RemoteUnindexedError(f"{public_url(url)}: not read by ranges: {SQLITE_REASON}")
+        message = f"{public_url(url)}: not read by ranges: {SQLITE_REASON}"
+        raise RemoteUnindexedError(message, SQLITE_REASON)
     return open_remote_bag(url)
 
 

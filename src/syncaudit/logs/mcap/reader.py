@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import heapq
 import io
-import os
 import struct
 import zlib
 from collections.abc import Iterator
@@ -94,19 +93,24 @@ class _Scan:
 class McapLog(LogReader):
     """An MCAP file; indexed reading when it has a summary, linear otherwise."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, file: BinaryIO | None = None) -> None:
+        """Open the MCAP at `path`, or read `file` (a seekable file object, such as a
+        `remote.file.RemoteFile`; closed with the log) and name it by `path`."""
         self.path = path
         self.warnings = []
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._cut: str | None = None
         self._scan = _Scan()
+        if file is None:
+            try:
+                file = path.open("rb")
+            except OSError as exc:
+                raise LogOpenError(f"{path}: cannot open: {one_line(exc)}") from exc
+        self._file: BinaryIO = file
         try:
-            self._file: BinaryIO = path.open("rb")
-        except OSError as exc:
-            raise LogOpenError(f"{path}: cannot open: {one_line(exc)}") from exc
-        try:
-            self._size = os.fstat(self._file.fileno()).st_size
+            self._size = file.seek(0, io.SEEK_END)
+            file.seek(0)
             self._reader = SeekingReader(self._file, validate_crcs=True)
             self._check_header()
             index = self._load_index()

@@ -33,19 +33,24 @@ if TYPE_CHECKING:
 class Rosbag1Log(LogReader):
     """A ROS 1 bag (format 2.0): chunk-parallel units from its index, or from a chunk scan."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, bag: BagFile | None = None) -> None:
+        """Open the bag at `path`, or read its index from `bag` (over any seekable file
+        object, such as a `remote.file.RemoteFile`: left open) and name it by `path`."""
         self.path = path
         self.warnings = []
         self._fallback = ""
         """Why the index was not used ('' where it was)."""
-        try:
-            bag = open_bag_file(path)
-        except OSError as exc:
-            raise LogOpenError(f"{path}: cannot read: {one_line(exc)}") from exc
-        try:
+        if bag is not None:
             self._index = self._load(bag)
-        finally:
-            bag.handle.close()
+        else:
+            try:
+                bag = open_bag_file(path)
+            except OSError as exc:
+                raise LogOpenError(f"{path}: cannot read: {one_line(exc)}") from exc
+            try:
+                self._index = self._load(bag)
+            finally:
+                bag.handle.close()
         self.summary = self._make_summary()
         self._report_damage()
         self._chunk_reader = Rosbag1ChunkReader()
