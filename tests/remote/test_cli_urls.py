@@ -56,3 +56,14 @@ def test_cli_on_a_missing_url_is_one_line_and_exit_2(http_root: tuple[str, Serve
     assert result.exit_code == 2
     assert f"{base}/none.mcap" in result.output and "sig=secret" not in result.output
     assert "Traceback" not in result.output
+
+
+def test_cli_on_a_bag_that_cannot_be_read_by_ranges_says_why_in_one_line(
+    http_root: tuple[str, ServerState],
+) -> None:
+    base, state = http_root
+    (state.root / "bag").symlink_to(SAMPLES / "vlp16_short_ros2")  # SQLite storage
+    result = runner.invoke(app, ["info", f"{base}/bag", "--json"])
+    assert result.exit_code == 2
+    assert "not read by ranges: SQLite storage" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
