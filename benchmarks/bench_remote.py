@@ -202,7 +202,7 @@ def _cpu_s() -> float:
 def compare(log: Path, args: argparse.Namespace) -> dict[str, Any]:
     """Local and remote audits of `log`, interleaved; the figures."""
     from syncaudit.audit.run import audit_log
-    from syncaudit.remote.ranges import tracking
+    from syncaudit.logs import open_log
     from syncaudit.rig import load_rig
 
     rig = load_rig(Path(f"{log}.rig.yaml"))
@@ -220,9 +220,15 @@ def compare(log: Path, args: argparse.Namespace) -> dict[str, Any]:
                 wall, cpu, _ = _timed(lambda: audit_log(log, rig, jobs=args.jobs))
                 local.append((wall, cpu))
                 served = server.cpu_s()
-                with tracking(url) as tracker:
-                    wall, cpu, result = _timed(lambda: audit_log(url, rig, jobs=args.jobs))
-                    stats = tracker.stats()
+
+                def audit_remote() -> tuple[Any, Any]:
+                    # Open as the gate's job does: the audit's own open reuses its bytes,
+                    # and the log counts every fetch (the workers' too).
+                    with open_log(url) as opened:
+                        return audit_log(url, rig, jobs=args.jobs), opened.fetch_stats
+
+                wall, cpu, (result, fetch) = _timed(audit_remote)
+                stats = fetch.to_dict()
                 remote.append((wall, cpu, server.cpu_s() - served))
                 got, want = result.to_dict(), dict(local_ref)
                 got.pop("path", None), want.pop("path", None)

@@ -1,4 +1,5 @@
-"""A real HTTP server on loopback that honours Range requests (and can misbehave).
+"""A real HTTP server on loopback that honours Range requests (and can misbehave), and
+moto's S3 server on loopback with two sample logs (`s3_endpoint`).
 
 Each test's server is its own and ends with the test: the fixture wakes any handler still
 waiting (`delay_s`), stops the server and joins every handler thread, so no request of an
@@ -22,7 +23,20 @@ from typing import Any
 
 import pytest
 
+from syncaudit.logs import LogReader
+
+
+def fetched(log: LogReader) -> dict[str, Any]:
+    """What reading a remote log has fetched so far (its `remote_read`), as a dict."""
+    stats = log.fetch_stats
+    assert stats is not None, f"{log.summary.path} is not a remote log"
+    return stats.to_dict()
+
+
 RANGE = re.compile(r"bytes=(\d+)-(\d*)$")
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
+SECRET = "not-a-real-secret-0123456789"
+"""The S3 server's secret key: it must appear in nothing syncaudit writes."""
 
 
 @dataclass
@@ -210,3 +224,33 @@ def _server(root: Path) -> Iterator[tuple[str, ServerState]]:
         server.server_close()  # joins every handler thread
         thread.join()
     assert not state.errors, "the test server failed a request:\n" + "\n".join(state.errors)
+
+
+@pytest.fixture()
+def s3_endpoint(monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """moto's S3 server on 127.0.0.1 with a bucket holding two sample logs."""
+    moto_server = pytest.importorskip("moto.server")
+    s3fs = pytest.importorskip("s3fs")
+    boto3 = pytest.importorskip("boto3")
+    server = moto_server.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    server.start()
+    host, port = server.get_host_and_port()
+    endpoint = f"http://{host}:{port}"
+    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "testing")
+    monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", SECRET)
+    monkeypatch.setenv("AWS_DEFAULT_REGION", "us-east-1")
+    monkeypatch.setenv("AWS_ENDPOINT_URL", endpoint)
+    # fsspec caches filesystems by their arguments: one made for an earlier test's server
+    # (same environment-given arguments, another port) must not be reused.
+    s3fs.S3FileSystem.clear_instance_cache()
+    try:
+        client = boto3.client("s3", endpoint_url=endpoint)
+        client.create_bucket(Bucket="fleet")
+        for key, name in (
+            ("uploads/car1/a.mcap", "vlp16_three_cameras.mcap"),
+            ("uploads/car2/b.bag", "vlp16_short.bag"),
+        ):
+            client.upload_file(str(SAMPLES / name), "fleet", key)
+        yield endpoint
+    finally:
+        server.stop()

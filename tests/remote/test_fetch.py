@@ -8,7 +8,8 @@ import pytest
 
 from syncaudit.audit.run import audit_log
 from syncaudit.errors import LogReadError
-from syncaudit.remote.fetch import coalesce, fetch_log, public_url
+from syncaudit.remote.fetch import coalesce, fetch_log
+from syncaudit.remote.urls import public_url
 
 from .conftest import ServerState
 

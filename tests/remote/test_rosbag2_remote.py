@@ -16,14 +16,13 @@ from syncaudit.fleet.policy import parse_policy
 from syncaudit.logs import open_log
 from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.mcap import remote as mcap_remote
-from syncaudit.logs.mcap.remote import RemoteUnindexedError
 from syncaudit.logs.ros2.remote import SQLITE_REASON, RemoteMcapBag, file_url
-from syncaudit.remote.ranges import tracking
+from syncaudit.remote.file import RemoteUnindexedError
 from syncaudit.rig import Rig
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
 
-from .conftest import ServerState
+from .conftest import ServerState, fetched
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLES = REPO / "sample_logs"
@@ -74,9 +73,9 @@ def test_an_mcap_bag_prefix_is_read_by_ranges_and_audits_as_the_folder(
     monkeypatch.setattr(mcap_remote, "RANGE_BYTES", 1 << 20)  # several runs per file
     monkeypatch.setattr(parallel_read, "GROUP_BYTES", 1 << 20)
     url = f"{base}/bags/{folder.name}/?token=t0ken"
-    with tracking(url) as tracker:
+    with open_log(url) as log:  # its fetch statistics cover the audit's own open
         remote = audit_log(url, rig, jobs=jobs)
-        stats = tracker.stats()
+        stats = fetched(log)
     local = audit_log(folder, rig, jobs=jobs)
     assert _without_path(remote) == _without_path(local)
     assert remote.to_dict()["path"] == f"{base}/bags/{folder.name}"

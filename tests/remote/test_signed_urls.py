@@ -15,10 +15,10 @@ from syncaudit.logs import open_log
 from syncaudit.logs import parallel as parallel_read
 from syncaudit.logs.mcap import remote as mcap_remote
 from syncaudit.logs.ros1 import remote as rosbag1_remote
-from syncaudit.remote.ranges import signed_url, tracking
+from syncaudit.remote.file import signed_url
 from syncaudit.rig import load_rig
 
-from .conftest import ServerState
+from .conftest import ServerState, fetched
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLES = REPO / "sample_logs"
@@ -65,9 +65,9 @@ def test_workers_read_a_signed_url_that_is_never_shown(
         assert units and all(u.source == f"{base}/{name}" for u in units)
         assert signed_url(f"{base}/{name}") == url  # while the log is open, in this process
     before = len(state.requests)
-    with tracking(url) as tracker:
+    with open_log(url) as log:  # its fetch statistics cover the audit's own open
         remote = audit_log(url, rig, jobs=2)
-        stats = tracker.stats()
+        stats = fetched(log)
     assert _without_path(remote) == _without_path(audit_log(SAMPLES / name, rig, jobs=2))
     assert "s3cr3t" not in repr(remote.to_dict()) and "s3cr3t" not in repr(stats)
     assert all(" bytes=" in r and "s3cr3t" in r for r in state.requests)  # all signed

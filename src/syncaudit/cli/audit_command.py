@@ -19,6 +19,8 @@ from syncaudit.cli.common import (
     app,
     emit,
     json_text,
+    local_paths,
+    log_location,
     output_set,
     print_json,
     run,
@@ -84,21 +86,25 @@ def audit(
 ) -> None:
     """Audit LiDAR-camera sync per camera (Eq 1-6), the recommended delay and the verdict."""
 
+    source = log_location(log)
+
     def job() -> None:
         targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
         calibration = _load_calibration(calibration_json) if calibration_json else None
         with output_set(
-            overwrite=overwrite, inputs=(log, rig, calibration_json), targets=targets.files()
+            overwrite=overwrite,
+            inputs=(*local_paths(source), rig, calibration_json),
+            targets=targets.files(),
         ) as outputs:
             targets.claim_pairings(outputs)
-            result = _audit(log, rig, jobs=jobs, check_crc=check_crc, tables=not as_json)
+            result = _audit(source, rig, jobs=jobs, check_crc=check_crc, tables=not as_json)
             data = result.to_dict()
             targets.write(outputs, result, data, calibration, overwrite=overwrite)
         _show(result, data, as_json=as_json)
         if gate and not result.passed:
             from syncaudit.errors import GateFailedError
 
-            raise GateFailedError(f"{log}: sync audit failed ({data['verdict']})")
+            raise GateFailedError(f"{source}: sync audit failed ({data['verdict']})")
 
     run(job, imports=_import_audit)
 
@@ -175,7 +181,7 @@ class _Targets:
 
 
 def _audit(
-    log: Path, rig: Path | None, *, jobs: int | None, check_crc: bool, tables: bool
+    log: str | Path, rig: Path | None, *, jobs: int | None, check_crc: bool, tables: bool
 ) -> AuditResult:
     """The audit of `log`; the tables' modules are imported while the workers read."""
     from syncaudit.audit.run import audit_log

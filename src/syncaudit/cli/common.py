@@ -252,7 +252,11 @@ def _root(
 # -- options shared by several commands ----------------------------------------------------
 
 LogArgument = Annotated[
-    Path, typer.Argument(help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag.")
+    str,
+    typer.Argument(
+        help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag; or its URL (s3://, gs://, "
+        "az://, http(s)://)."
+    ),
 ]
 RigOption = Annotated[
     Path | None,
@@ -273,6 +277,20 @@ GateFlag = Annotated[bool, typer.Option("--gate", help="Exit 10 when the check f
 OverwriteFlag = Annotated[
     bool, typer.Option("--overwrite", help="Replace outputs that exist (all of them or none).")
 ]
+
+
+def log_location(text: str) -> str | Path:
+    """A log argument as the readers take it: a URL kept as given (a Path would fold its
+    '//' into '/'), anything else a path."""
+    from syncaudit.remote.urls import is_url
+
+    return text if is_url(text) else Path(text)
+
+
+def local_paths(*items: str | Path | None) -> tuple[Path | None, ...]:
+    """The local paths among `items` (URLs and None dropped to None): the inputs an
+    output must not overwrite."""
+    return tuple(item if isinstance(item, Path) else None for item in items)
 
 
 # -- running a command ---------------------------------------------------------------------

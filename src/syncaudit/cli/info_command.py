@@ -9,6 +9,7 @@ from syncaudit.cli.common import (
     app,
     emit,
     fail,
+    log_location,
     print_json,
     run,
 )
@@ -27,7 +28,7 @@ def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> 
         from syncaudit.audit.inspect import inspect_log
         from syncaudit.rig import load_rig
 
-        report = inspect_log(log, load_rig(rig) if rig else None, partial=True)
+        report = inspect_log(log_location(log), load_rig(rig) if rig else None, partial=True)
         if as_json:
             print_json(report.to_dict())
         else:

@@ -8,7 +8,16 @@ from typing import Annotated
 
 import typer
 
-from syncaudit.cli.common import LogArgument, OverwriteFlag, app, emit, output_set, run
+from syncaudit.cli.common import (
+    LogArgument,
+    OverwriteFlag,
+    app,
+    emit,
+    local_paths,
+    log_location,
+    output_set,
+    run,
+)
 
 
 def _write_stdout(text: str) -> None:
@@ -25,11 +34,13 @@ def rig(
 ) -> None:
     """Write a starter rig guessed from the log: every guess and TODO commented."""
 
+    source = log_location(log)
+
     def job() -> None:
-        with output_set(overwrite=overwrite, inputs=(log,), targets=(out,)) as outputs:
+        with output_set(overwrite=overwrite, inputs=local_paths(source), targets=(out,)) as outputs:
             from syncaudit.audit.rig_guess import starter_rig_yaml
 
-            text = starter_rig_yaml(log)
+            text = starter_rig_yaml(source)
             if out is not None:
                 outputs.write_text(out, text)
         if out is None:

@@ -32,7 +32,7 @@ from syncaudit.fleet.policy import Policy
 from syncaudit.fleet.record import JudgedLog, display_path, log_key
 from syncaudit.fleet.remote_job import run_any_log_job
 from syncaudit.logs.parallel import default_jobs
-from syncaudit.remote.fetch import is_url, public_url
+from syncaudit.remote.urls import is_url, public_url
 
 DB_BATCH_LOGS = 32
 DB_BATCH_S = 5.0

@@ -24,8 +24,8 @@ import yaml
 
 from syncaudit.errors import ConfigError, LogOpenError
 from syncaudit.fleet.policy import Policy
-from syncaudit.remote.fetch import is_url, public_url
 from syncaudit.remote.listing import list_logs, remote_fingerprint
+from syncaudit.remote.urls import is_url, public_url
 
 LOG_SUFFIXES = (".mcap", ".bag", ".db3")
 MANIFEST_SUFFIXES = (".csv", ".jsonl")

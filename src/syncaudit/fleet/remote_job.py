@@ -19,8 +19,10 @@ from pathlib import Path
 from syncaudit.errors import SyncauditError
 from syncaudit.fleet.inputs import LogJob
 from syncaudit.fleet.job import JobOptions, LogOutcome, run_log_job
-from syncaudit.remote.fetch import fetch_log, is_url
-from syncaudit.remote.ranges import tracking
+from syncaudit.logs import open_log
+from syncaudit.remote.fetch import fetch_log
+from syncaudit.remote.file import RemoteUnindexedError
+from syncaudit.remote.urls import is_url
 
 
 def rig_topics(rig_path: str | None) -> frozenset[str] | None:
@@ -49,12 +51,18 @@ def run_any_log_job(job: LogJob, options: JobOptions) -> LogOutcome:
         return run_log_job(job, options)
     reason = "--calibrate reads point clouds through a local path"
     if not options.calibrate:
-        with tracking(job.path) as tracker:
-            outcome = run_log_job(job, options)
-            if tracker.ranged:  # else: not readable by ranges, read from a copy below
-                outcome.remote_read = tracker.stats()
-                return outcome
-            reason = tracker.whole_reason
+        try:
+            log = open_log(job.path)
+        except RemoteUnindexedError as exc:  # not readable by ranges: read from a copy below
+            reason = exc.whole_reason
+        except SyncauditError:
+            return run_log_job(job, options)  # the job's own outcome of that error
+        else:
+            with log:  # open across the job's own opens: they reuse what it fetched
+                outcome = run_log_job(job, options)
+                stats = log.fetch_stats
+            outcome.remote_read = stats.to_dict() if stats is not None else None
+            return outcome
     try:
         topics = None if options.calibrate else rig_topics(job.rig_path)
     except SyncauditError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 from syncaudit.logs.model import (
     ChannelInfo,
@@ -14,7 +15,12 @@ from syncaudit.logs.model import (
     ReadUnit,
     TopicInfo,
 )
-from syncaudit.logs.typesys import TypeRegistry
+from syncaudit.logs.typesys import Definition, TypeRegistry, log_types
+
+if TYPE_CHECKING:
+    from rosbags.interfaces.typing import Typesdict
+
+    from syncaudit.remote.ranges import FetchStats
 
 
 class LogReader(ABC):
@@ -57,6 +63,12 @@ class LogReader(ABC):
     ) -> Iterator[RawMessage]:
         """Backend part of `messages`, with the selection already normalised."""
 
+    @property
+    def fetch_stats(self) -> FetchStats | None:
+        """For a log read from a URL: what reading it has fetched so far, by this process
+        and its workers, against its size and needed chunks (None for a local file)."""
+        return None
+
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Pieces of the log holding `topics` that workers can read on their own.
 
@@ -68,9 +80,28 @@ class LogReader(ABC):
         """Channel/connection id -> topic, type, encoding for the units' wanted messages."""
         return {}
 
-    @abstractmethod
     def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types for messages of the given encoding ('cdr' or 'ros1') in this log."""
+        """Types for messages of the given encoding ('cdr' or 'ros1') in this log: its own
+        definitions, then schemas/, then ROS defaults (built once per encoding)."""
+        registries: dict[str, TypeRegistry] = self.__dict__.setdefault("_registries", {})
+        if encoding not in registries:
+            registries[encoding] = TypeRegistry(
+                ros1=self._ros1_types(encoding), log_types=self.log_types(encoding)
+            )
+        return registries[encoding]
+
+    def log_types(self, encoding: str) -> Typesdict:
+        """The types the log's own definitions give for messages of `encoding` (a definition
+        that cannot be parsed is a 'bad-schema' warning)."""
+        return log_types(self._definitions(encoding), self.warn)
+
+    def _definitions(self, encoding: str) -> Iterable[Definition]:
+        """The message definitions the log carries for messages of `encoding`."""
+        return ()
+
+    def _ros1_types(self, encoding: str) -> bool:
+        """Whether the ROS defaults under the log's definitions are ROS 1's (else ROS 2's)."""
+        return encoding == "ros1"
 
     def deserialize(self, msg: RawMessage) -> object:
         """Deserialize one raw message with the log's own definitions (or schemas/).

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.magic import MCAP_MAGIC, ROSBAG1_MAGIC, ROSBAG_ANY_MAGIC, SQLITE_MAGIC
 from syncaudit.logs.typesys import one_line
+from syncaudit.remote.urls import public_url
 
 __all__ = ["MCAP_MAGIC", "ROSBAG1_MAGIC", "SQLITE_MAGIC", "open_log"]
 
@@ -46,6 +48,30 @@ def _bag_folder(path: Path) -> LogReader:
     return _rosbags_log(path, ros1=False)
 
 
+def _remote_log(url: str) -> LogReader:
+    """A log behind a URL, read by ranges: an indexed MCAP file, a ROS 1 bag, or a ROS 2 bag
+    prefix with MCAP storage (any other URL: the prefix of a bag, its metadata.yaml read
+    first). What cannot be read by ranges raises `RemoteUnindexedError`, for the caller
+    (the fleet gate) to download the log whole."""
+    path = urlsplit(url).path.lower()
+    if path.endswith(".mcap"):
+        from syncaudit.logs.mcap.remote import RemoteMcapLog
+
+        return RemoteMcapLog(url)
+    if path.endswith(".bag"):
+        from syncaudit.logs.ros1.remote import RemoteRosbag1Log
+
+        return RemoteRosbag1Log(url)
+    from syncaudit.logs.ros2.remote import SQLITE_REASON, open_remote_bag
+
+    if path.endswith(".db3"):
+        from syncaudit.remote.file import RemoteUnindexedError
+
+        message = f"{public_url(url)}: not read by ranges: {SQLITE_REASON}"
+        raise RemoteUnindexedError(message, SQLITE_REASON)
+    return open_remote_bag(url)
+
+
 def open_log(path: str | Path) -> LogReader:
     """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`) or a ROS 1 `.bag`.
 
@@ -54,9 +80,7 @@ def open_log(path: str | Path) -> LogReader:
     An indexed MCAP or ROS 1 bag may also be a URL (http(s)://, or s3:// etc. via fsspec).
     """
     if isinstance(path, str) and "://" in path:
-        from syncaudit.logs.mcap.remote import open_remote_log
-
-        return open_remote_log(path)
+        return _remote_log(path)
     path = Path(path)
     if not path.exists():
         raise LogOpenError(f"{path}: no such file or directory")

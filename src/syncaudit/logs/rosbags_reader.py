@@ -15,10 +15,10 @@ from rosbags.rosbag2.storage_mcap import McapReader as Rosbag2McapStorage
 from syncaudit.errors import LogOpenError, LogReadError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import LogSummary, RawMessage, TopicInfo
-from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
+from syncaudit.logs.typesys import Definition, one_line
 
 if TYPE_CHECKING:
-    from rosbags.interfaces.typing import Typesdict
+    pass
 
 
 class RosbagsLog(LogReader):
@@ -35,7 +35,6 @@ class RosbagsLog(LogReader):
             self._reader.open()
         except Exception as exc:  # rosbags: ReaderError, OSError, apsw and YAML errors
             raise LogOpenError(f"{path}: cannot open as a {kind}: {one_line(exc)}") from exc
-        self._registry: TypeRegistry | None = None
         try:
             self.summary = self._make_summary()
         except Exception as exc:  # metadata with wrong value types
@@ -134,24 +133,14 @@ class RosbagsLog(LogReader):
 
         yield from heapq.merge(*(one(s) for s in storages), key=lambda m: m.log_time_ns)
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from the bag's connection definitions, then schemas/ and ROS defaults."""
-        if self._registry is None:
-            log_types: Typesdict = {}
-            for conn in self._reader.connections:
-                if not conn.msgdef.data or conn.msgtype in log_types:
-                    continue
-                fmt = "ros2idl" if conn.msgdef.format.name == "IDL" else "msg"
-                try:
-                    parsed = parse_definition(fmt, conn.msgdef.data, conn.msgtype)
-                except Exception as exc:  # a bad definition must not stop the audit
-                    self.warn(
-                        "bad-schema", f"definition of {conn.msgtype!r} unreadable: {one_line(exc)}"
-                    )
-                    continue
-                log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registry = TypeRegistry(ros1=self.ros1, log_types=log_types)
-        return self._registry
+    def _definitions(self, encoding: str) -> Iterator[Definition]:
+        """The bag's connection definitions."""
+        for c in self._reader.connections:
+            fmt = "ros2idl" if c.msgdef.format.name == "IDL" else "msg"
+            yield Definition(c.msgtype, fmt, c.msgdef.data, f"definition of {c.msgtype!r}")
+
+    def _ros1_types(self, encoding: str) -> bool:
+        return self.ros1
 
     def _close(self) -> None:
         self._reader.close()

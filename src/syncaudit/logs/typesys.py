@@ -6,6 +6,8 @@ not with this module: an audit whose messages all have struct readers never need
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -94,6 +96,39 @@ def normalise_type_name(name: str) -> str:
 def one_line(exc: BaseException) -> str:
     """An exception's text folded onto one line (type name if it has no text)."""
     return " ".join(str(exc).split()) or type(exc).__name__
+
+
+@dataclass(frozen=True, slots=True)
+class Definition:
+    """One message definition a log carries (an MCAP schema, a bag connection's or a
+    rosbag2 database's definition), as its reader found it."""
+
+    msgtype: str
+    """The type it defines ('pkg/msg/Name', or ROS 1's 'pkg/Name')."""
+    encoding: str
+    """'ros1msg', 'ros2msg', 'ros2idl', 'msg' or 'idl' (anything else defines no ROS type)."""
+    text: str | bytes
+    """The definition (bytes are decoded as UTF-8 when it is parsed)."""
+    where: str
+    """How a warning about it begins: "definition of 'pkg/msg/Name'", or the file and schema."""
+
+
+def log_types(definitions: Iterable[Definition], warn: Callable[[str, str], None]) -> Typesdict:
+    """The types a log's own definitions give, the first definition of a type winning; one
+    that cannot be parsed is a 'bad-schema' warning, not an error (it must not stop an
+    audit that does not deserialise that type)."""
+    types: Typesdict = {}
+    for item in definitions:
+        if not item.text or normalise_type_name(item.msgtype) in types:
+            continue
+        try:
+            text = item.text.decode("utf-8") if isinstance(item.text, bytes) else item.text
+            parsed = parse_definition(item.encoding, text, item.msgtype)
+        except Exception as exc:  # rosbags raises several parser error types
+            warn("bad-schema", f"{item.where} unreadable: {one_line(exc)}")
+            continue
+        types.update({k: v for k, v in parsed.items() if k not in types})
+    return types
 
 
 def _nested_names(definition: object) -> list[str]:

@@ -1,32 +1,30 @@
 """Fetch a remote log into a local folder, for the logs that cannot be read by ranges.
 
-An indexed MCAP is read straight from its URL (`logs.mcap_remote`: each chunk worker
+An indexed MCAP is read straight from its URL (`logs.mcap.remote`: each chunk worker
 streams its chunks into memory). What this module fetches is the rest: ROS 1 bags and
 ROS 2 bag prefixes (metadata.yaml and its files) whole, and an MCAP without a usable
 index whole; and, for the calibration (which reads point-cloud topics through a local
 path), an MCAP as a sparse file: the footer and summary first, then the chunks whose
 message indexes name a channel of the wanted topics (all chunks when the topics are not
-known), read in coalesced ranges of at most `PIECE_BYTES` (fsspec's `cat_ranges`) and
+known), read in coalesced ranges of at most `PIECE_BYTES` (`IN_FLIGHT` at once) and
 written at their offsets into a sparse file of the remote size.
 """
 
 from __future__ import annotations
 
 import os
-import re
 import struct
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from syncaudit.errors import LogOpenError, LogReadError, UsageError
-from syncaudit.logs.magic import MCAP_MAGIC
-from syncaudit.remote.ranges import FetchStats as FetchStats  # re-exported
-from syncaudit.remote.ranges import public_url as public_url  # re-exported
+from syncaudit.errors import LogOpenError
+from syncaudit.remote.ranges import FetchStats, FsspecObject, read_range
+from syncaudit.remote.urls import filesystem, public_url
 
-URL = re.compile(r"^(s3|s3a|gs|gcs|az|abfs|abfss|http|https)://", re.IGNORECASE)
-EXTRAS = {"s3": "s3", "s3a": "s3", "gs": "gcs", "gcs": "gcs", "az": "azure", "abfs": "azure"}
-MAGIC = MCAP_MAGIC
+MAGIC = b"\x89MCAP0\r\n"
+"""An MCAP file's first and last bytes (the format's, as `mcap.writer.MCAP0_MAGIC`)."""
 TAIL_BYTES = 64 << 10
 """First read of an MCAP's end: the footer, and for small logs the whole summary."""
 HEAD_BYTES = 64 << 10
@@ -35,65 +33,18 @@ PIECE_BYTES = 16 << 20
 keep several requests in flight."""
 GAP_BYTES = 64 << 10
 """Ranges closer than this are read as one (the gap is fetched too)."""
-TRIES = 3
 IN_FLIGHT = 16
 """Requests fetched concurrently (at most IN_FLIGHT x PIECE_BYTES = 256 MiB in memory)."""
 
 
-def is_url(item: str) -> bool:
-    """True for the object-storage and HTTP URLs fsspec reads."""
-    return bool(URL.match(item))
-
-
-def filesystem(url: str) -> tuple[Any, str]:
-    """(fsspec filesystem, path) for a URL; a missing backend names the extra to install."""
-    scheme = url.split("://", 1)[0].lower()
-    extra = EXTRAS.get(scheme, "http")
-    try:
-        from fsspec.core import url_to_fs  # type: ignore[import-untyped]
-    except ImportError:
-        raise UsageError(f"reading {scheme}:// needs pip install 'syncaudit[{extra}]'") from None
-    try:
-        fs, path = url_to_fs(url)
-    except ImportError:
-        raise UsageError(f"reading {scheme}:// needs pip install 'syncaudit[{extra}]'") from None
-    return fs, path
-
-
 def _cat_ranges(fs: Any, path: str, ranges: list[tuple[int, int]], url: str) -> list[bytes]:
-    """Fetch byte ranges (concurrently where the backend can), retrying failed ones."""
-    missing = list(range(len(ranges)))
-    out: list[bytes | None] = [None] * len(ranges)
-    last: str = ""
-    for _ in range(TRIES):
-        try:
-            data = fs.cat_ranges(
-                [path] * len(missing),
-                [ranges[i][0] for i in missing],
-                [ranges[i][1] for i in missing],
-                on_error="return",
-            )
-        except Exception as exc:  # the backend's own errors: one line, then retry
-            data = [exc] * len(missing)
-        still = []
-        for index, piece in zip(missing, data, strict=True):
-            start, end = ranges[index]
-            if isinstance(piece, bytes | bytearray) and len(piece) == end - start:
-                out[index] = bytes(piece)
-            else:
-                still.append(index)
-                last = (
-                    f"{type(piece).__name__}: {piece}".splitlines()[0]
-                    if isinstance(piece, BaseException)
-                    else f"got {len(piece)} of {end - start} bytes"
-                )
-        missing = still
-        if not missing:
-            return [piece for piece in out if piece is not None]
-    start, end = ranges[missing[0]]
-    raise LogReadError(
-        f"{public_url(url)}: reading bytes {start}-{end} failed {TRIES} times ({last})"
-    )
+    """Fetch byte ranges, `IN_FLIGHT` at a time, each retried as every remote read is
+    (`remote.ranges.read_range`: from where a failed reply stopped, `TRIES` attempts)."""
+    obj = FsspecObject.of(fs, path, public_url(url))
+    if len(ranges) == 1:
+        return [read_range(obj, *ranges[0], None)]
+    with ThreadPoolExecutor(min(IN_FLIGHT, len(ranges))) as pool:
+        return list(pool.map(lambda r: read_range(obj, r[0], r[1], None), ranges))
 
 
 def coalesce(

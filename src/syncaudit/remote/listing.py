@@ -7,7 +7,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError
-from syncaudit.remote.fetch import filesystem, public_url
+from syncaudit.remote.urls import filesystem, public_url
 
 LOG_SUFFIXES = (".mcap", ".bag")
 

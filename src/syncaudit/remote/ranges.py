@@ -28,13 +28,13 @@ import os
 import re
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager, suppress
-from dataclasses import asdict, dataclass, field
+from contextlib import suppress
+from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 from urllib.parse import unquote, urljoin, urlsplit
 
 from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.remote.urls import filesystem, public_url
 
 TRIES = 3
 """Attempts per range before the read is an error (the first and two retries)."""
@@ -49,15 +49,6 @@ browsers ~20: a log behind more than a few is a misconfigured server or a loop).
 REDIRECTS = frozenset({301, 302, 303, 307, 308})
 PERMANENT_REDIRECTS = frozenset({301, 308})
 _CONTENT_RANGE = re.compile(r"bytes (\d+)-(\d+)/(\d+|\*)$")
-
-
-def public_url(url: str) -> str:
-    """The URL without query string, fragment or user info (no credentials, no tokens)."""
-    parts = urlsplit(url)
-    host = parts.hostname or ""
-    if parts.port:
-        host = f"{host}:{parts.port}"
-    return f"{parts.scheme}://{host}{parts.path}"
 
 
 def _one_line(exc: BaseException) -> str:
@@ -110,98 +101,6 @@ class FetchStats:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
         return asdict(self)
-
-
-@dataclass(slots=True)
-class Tracker:
-    """What one process knows of a remote log while it is being audited: the bytes its
-    parent fetched (header, summary: reused by a second open), the shared counter, and
-    the needed-chunk figures the reader found."""
-
-    url: str
-    counter: FetchCounter = field(default_factory=FetchCounter)
-    segments: dict[int, bytes] = field(default_factory=dict)
-    """Start offset -> bytes fetched by the parent (head, tail, summary)."""
-    cached_bytes: int = 0
-    """Bytes of chunks among `segments` (bounded by the reader)."""
-    size_bytes: int = 0
-    needed_chunk_bytes: int = 0
-    chunks_fetched: int = 0
-    chunks_total: int = 0
-    ranged: bool = True
-    whole_reason: str = ""
-    """Why the log cannot be read by ranges (set with `ranged = False`)."""
-    users: int = 0
-
-    def stats(self) -> dict[str, Any]:
-        """The `remote_read` entry of `--json-out`."""
-        return FetchStats(
-            url=public_url(self.url),
-            size_bytes=self.size_bytes,
-            fetched_bytes=self.counter.fetched_bytes,
-            requests=self.counter.requests,
-            needed_chunk_bytes=self.needed_chunk_bytes,
-            chunks_fetched=self.chunks_fetched,
-            chunks_total=self.chunks_total,
-            ranged=self.ranged,
-            whole_reason=self.whole_reason,
-        ).to_dict()
-
-
-_TRACKERS: dict[str, Tracker] = {}
-"""Public URL (no query string, no user info) -> the tracker of the log behind it."""
-_TRACKERS_LOCK = threading.Lock()
-
-
-def acquire_tracker(url: str) -> Tracker:
-    """The tracker of `url` in this process (forked workers inherit it), made on first use.
-
-    Kept under the public URL: read units and messages name the log by it, and the
-    tracker alone holds the URL as given (a signed URL's query string), for the readers
-    of this process and of the workers it forks (`signed_url`)."""
-    key = public_url(url)
-    with _TRACKERS_LOCK:
-        tracker = _TRACKERS.get(key)
-        if tracker is None:
-            tracker = _TRACKERS[key] = Tracker(url)
-        tracker.users += 1
-        return tracker
-
-
-def release_tracker(tracker: Tracker) -> None:
-    """Drop one use of a tracker; the last user removes it."""
-    key = public_url(tracker.url)
-    with _TRACKERS_LOCK:
-        tracker.users -= 1
-        if tracker.users <= 0 and _TRACKERS.get(key) is tracker:
-            del _TRACKERS[key]
-
-
-def find_tracker(url: str) -> Tracker | None:
-    """The tracker of `url` (public or as given) if this process, or the parent it forked
-    from, holds one."""
-    return _TRACKERS.get(public_url(url))
-
-
-def signed_url(url: str) -> str:
-    """The URL as the log was opened with (query string, user info) for its public form,
-    where this process holds its tracker; else `url` itself.
-
-    Read units carry the public URL only (they may be shown); a worker turns it back
-    into the URL it must ask with here. A forked worker inherits the tracker; a spawned
-    worker gets the URL in its task (never shown) and opens the log with it first."""
-    tracker = find_tracker(url)
-    return tracker.url if tracker is not None else url
-
-
-@contextmanager
-def tracking(url: str) -> Iterator[Tracker]:
-    """Keep `url`'s tracker alive across every open of the log inside the block."""
-    tracker = acquire_tracker(url)
-    try:
-        yield tracker
-    finally:
-        release_tracker(tracker)
 
 
 class Body(Protocol):
@@ -401,11 +300,16 @@ class FsspecObject:
     """An object in a store fsspec reads: each range is one `cat_file`."""
 
     def __init__(self, url: str) -> None:
-        from syncaudit.remote.fetch import filesystem
-
         self.name = public_url(url)
         self._fs, self._path = filesystem(url)
         self._size: int | None = None
+
+    @classmethod
+    def of(cls, fs: Any, path: str, name: str, size: int | None = None) -> FsspecObject:
+        """An object of a filesystem already open (a fetch's), named `name` in messages."""
+        obj = cls.__new__(cls)
+        obj.name, obj._fs, obj._path, obj._size = name, fs, path, size
+        return obj
 
     def open(self, start: int, end: int) -> tuple[Body, int]:
         """The range fetched whole into memory (the backends read ranges whole anyway)."""

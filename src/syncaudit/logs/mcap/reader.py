@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import heapq
 import io
-import os
 import struct
 import zlib
 from collections.abc import Iterator
@@ -50,10 +49,14 @@ from syncaudit.logs.mcap.chunks import (
     iter_chunk_messages,
 )
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
-from syncaudit.logs.typesys import TypeRegistry, normalise_type_name, one_line, parse_definition
+from syncaudit.logs.typesys import (
+    Definition,
+    normalise_type_name,
+    one_line,
+)
 
 if TYPE_CHECKING:
-    from rosbags.interfaces.typing import Typesdict
+    pass
 
 MAGIC = MCAP_MAGIC
 HEADER_CHECKS = 4096
@@ -90,20 +93,24 @@ class _Scan:
 class McapLog(LogReader):
     """An MCAP file; indexed reading when it has a summary, linear otherwise."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, file: BinaryIO | None = None) -> None:
+        """Open the MCAP at `path`, or read `file` (a seekable file object, such as a
+        `remote.file.RemoteFile`; closed with the log) and name it by `path`."""
         self.path = path
         self.warnings = []
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
-        self._registries: dict[str, TypeRegistry] = {}
         self._cut: str | None = None
         self._scan = _Scan()
+        if file is None:
+            try:
+                file = path.open("rb")
+            except OSError as exc:
+                raise LogOpenError(f"{path}: cannot open: {one_line(exc)}") from exc
+        self._file: BinaryIO = file
         try:
-            self._file: BinaryIO = path.open("rb")
-        except OSError as exc:
-            raise LogOpenError(f"{path}: cannot open: {one_line(exc)}") from exc
-        try:
-            self._size = os.fstat(self._file.fileno()).st_size
+            self._size = file.seek(0, io.SEEK_END)
+            file.seek(0)
             self._reader = SeekingReader(self._file, validate_crcs=True)
             self._check_header()
             index = self._load_index()
@@ -632,32 +639,16 @@ class McapLog(LogReader):
                     if isinstance(rec, Message) and _in_range(rec.log_time, start_ns, stop_ns):
                         heapq.heappush(heap, (rec.log_time, offset, index, rec))
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from this file's schemas of the given encoding, then schemas/ and ROS."""
-        if encoding not in self._registries:
-            self._registries[encoding] = TypeRegistry(
-                ros1=encoding == "ros1", log_types=self.log_types(encoding)
-            )
-        return self._registries[encoding]
-
-    def log_types(self, encoding: str) -> Typesdict:
-        """Message definitions this file's schemas give for channels of `encoding`."""
-        log_types: Typesdict = {}
-        for channel in self._channels.values():
-            schema = self._schemas.get(channel.schema_id)
-            if schema is None or not schema.data or channel.message_encoding != encoding:
-                continue
-            try:
-                text = schema.data.decode("utf-8")
-                parsed = parse_definition(schema.encoding, text, schema.name)
-            except Exception as exc:  # a bad schema must not stop the audit
-                self.warn(
-                    "bad-schema",
-                    f"{self.path}: schema {schema.name!r} unreadable: {one_line(exc)}",
-                )
-                continue
-            log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-        return log_types
+    def _definitions(self, encoding: str) -> Iterator[Definition]:
+        """This file's schemas used by channels of `encoding`, in the channels' order."""
+        used = dict.fromkeys(
+            c.schema_id for c in self._channels.values() if c.message_encoding == encoding
+        )
+        for sid in used:
+            schema = self._schemas.get(sid)
+            if schema is not None:
+                where = f"{self.path}: schema {schema.name!r}"
+                yield Definition(schema.name, schema.encoding, schema.data, where)
 
     def indexed_summary(self) -> Summary | None:
         """The MCAP summary where the file has chunk indexes (for chunk-parallel reading)."""

@@ -1,7 +1,8 @@
 """An indexed MCAP read straight from a URL: ranged reads of its index and of its chunks.
 
-The parent (`RemoteMcapLog`) fetches the head, the footer and the summary section (chunk
-index, channels, schemas, statistics): a few requests, however large the log. Its read
+The parent (`RemoteMcapLog`: the local `McapLog` over a `remote.file.RemoteFile`) fetches
+the head, the footer and the summary section (chunk index, channels, schemas,
+statistics) ahead: a few requests, however large the log. Its read
 units ('mcap-remote-chunks') are runs of consecutive chunks holding audited topics,
 coalesced across the small gaps between them (the message-index records) up to
 `RANGE_BYTES`; each worker process streams its runs with one ranged GET each
@@ -18,19 +19,14 @@ usable index (cut off, no summary) cannot be read by chunks and is refused with
 
 from __future__ import annotations
 
-import io
 import struct
 import zlib
 from collections.abc import Iterator
-from pathlib import PosixPath
 from typing import BinaryIO, cast
-from urllib.parse import urlsplit
 
-from mcap.reader import SeekingReader
 from mcap.summary import Summary
 
-from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.base import LogReader
+from syncaudit.errors import LogOpenError, LogReadError
 from syncaudit.logs.mcap.chunks import (
     MAX_LOG_TIME_NS,
     OP_CHUNK,
@@ -40,30 +36,25 @@ from syncaudit.logs.mcap.chunks import (
     chunk_where,
     iter_chunk_messages,
 )
-from syncaudit.logs.mcap.reader import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog, _Scan
+from syncaudit.logs.mcap.reader import MAGIC, MAX_CHUNK_RECORD_BYTES, McapLog
 from syncaudit.logs.model import ChannelInfo, ReadUnit
-from syncaudit.logs.typesys import one_line
-from syncaudit.remote.ranges import (
-    RangeStream,
-    RemoteObject,
-    Tracker,
-    acquire_tracker,
-    find_tracker,
-    open_object,
-    public_url,
-    read_head,
-    read_range,
-    release_tracker,
+from syncaudit.remote.file import (
+    RemoteFile,
+    RemoteSource,
+    RemoteUnindexedError,
+    RunStream,
+    read_run,
+    shared_source,
     signed_url,
 )
+from syncaudit.remote.ranges import FetchStats, RemoteObject, open_object
+from syncaudit.remote.urls import UrlPath, public_url
 
 KIND = "mcap-remote-chunks"
 HEAD_BYTES = 1 << 10
 """First read: the magic and the head of the header record (all `McapLog` checks)."""
 TAIL_BYTES = 16 << 10
 """Second read: the footer, and for most logs the whole summary section."""
-MISS_BYTES = 4 << 10
-"""Smallest read of the parent outside head, tail and summary (message indexes)."""
 RANGE_BYTES = 24 << 20
 """Largest run of chunks one GET reads (and one worker task holds): as `collect`'s
 GROUP_BYTES, so tasks are as many as for the local file."""
@@ -74,104 +65,6 @@ PARENT_CACHE_BYTES = 64 << 20
 so that the workers' runs do not fetch them again."""
 _FOOTER_SUMMARY_START = 28
 """Bytes from the end of the file to the footer's summary_start field (u64)."""
-
-
-class RemoteUnindexedError(LogOpenError):
-    """A remote MCAP without a usable chunk index: it can only be read whole."""
-
-
-class UrlPath(PosixPath):
-    """A URL where `McapLog` keeps a path: `str()` gives the URL back (scheme://host/path),
-    so every message it writes names the log by its URL."""
-
-    def __str__(self) -> str:
-        parts = self.parts
-        return f"{parts[0]}//{'/'.join(parts[1:])}" if parts else ""
-
-
-class RemoteFile:
-    """A read-only, seekable view of a remote object (for the mcap library, the ROS 1 bag
-    reader): the bytes the parent fetched (head, tail, summary, index), anything else by a
-    ranged read.
-
-    Not an `io.RawIOBase`: the mcap library wraps those in a BufferedReader, which reads
-    ahead past what is needed and closes the file when it is dropped.
-    """
-
-    def __init__(
-        self, obj: RemoteObject, size: int, tracker: Tracker, *, keep: bool = True
-    ) -> None:
-        self._obj, self._size, self._tracker = obj, size, tracker
-        self._keep = keep
-        """Keep what a miss fetched (the parent's index reads; not a worker's chunks)."""
-        self._pos = 0
-        self.closed = False
-
-    def readable(self) -> bool:
-        """Yes."""
-        return True
-
-    def seekable(self) -> bool:
-        """Yes."""
-        return True
-
-    def tell(self) -> int:
-        """The read position."""
-        return self._pos
-
-    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
-        """Move the read position."""
-        base = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self._size}[whence]
-        self._pos = max(0, base + offset)
-        return self._pos
-
-    def read(self, size: int = -1) -> bytes | bytearray:
-        """Up to `size` bytes from the read position (to the end if negative)."""
-        end = self._size if size < 0 else min(self._size, self._pos + size)
-        if end <= self._pos:
-            return b""
-        start, self._pos = self._pos, end
-        if not self._keep and self._held(start, end) is None:
-            # A worker's chunk: streamed straight into the buffer returned (no second copy).
-            out = bytearray(end - start)
-            stream = RunStream(self._obj, start, end, self._tracker)
-            try:
-                stream.readinto(memoryview(out))
-            finally:
-                stream.close()
-            return out
-        return bytes(self._slice(start, end))
-
-    def readinto(self, buffer: bytearray | memoryview) -> int:
-        """Fill a prefix of `buffer`; the bytes read."""
-        n = min(len(buffer), self._size - self._pos)
-        if n <= 0:
-            return 0
-        buffer[:n] = self._slice(self._pos, self._pos + n)
-        self._pos += n
-        return n
-
-    def close(self) -> None:
-        """Nothing held open (the fetched bytes belong to the tracker)."""
-        self.closed = True
-
-    def _held(self, start: int, end: int) -> memoryview | None:
-        """Bytes start..end-1 if one fetched segment holds them all."""
-        for at, data in self._tracker.segments.items():
-            if at <= start and end <= at + len(data):
-                return memoryview(data)[start - at : end - at]
-        return None
-
-    def _slice(self, start: int, end: int) -> memoryview:
-        held = self._held(start, end)
-        if held is not None:
-            return held
-        stop = min(self._size, max(end, start + MISS_BYTES))
-        if not self._keep:
-            return memoryview(read_range(self._obj, start, end, self._tracker.counter))
-        data = read_range(self._obj, start, stop, self._tracker.counter)
-        self._tracker.segments[start] = data
-        return memoryview(data)[: end - start]
 
 
 class RemoteChunkReader(ChunkReader):
@@ -186,7 +79,7 @@ class RemoteChunkReader(ChunkReader):
     def __init__(
         self,
         obj: RemoteObject,
-        tracker: Tracker | None,
+        source: RemoteSource | None,
         *,
         check_crc: bool = False,
         reuse: bool = True,
@@ -198,29 +91,24 @@ class RemoteChunkReader(ChunkReader):
         self._out = bytearray()
         self._zstd = None
         self._obj = obj
-        self._tracker = tracker
+        self._source = source
         self._slots: list[bytearray] = []
 
     def read(self, offset: int, length: int) -> memoryview:
         """The decompressed records of the chunk record at `offset` (fetched whole, and
-        kept in the tracker up to `PARENT_CACHE_BYTES`: the workers' runs then skip it)."""
+        kept by the source up to `PARENT_CACHE_BYTES`: the workers' runs then skip it)."""
         where = chunk_where(self.path, offset)
         if offset < 0 or length < RECORD_HEAD.size or length > MAX_CHUNK_RECORD_BYTES:
             raise LogReadError(f"{where}: chunk record of {length} bytes cannot be read")
-        tracker = self._tracker
-        data = bytearray(length)
-        stream = RunStream(self._obj, offset, offset + length, tracker)
-        try:
-            stream.readinto(memoryview(data))
-        finally:
-            stream.close()
+        source = self._source
+        data = read_run(self._obj, offset, offset + length, source)
         if (
-            tracker is not None
-            and offset not in tracker.segments
-            and tracker.cached_bytes + length <= PARENT_CACHE_BYTES
+            source is not None
+            and offset not in source.segments
+            and source.cached_bytes + length <= PARENT_CACHE_BYTES
         ):
-            tracker.segments[offset] = bytes(data)
-            tracker.cached_bytes += length
+            source.segments[offset] = bytes(data)
+            source.cached_bytes += length
         return self.decode(memoryview(data)[:length], where)
 
     def decode(self, record: memoryview, where: str, *, slot: int | None = None) -> memoryview:
@@ -241,62 +129,48 @@ class RemoteChunkReader(ChunkReader):
 
 
 class RemoteMcapLog(McapLog):
-    """An indexed MCAP behind a URL (http(s):// read directly, other stores via fsspec)."""
+    """An indexed MCAP behind a URL (http(s):// read directly, other stores via fsspec):
+    the local reader over a `RemoteFile` that holds the head, footer and summary."""
 
     def __init__(self, url: str) -> None:
         self.url = url
-        self.path = UrlPath(public_url(url))
-        self.warnings = []
-        self._schemas = {}
-        self._channels = {}
-        self._registries = {}
-        self._cut = None
-        self._scan = _Scan()
-        self._tracker = acquire_tracker(url)
+        path = UrlPath(public_url(url))
+        self._remote = RemoteFile.open(url, HEAD_BYTES)
         try:
-            self._object = open_object(url)
-            self._size = self._fetch_index()
-            self._file = cast(BinaryIO, RemoteFile(self._object, self._size, self._tracker))
-            self._reader = SeekingReader(self._file, validate_crcs=True)
-            self._check_header()
-            if self._load_index() is None:
-                reason = "MCAP without a usable chunk index (cut off or no summary)"
-                self._tracker.ranged = False
-                self._tracker.whole_reason = f"{reason}: downloaded whole and scanned"
-                raise RemoteUnindexedError(f"{self.path}: {reason}: it cannot be read by ranges")
-            self._indexed = True
-        except SyncauditError:
-            release_tracker(self._tracker)
+            self._hold_index(path)
+        except BaseException:
+            self._remote.close()
             raise
-        except Exception as exc:  # mcap raises many types on damaged bytes
-            release_tracker(self._tracker)
-            raise LogOpenError(f"{self.path}: not a readable MCAP file: {one_line(exc)}") from exc
+        super().__init__(path, cast(BinaryIO, self._remote))
 
-    def _fetch_index(self) -> int:
-        """Fetch head, tail and summary section (once per tracked log); the file size."""
-        tracker = self._tracker
-        if tracker.segments:
-            return tracker.size_bytes
-        head, size = read_head(self._object, HEAD_BYTES, tracker.counter)
-        if size == 0:
-            raise LogOpenError(f"{self.path}: file is empty")
-        if not head.startswith(MAGIC):
-            raise LogOpenError(f"{self.path}: not an MCAP file (no MCAP magic at its start)")
-        segments = {0: head}
-        tail_start = max(len(head), size - TAIL_BYTES)
-        if tail_start < size:
-            tail = read_range(self._object, tail_start, size, tracker.counter)
-            if tail.endswith(MAGIC) and len(tail) >= _FOOTER_SUMMARY_START:
-                (summary_start,) = struct.unpack_from("<Q", tail, len(tail) - _FOOTER_SUMMARY_START)
-                start = max(summary_start, len(head))
-                if summary_start > 0 and start < tail_start:
-                    # One segment from the summary to the end: its records read across.
-                    summary = read_range(self._object, start, tail_start, tracker.counter)
-                    tail, tail_start = summary + tail, start
-            segments[tail_start] = tail
-        tracker.segments.update(segments)
-        tracker.size_bytes = size
-        return size
+    def _hold_index(self, path: UrlPath) -> None:
+        """Check the head; fetch the tail and the summary section ahead, one request each
+        (nothing when a first open of the URL in this process did)."""
+        file = self._remote
+        head = file.held(0, min(file.size, HEAD_BYTES))
+        if file.size == 0:
+            raise LogOpenError(f"{path}: file is empty")
+        if head is None or bytes(head[: len(MAGIC)]) != MAGIC:
+            raise LogOpenError(f"{path}: not an MCAP file (no MCAP magic at its start)")
+        size, head_end = file.size, len(head)
+        tail_start = max(head_end, size - TAIL_BYTES)
+        if tail_start >= size:
+            return
+        file.hold(tail_start, size)
+        tail = file.held(tail_start, size)
+        if tail is None or bytes(tail[-len(MAGIC) :]) != MAGIC or len(tail) < _FOOTER_SUMMARY_START:
+            return
+        (summary_start,) = struct.unpack_from("<Q", tail, len(tail) - _FOOTER_SUMMARY_START)
+        if summary_start > 0:
+            file.hold(max(summary_start, head_end), tail_start)  # joined to the tail
+
+    def _scan_linear(self) -> None:
+        """No scan over ranged reads (it would read every record): refused, to be fetched."""
+        reason = "MCAP without a usable chunk index (cut off or no summary)"
+        raise RemoteUnindexedError(
+            f"{self.path}: {reason}: it cannot be read by ranges",
+            f"{reason}: downloaded whole and scanned",
+        )
 
     def _check_chunks(self, summary: Summary) -> None:
         """Refuse, at open, chunk indexes that cannot be true (a size no chunk can have, a
@@ -315,7 +189,8 @@ class RemoteMcapLog(McapLog):
 
     def _chunk_reader(self) -> ChunkReader:
         """Chunks for `messages()`: fetched one by one, each into its own buffer."""
-        return RemoteChunkReader(self._object, self._tracker, check_crc=True, reuse=False)
+        source = self._remote.source
+        return RemoteChunkReader(source.obj, source, check_crc=True, reuse=False)
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
         """Runs of chunks holding `topics`, one ranged GET each (see `coalesce_units`)."""
@@ -323,18 +198,14 @@ class RemoteMcapLog(McapLog):
         if chunks is None:
             return None
         summary = self.indexed_summary()
-        self._tracker.chunks_total = len(summary.chunk_indexes) if summary else 0
-        self._tracker.chunks_fetched = len(chunks)
-        self._tracker.needed_chunk_bytes = sum(unit.length for unit in chunks)
+        total = len(summary.chunk_indexes) if summary else 0
+        self._remote.source.note_chunks(total, len(chunks), sum(u.length for u in chunks))
         return coalesce_units(chunks, str(self.path))
 
-    def fetch_stats(self) -> Tracker:
-        """What this log's reading has fetched so far (shared with its workers)."""
-        return self._tracker
-
-    def _close(self) -> None:
-        self._file.close()
-        release_tracker(self._tracker)
+    @property
+    def fetch_stats(self) -> FetchStats:
+        """What reading this log has fetched so far (its workers too)."""
+        return self._remote.source.stats()
 
 
 def coalesce_units(chunks: list[ReadUnit], url: str) -> list[ReadUnit]:
@@ -374,9 +245,8 @@ class RemoteChunksUnitReader:
     def __init__(self, source: str, *, check_crc: bool = False) -> None:
         self.source = source
         self._object = open_object(signed_url(source))
-        # The parent's tracker, inherited by fork: its counter, and the bytes it holds.
-        self._tracker = find_tracker(source)
-        self._counter = self._tracker.counter if self._tracker is not None else None
+        # The parent's source, inherited by fork: its counter, and the bytes it holds.
+        self._source = shared_source(source)
         self._decoder = RemoteChunkReader(self._object, None, check_crc=check_crc)
         self._input = bytearray()
         self._head = bytearray(RECORD_HEAD.size)
@@ -390,7 +260,7 @@ class RemoteChunksUnitReader:
         the order the local reader's chunks do. Payloads stay valid until the next run.
         """
         end = unit.offset + unit.length
-        stream = RunStream(self._object, unit.offset, end, self._tracker)
+        stream = RunStream(self._object, unit.offset, end, self._source)
         try:
             pos, ordinal = unit.offset, 0
             while pos < end:
@@ -442,53 +312,6 @@ class RemoteChunksUnitReader:
         """Nothing to release: the connection belongs to the worker process."""
 
 
-class RunStream:
-    """The bytes of a run, in order: those the parent already holds (head, tail, chunks
-    its own `messages()` read) from memory, each stretch between them by one ranged GET."""
-
-    def __init__(self, obj: RemoteObject, start: int, end: int, tracker: Tracker | None) -> None:
-        self.pos = start
-        segments = tracker.segments.items() if tracker is not None else ()
-        self._held = sorted(
-            (at, data) for at, data in segments if at < end and start < at + len(data)
-        )
-        self._obj = obj
-        self._counter = tracker.counter if tracker is not None else None
-        self._net: RangeStream | None = None
-        self._gaps: list[tuple[int, int]] = []
-        at = start
-        for seg_start, data in self._held:
-            if seg_start > at:
-                self._gaps.append((at, min(seg_start, end)))
-            at = max(at, seg_start + len(data))
-        if at < end:
-            self._gaps.append((at, end))
-
-    def readinto(self, buffer: memoryview) -> None:
-        """Fill `buffer` exactly with the next bytes of the run."""
-        while len(buffer):
-            gap = next(((a, b) for a, b in self._gaps if a <= self.pos < b), None)
-            if gap is not None:
-                net = self._net
-                if net is None or net.start != gap[0]:
-                    self.close()
-                    net = self._net = RangeStream(self._obj, gap[0], gap[1], self._counter)
-                n = min(len(buffer), gap[1] - self.pos)
-                net.readinto(buffer[:n])
-            else:
-                at, data = next((a, d) for a, d in self._held if a <= self.pos < a + len(d))
-                n = min(len(buffer), at + len(data) - self.pos)
-                buffer[:n] = data[self.pos - at : self.pos - at + n]
-            buffer = buffer[n:]
-            self.pos += n
-
-    def close(self) -> None:
-        """Drop the reply."""
-        if self._net is not None:
-            self._net.close()
-            self._net = None
-
-
 def _skip(stream: RunStream, length: int) -> None:
     """Read past `length` bytes of the stream."""
     scratch = memoryview(bytearray(min(length, 1 << 16)))
@@ -496,27 +319,3 @@ def _skip(stream: RunStream, length: int) -> None:
         step = min(length, len(scratch))
         stream.readinto(scratch[:step])
         length -= step
-
-
-def open_remote_log(url: str) -> LogReader:
-    """A log behind a URL, read by ranges: an indexed MCAP file, a ROS 1 bag, or a ROS 2 bag
-    prefix with MCAP storage (any other URL: the prefix of a bag, its metadata.yaml read
-    first). What cannot be read by ranges raises `RemoteUnindexedError`, for the caller
-    (the fleet gate) to download the log whole."""
-    path = urlsplit(url).path.lower()
-    if path.endswith(".mcap"):
-        return RemoteMcapLog(url)
-    if path.endswith(".bag"):
-        from syncaudit.logs.ros1.remote import RemoteRosbag1Log
-
-        return RemoteRosbag1Log(url)
-    if path.endswith(".db3"):
-        from syncaudit.logs.ros2.remote import SQLITE_REASON
-
-        tracker = acquire_tracker(url)  # (the caller's, if it tracks this URL)
-        tracker.ranged, tracker.whole_reason = False, SQLITE_REASON
-        release_tracker(tracker)
-        raise RemoteUnindexedError(f"{public_url(url)}: not read by ranges: {SQLITE_REASON}")
-    from syncaudit.logs.ros2.remote import open_remote_bag
-
-    return open_remote_bag(url)

@@ -23,30 +23,34 @@ from syncaudit.logs.ros1.format import (
     read_index,
     scan_chunks,
 )
-from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
+from syncaudit.logs.typesys import Definition, one_line
 from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
 
 if TYPE_CHECKING:
-    from rosbags.interfaces.typing import Typesdict
+    pass
 
 
 class Rosbag1Log(LogReader):
     """A ROS 1 bag (format 2.0): chunk-parallel units from its index, or from a chunk scan."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, bag: BagFile | None = None) -> None:
+        """Open the bag at `path`, or read its index from `bag` (over any seekable file
+        object, such as a `remote.file.RemoteFile`: left open) and name it by `path`."""
         self.path = path
         self.warnings = []
-        self._registry: TypeRegistry | None = None
         self._fallback = ""
         """Why the index was not used ('' where it was)."""
-        try:
-            bag = open_bag_file(path)
-        except OSError as exc:
-            raise LogOpenError(f"{path}: cannot read: {one_line(exc)}") from exc
-        try:
+        if bag is not None:
             self._index = self._load(bag)
-        finally:
-            bag.handle.close()
+        else:
+            try:
+                bag = open_bag_file(path)
+            except OSError as exc:
+                raise LogOpenError(f"{path}: cannot read: {one_line(exc)}") from exc
+            try:
+                self._index = self._load(bag)
+            finally:
+                bag.handle.close()
         self.summary = self._make_summary()
         self._report_damage()
         self._chunk_reader = Rosbag1ChunkReader()
@@ -232,23 +236,13 @@ class Rosbag1Log(LogReader):
             info = channels[conn_id]
             yield RawMessage(info.topic, info.msgtype, t, payload, "ros1")
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from the bag's connection definitions, then schemas/ and ROS 1 defaults."""
-        if self._registry is None:
-            log_types: Typesdict = {}
-            for conn in self._index.connections.values():
-                if not conn.definition or conn.msgtype in log_types:
-                    continue
-                try:
-                    parsed = parse_definition("msg", conn.definition, conn.msgtype)
-                except Exception as exc:  # a bad definition must not stop the audit
-                    self.warn(
-                        "bad-schema", f"definition of {conn.msgtype!r} unreadable: {one_line(exc)}"
-                    )
-                    continue
-                log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registry = TypeRegistry(ros1=True, log_types=log_types)
-        return self._registry
+    def _definitions(self, encoding: str) -> Iterator[Definition]:
+        """The bag's connection definitions (ROS 1 defaults under them, whatever is asked)."""
+        for c in self._index.connections.values():
+            yield Definition(c.msgtype, "msg", c.definition, f"definition of {c.msgtype!r}")
+
+    def _ros1_types(self, encoding: str) -> bool:
+        return True
 
     def _close(self) -> None:
         self._chunk_reader.close()

@@ -23,10 +23,8 @@ from collections.abc import Iterator
 from typing import BinaryIO, cast
 
 from syncaudit.errors import LogOpenError, LogReadError, SyncauditError
-from syncaudit.logs.mcap.remote import RemoteFile, RemoteUnindexedError, RunStream, UrlPath
 from syncaudit.logs.model import ChannelInfo, ReadUnit
 from syncaudit.logs.ros1.format import (
-    MAGIC,
     OP_CHUNK,
     OP_CHUNK_INFO,
     UNIT_KIND,
@@ -38,17 +36,16 @@ from syncaudit.logs.ros1.format import (
 )
 from syncaudit.logs.ros1.reader import Rosbag1Log
 from syncaudit.logs.typesys import one_line
-from syncaudit.remote.ranges import (
-    Tracker,
-    acquire_tracker,
-    find_tracker,
-    open_object,
-    public_url,
-    read_head,
-    read_range,
-    release_tracker,
+from syncaudit.remote.file import (
+    RemoteFile,
+    RemoteSource,
+    RemoteUnindexedError,
+    RunStream,
+    shared_source,
     signed_url,
 )
+from syncaudit.remote.ranges import FetchStats, open_object
+from syncaudit.remote.urls import UrlPath, public_url
 
 KIND = "rosbag1-remote-chunk"
 RANGE_BYTES = 24 << 20
@@ -90,68 +87,51 @@ class _SpannedBagFile(BagFile):
 
 
 class RemoteRosbag1Log(Rosbag1Log):
-    """A ROS 1 bag (format 2.0) behind a URL, read by chunk spans."""
+    """A ROS 1 bag (format 2.0) behind a URL, read by chunk spans: the local reader over
+    a `RemoteFile` that holds the bag header and the index section."""
 
     def __init__(self, url: str) -> None:
         self.url = url
-        self.path = UrlPath(public_url(url))
-        self.warnings = []
-        self._registry = None
-        self._fallback = ""
-        self._tracker = acquire_tracker(url)
+        path = UrlPath(public_url(url))
+        self._remote = RemoteFile.open(url, HEAD_BYTES)
         try:
-            self._object = open_object(url)
-            bag = self._fetch_index()
-            self._index = self._load(bag)
+            if self._remote.size == 0:
+                raise LogOpenError(f"{path}: file is empty")
+            super().__init__(path, self._spanned_bag())
         except SyncauditError:
-            release_tracker(self._tracker)
+            self._remote.close()
             raise
         except Exception as exc:
-            release_tracker(self._tracker)
-            raise LogOpenError(f"{self.path}: not a readable ROS 1 bag: {one_line(exc)}") from exc
-        self.summary = self._make_summary()
-        self._report_damage()
+            self._remote.close()
+            raise LogOpenError(f"{path}: not a readable ROS 1 bag: {one_line(exc)}") from exc
         self._chunk_reader = RemoteRosbag1ChunkReader(url)
 
-    def _fetch_index(self) -> BagFile:
-        """Fetch the head and (where the header points at one) the index section."""
-        tracker = self._tracker
-        if not tracker.segments:
-            head, size = read_head(self._object, HEAD_BYTES, tracker.counter)
-            if size == 0:
-                raise LogOpenError(f"{self.path}: file is empty")
-            tracker.segments[0], tracker.size_bytes = head, size
-        size = tracker.size_bytes
-        handle = cast(BinaryIO, RemoteFile(self._object, size, tracker))
+    def _spanned_bag(self) -> BagFile:
+        """The bag over the remote file, its index section fetched ahead in one request
+        (where the header points at one; else the plain bag, for `_load` to refuse)."""
+        file = self._remote
+        handle = cast(BinaryIO, file)
         try:
-            index_pos, _conns, _chunks, first = read_bag_header(BagFile(handle, size))
+            index_pos, _conns, _chunks, first = read_bag_header(BagFile(handle, file.size))
         except (BagFormatError, ValueError):
-            return BagFile(handle, size)  # not a bag, or a damaged header: `_load` says which
-        if first <= index_pos < size and index_pos not in tracker.segments:
-            tracker.segments[index_pos] = read_range(self._object, index_pos, size, tracker.counter)
-        return _SpannedBagFile(handle, size, index_pos)
-
-    def _load(self, bag: BagFile) -> BagIndex:
-        if bag.read(0, len(MAGIC)) != MAGIC:
-            raise LogOpenError(f"{self.path}: not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0')")
-        return super()._load(bag)
+            return BagFile(handle, file.size)  # not a bag, or a damaged header: `_load` says
+        if first <= index_pos < file.size:
+            file.hold(index_pos, file.size)
+        return _SpannedBagFile(handle, file.size, index_pos)
 
     def _scan(self, bag: BagFile, first: int, reason: str) -> BagIndex:
         """No scan over ranged reads (it would read every record): refused, to be fetched."""
-        self._tracker.ranged = False
-        self._tracker.whole_reason = f"ROS 1 bag {reason}: downloaded whole and scanned"
         raise RemoteUnindexedError(
-            f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}"
+            f"{self.path}: ROS 1 bag cannot be read by ranges because {reason}",
+            f"ROS 1 bag {reason}: downloaded whole and scanned",
         )
 
     def _units(self, conn_ids: set[int]) -> list[ReadUnit]:
         """Runs of adjacent chunk spans holding `conn_ids` (up to `RANGE_BYTES`), each read
         from the URL with one GET."""
         spans = super()._units(conn_ids)
-        tracker = self._tracker
-        tracker.chunks_total = len(self._index.chunks)
-        tracker.chunks_fetched = len(spans)
-        tracker.needed_chunk_bytes = sum(unit.length for unit in spans)
+        needed = sum(unit.length for unit in spans)
+        self._remote.source.note_chunks(len(self._index.chunks), len(spans), needed)
         runs: list[ReadUnit] = []
         for span in spans:  # in file order
             last = runs[-1] if runs else None
@@ -174,13 +154,14 @@ class RemoteRosbag1Log(Rosbag1Log):
             )
         return runs
 
-    def fetch_stats(self) -> Tracker:
-        """What this log's reading has fetched so far (shared with its workers)."""
-        return self._tracker
+    @property
+    def fetch_stats(self) -> FetchStats:
+        """What reading this log has fetched so far (its workers too)."""
+        return self._remote.source.stats()
 
     def _close(self) -> None:
         super()._close()
-        release_tracker(self._tracker)
+        self._remote.close()
 
 
 class _RunFile:
@@ -215,11 +196,11 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
         super().__init__()
         self._source = source
         self._buffer = bytearray()
-        self._tracker: Tracker | None = None
+        self._shared: RemoteSource | None = None
         if source is None:
             return
         self._object = open_object(signed_url(source))
-        self._tracker = find_tracker(source)  # the parent's, inherited by fork
+        self._shared = shared_source(source)  # the parent's, inherited by fork
 
     def _read(self, bag: BagFile, offset: int, length: int) -> memoryview:
         """The chunk's bytes straight from the run held in memory (the local reader reads
@@ -237,7 +218,7 @@ class RemoteRosbag1ChunkReader(Rosbag1ChunkReader):
         if len(self._buffer) < unit.length:
             self._buffer = bytearray(unit.length)
         view = memoryview(self._buffer)[: unit.length]
-        stream = RunStream(self._object, unit.offset, unit.offset + unit.length, self._tracker)
+        stream = RunStream(self._object, unit.offset, unit.offset + unit.length, self._shared)
         try:
             stream.readinto(view)
         finally:

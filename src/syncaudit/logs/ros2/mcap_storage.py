@@ -16,7 +16,6 @@ from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
-from syncaudit.logs.typesys import TypeRegistry
 
 if TYPE_CHECKING:
     from rosbags.interfaces.typing import Typesdict
@@ -36,7 +35,6 @@ class McapBag(LogReader):
         self.path = folder
         self.warnings = []
         self._logs: list[McapLog] = []
-        self._registries: dict[str, TypeRegistry] = {}
         try:
             for file in files:
                 self._logs.append(McapLog(file))
@@ -124,17 +122,16 @@ class McapBag(LogReader):
                     return None
         return table
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from every file's schemas of `encoding`, then schemas/ and ROS."""
-        if encoding not in self._registries:
-            log_types: Typesdict = {}
-            for log in self._logs:
-                for name, definition in log.log_types(encoding).items():
-                    log_types.setdefault(name, definition)
-                for warning in log.warnings:
-                    self.warn(warning.code, warning.message)
-            self._registries[encoding] = TypeRegistry(ros1=encoding == "ros1", log_types=log_types)
-        return self._registries[encoding]
+    def log_types(self, encoding: str) -> Typesdict:
+        """Every file's types of `encoding`, the first file's winning (each file's warnings
+        are the bag's)."""
+        types: Typesdict = {}
+        for log in self._logs:
+            for name, definition in log.log_types(encoding).items():
+                types.setdefault(name, definition)
+            for warning in log.warnings:
+                self.warn(warning.code, warning.message)
+        return types
 
     def _close(self) -> None:
         for log in self._logs:

@@ -4,8 +4,8 @@ The prefix's `metadata.yaml` is fetched (one request) and names the storage file
 MCAP storage each file is a `RemoteMcapLog` (head, footer and summary: three requests a
 file) and the files together are an `McapBag`, the local reader of ROS 2 MCAP folders:
 the same merged summary, type registries and chunk-parallel read units across files
-(runs of chunks, one ranged GET each, `logs.mcap_remote`). Every file's fetched bytes are
-counted in the prefix's tracker, so `remote_read` covers the whole bag.
+(runs of chunks, one ranged GET each, `logs.mcap.remote`). The bag's `fetch_stats` adds up
+metadata.yaml's and every file's, so `remote_read` covers the whole bag.
 
 What is not read by ranges (`RemoteUnindexedError`, for the caller to download the
 prefix whole): SQLite storage (`.db3`: SQLite reads B-tree pages at offsets known only
@@ -24,19 +24,13 @@ import yaml
 
 from syncaudit.errors import LogOpenError, SyncauditError
 from syncaudit.logs.mcap.reader import McapLog
-from syncaudit.logs.mcap.remote import RemoteMcapLog, RemoteUnindexedError, UrlPath
-from syncaudit.logs.model import LogWarning, ReadUnit
+from syncaudit.logs.mcap.remote import RemoteMcapLog
+from syncaudit.logs.model import LogWarning
 from syncaudit.logs.ros2.mcap_storage import McapBag
 from syncaudit.logs.typesys import one_line
-from syncaudit.remote.ranges import (
-    Tracker,
-    acquire_tracker,
-    open_object,
-    public_url,
-    read_head,
-    read_range,
-    release_tracker,
-)
+from syncaudit.remote.file import RemoteFile, RemoteUnindexedError
+from syncaudit.remote.ranges import FetchStats
+from syncaudit.remote.urls import UrlPath, public_url
 
 METADATA_BYTES = 256 << 10
 """First read of metadata.yaml (a few KiB for most bags; read on if longer)."""
@@ -66,40 +60,41 @@ class RemoteMcapBag(McapBag):
         self.path = UrlPath(public_url(file_url(url, "")).rstrip("/"))
         self.warnings = []
         self._logs: list[McapLog] = []
-        self._registries = {}
-        self._tracker = acquire_tracker(url)
+        self._files: list[RemoteMcapLog] = []
+        self._metadata = self._open_metadata()
         try:
-            files = self._files()
-            for name in files:
-                self._logs.append(_open_file(file_url(url, name), self._tracker))
-            self._tracker.size_bytes = sum(
-                log.fetch_stats().size_bytes for log in self._logs if isinstance(log, RemoteMcapLog)
-            )
+            for name in self._storage_files():
+                self._files.append(RemoteMcapLog(file_url(url, name)))
+                self._logs.append(self._files[-1])
         except BaseException:
-            for log in self._logs:
-                log.close()
-            release_tracker(self._tracker)
+            for opened in self._files:
+                opened.close()
+            self._metadata.close()
             raise
-        for log in self._logs:
+        for log in self._files:
             for warning in log.warnings:
                 self.warn(warning.code, warning.message)
         self.summary = self._merged_summary()
 
-    def _files(self) -> list[str]:
-        """The storage files metadata.yaml lists (MCAP storage, no rosbag2 compression)."""
-        where = f"{self.path}/metadata.yaml"
-        obj = open_object(file_url(self.url, "metadata.yaml"))
-        counter = self._tracker.counter
+    def _open_metadata(self) -> RemoteFile:
+        """The prefix's metadata.yaml, its first `METADATA_BYTES` fetched."""
         try:
-            data, size = read_head(obj, METADATA_BYTES, counter)
+            return RemoteFile.open(file_url(self.url, "metadata.yaml"), METADATA_BYTES)
         except LogOpenError as exc:
             raise LogOpenError(
                 f"{self.path}: neither an .mcap/.bag file nor a ROS 2 bag prefix ({exc})"
             ) from None
+
+    def _storage_files(self) -> list[str]:
+        """The storage files metadata.yaml lists (MCAP storage, no rosbag2 compression)."""
+        where = f"{self.path}/metadata.yaml"
+        file = self._metadata
+        size = file.size
         if size > MAX_METADATA_BYTES:
             raise LogOpenError(f"{where}: {size} bytes, more than any bag's metadata")
-        if size > len(data):
-            data += read_range(obj, len(data), size, counter)
+        head = min(size, METADATA_BYTES)
+        file.hold(head, size)  # the rest of a long one, in one request
+        data = b"".join(bytes(file.held(*span) or b"") for span in ((0, head), (head, size)))
         try:
             doc = yaml.load(data, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
             info = doc["rosbag2_bagfile_information"]
@@ -136,38 +131,27 @@ class RemoteMcapBag(McapBag):
         return names
 
     def _refuse(self, reason: str) -> None:
-        self._tracker.ranged = False
-        self._tracker.whole_reason = reason
-        raise RemoteUnindexedError(f"{self.path}: ROS 2 bag not read by ranges: {reason}")
+        raise RemoteUnindexedError(f"{self.path}: ROS 2 bag not read by ranges: {reason}", reason)
 
-    def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
-        """Every file's runs of chunks (as the local folder's chunks), and the bag's totals."""
-        units = super().read_units(topics)
-        tracker = self._tracker
-        trackers = [log.fetch_stats() for log in self._logs if isinstance(log, RemoteMcapLog)]
-        tracker.chunks_total = sum(t.chunks_total for t in trackers)
-        tracker.chunks_fetched = sum(t.chunks_fetched for t in trackers)
-        tracker.needed_chunk_bytes = sum(t.needed_chunk_bytes for t in trackers)
-        return units
-
-    def fetch_stats(self) -> Tracker:
-        """What this bag's reading has fetched so far, every file together."""
-        return self._tracker
+    @property
+    def fetch_stats(self) -> FetchStats:
+        """What reading this bag has fetched so far: metadata.yaml and every file (their
+        workers too), against the files' sizes and needed chunks."""
+        files = [log.fetch_stats for log in self._files]
+        metadata = self._metadata.source.stats()
+        return FetchStats(
+            url=public_url(self.url),
+            size_bytes=sum(f.size_bytes for f in files),
+            fetched_bytes=metadata.fetched_bytes + sum(f.fetched_bytes for f in files),
+            requests=metadata.requests + sum(f.requests for f in files),
+            needed_chunk_bytes=sum(f.needed_chunk_bytes for f in files),
+            chunks_fetched=sum(f.chunks_fetched for f in files),
+            chunks_total=sum(f.chunks_total for f in files),
+        )
 
     def _close(self) -> None:
         super()._close()
-        release_tracker(self._tracker)
-
-
-def _open_file(url: str, bag: Tracker) -> RemoteMcapLog:
-    """One storage file of a bag, its fetches counted in the bag's counter too."""
-    tracker = acquire_tracker(url)
-    try:
-        if tracker.users == 1:  # fresh: count into the bag's shared counter
-            tracker.counter = bag.counter
-        return RemoteMcapLog(url)
-    finally:
-        release_tracker(tracker)
+        self._metadata.close()
 
 
 def open_remote_bag(url: str) -> McapBag:

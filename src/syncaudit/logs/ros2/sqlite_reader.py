@@ -26,11 +26,11 @@ from syncaudit.logs.ros2.sqlite_rows import (
     plan_units,
     verify_tail,
 )
-from syncaudit.logs.typesys import TypeRegistry, one_line, parse_definition
+from syncaudit.logs.typesys import Definition, one_line
 from syncaudit.logs.unit_merge import UnitMessage, merge_units, sorted_unit
 
 if TYPE_CHECKING:
-    from rosbags.interfaces.typing import Typesdict
+    pass
 
 
 class SqliteLog(LogReader):
@@ -40,7 +40,6 @@ class SqliteLog(LogReader):
         """`path`: a bare .db3 (meta None) or the bag folder whose metadata is `meta`."""
         self.path = path
         self.warnings = list(meta.warnings) if meta is not None else []
-        self._registry: TypeRegistry | None = None
         self._tmpdir: Path | None = None
         self._dbs: list[sqlite3.Connection] = []
         self._files: list[SqliteFile] = []
@@ -261,24 +260,14 @@ class SqliteLog(LogReader):
             info = channels[cid]
             yield RawMessage(info.topic, info.msgtype, t, payload, info.encoding)
 
-    def type_registry(self, encoding: str) -> TypeRegistry:
-        """Types from the bag's message_definitions, then schemas/ and ROS 2 defaults."""
-        if self._registry is None:
-            log_types: Typesdict = {}
-            for info in self._files:
-                for name, (fmt, text) in info.definitions.items():
-                    if name in log_types:
-                        continue
-                    try:
-                        parsed = parse_definition(fmt, text, name)
-                    except Exception as exc:  # a bad definition must not stop the audit
-                        self.warn(
-                            "bad-schema", f"definition of {name!r} unreadable: {one_line(exc)}"
-                        )
-                        continue
-                    log_types.update({k: v for k, v in parsed.items() if k not in log_types})
-            self._registry = TypeRegistry(ros1=False, log_types=log_types)
-        return self._registry
+    def _definitions(self, encoding: str) -> Iterator[Definition]:
+        """The bag's message_definitions, file by file (ROS 2 defaults under them)."""
+        for info in self._files:
+            for name, (fmt, text) in info.definitions.items():
+                yield Definition(name, fmt, text, f"definition of {name!r}")
+
+    def _ros1_types(self, encoding: str) -> bool:
+        return False
 
     def _close(self) -> None:
         self._rows.close()
