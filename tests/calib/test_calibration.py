@@ -40,14 +40,9 @@ from syncaudit.calib import (
     render_calibration_html,
     se3,
 )
-from syncaudit.calib.settings import (
-    AlignmentLimits,
-    CalibSceneConfig,
-    calib_scene_config,
-    load_config,
-    rig_preset,
-)
+from syncaudit.calib.settings import AlignmentLimits, load_config
 from syncaudit.errors import ConfigError, NoDataError
+from syncaudit.simulate.calib_config import CalibSceneConfig, calib_scene_config, rig_preset
 from syncaudit.simulate.calib_session import MATRIX, matrix_tolerance, simulate_calib_session
 
 FAST_STOPS = 8

@@ -404,7 +404,7 @@ def simulate_calib(
     """Write a calibration session of two non-overlapping LiDARs and its truth (OUT.truth.json)."""
 
     def job() -> None:
-        from syncaudit.calib.settings import calib_scene_config
+        from syncaudit.simulate.calib_config import calib_scene_config
         from syncaudit.simulate.calib_session import simulate_calib_session, truth_path
         from syncaudit.writers.log_writer import log_target
 
