@@ -220,7 +220,6 @@ def simulate_sync(
                 delay_error_us=delay_error_us,
                 clock_offset_s=clock_offset_s,
                 compressed=compressed,
-                controller=controller,
                 seed=seed,
                 duration_s=duration_s,
                 log_format=infer_format(target, log_format),
@@ -240,12 +239,16 @@ def simulate_sync(
             raise _usage(exc) from None
         import yaml
 
+        from syncaudit.cli.simulate_controller import ControllerDelays
+
+        delays = ControllerDelays() if controller else None
+
         from syncaudit.simulate.rig_file import rig_from_truth, rig_path
         from syncaudit.simulate.sync_log import simulate_sync_log, truth_path
 
         rig_file = rig_path(target)
         with output_set(overwrite=overwrite, targets=(rig_file,)) as outputs:
-            truth = simulate_sync_log(target, config, outputs=outputs)
+            truth = simulate_sync_log(target, config, outputs=outputs, delays=delays)
             rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
             outputs.write_text(rig_file, yaml.safe_dump(rig, sort_keys=False))
         lidar_truth = truth["lidar"]
