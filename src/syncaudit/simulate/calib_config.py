@@ -119,6 +119,9 @@ MountPreset = Literal["roof_front_rear", "roof_left_right", "bumper_front_rear",
 """Where the two LiDARs sit: roof front/rear, roof left/right (sideways), bumper-height
 front/rear (low, ground-dominated views), diagonal corners (front-left, rear-right)."""
 
+DEFAULT_MOUNT: MountPreset = "roof_front_rear"
+"""The mount of a session that names none (`calib_scene_config`, `simulate calib`)."""
+
 _MOUNTS: dict[str, tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...]] = {
     "roof_front_rear": (
         ((2.2, 0.05, 1.95), (0.4, 4.0, 1.5)),
@@ -288,7 +291,7 @@ class CalibSceneConfig(ConfigModel):
 def calib_scene_config(
     *,
     beams: int = 32,
-    mount: MountPreset = "roof_front_rear",
+    mount: MountPreset = DEFAULT_MOUNT,
     motion: Literal["turntable", "drive"] = "turntable",
     n_stops: int = 12,
     seed: int = 0,

@@ -34,7 +34,7 @@ import math
 import struct
 import typing
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
@@ -1305,46 +1305,59 @@ def lidar_model(name: str) -> LidarModel:
 
 
 def sync_sim_config(
+    base: Mapping[str, Any] | None = None,
     *,
-    lidar: str = "VLP-16",
-    tunnel: bool = True,
-    delay_error_us: float = 0.0,
-    clock_offset_s: float = 0.0,
-    compressed: bool = False,
-    stamp: str = "exposure_start",
+    lidar: str | None = None,
+    tunnel: bool | None = None,
+    delay_error_us: float | None = None,
+    clock_offset_s: float | None = None,
+    compressed: bool | None = None,
+    stamp: str | None = None,
     **settings: Any,
 ) -> SyncSimConfig:
-    """A SyncSimConfig from the settings `syncaudit simulate sync` offers.
+    """A SyncSimConfig from `base` (SyncSimConfig fields, as a config file holds them), the
+    `settings` over it, and the shorthands `syncaudit simulate sync` offers over both.
 
-    `lidar` accepts the names users write (`XT32`, `vlp-16`); `tunnel=False` keeps the
-    exposure bright all along; `delay_error_us` offsets every camera's applied delay from the
-    ideal; `clock_offset_s` is the LiDAR clock minus the host clock; `stamp` is what every
-    camera's image header stamp marks. Every other keyword is a SyncSimConfig field (`seed`,
-    `duration_s`, `log_format`, `packet_drop_fraction`, `shared_topics`, ...).
+    The shorthands (None: as `base` has it): `lidar` the names users write (`XT32`,
+    `vlp-16`); `tunnel=False` keeps the exposure bright all along; `delay_error_us` offsets
+    every camera's applied delay from the ideal; `clock_offset_s` is the LiDAR clock minus
+    the host clock; `compressed` picks CompressedImage; `stamp` what every camera's image
+    header stamp marks. Every other keyword is a SyncSimConfig field (`seed`, `duration_s`,
+    `log_format`, `packet_drop_fraction`, `shared_topics`, ...). Defaults are the model's.
 
     Raises:
         ConfigError: naming the first setting out of range.
     """
-    base = SyncSimConfig()
-    light = (
-        base.light
-        if tunnel
-        else base.light.model_copy(update={"dark_exposure_us": base.light.bright_exposure_us})
-    )
-    return SyncSimConfig.model_validate(
-        {
-            **settings,
-            "lidar_model": lidar_model(lidar),
-            "clock_offset_ns": round(clock_offset_s * 1e9),
-            "light": light,
-            "cameras": [  # as mappings, so that the settings are validated
-                {
-                    **camera.model_dump(),
-                    "delay_error_us": delay_error_us,
-                    "stamp_semantics": stamp,
-                }
-                for camera in base.cameras
-            ],
-            "image_kind": "compressed" if compressed else "raw",
-        }
-    )
+    data: dict[str, Any] = {**(base or {}), **settings}
+    if lidar is not None:
+        data["lidar_model"] = lidar_model(lidar)
+    if clock_offset_s is not None:
+        data["clock_offset_ns"] = round(clock_offset_s * 1e9)
+    if tunnel is False:
+        light = _plain(data.get("light", LightModel()))
+        if not isinstance(light, Mapping):
+            raise ConfigError("light: must be a mapping of LightModel settings")
+        bright = light.get(
+            "bright_exposure_us", LightModel.model_fields["bright_exposure_us"].default
+        )
+        data["light"] = {**light, "dark_exposure_us": bright}
+    if compressed is not None:
+        data["image_kind"] = "compressed" if compressed else "raw"
+    camera_updates: dict[str, Any] = {}
+    if delay_error_us is not None:
+        camera_updates["delay_error_us"] = delay_error_us
+    if stamp is not None:
+        camera_updates["stamp_semantics"] = stamp
+    if camera_updates:
+        cameras = data.get("cameras", _default_cameras())
+        plain = [_plain(camera) for camera in cameras] if isinstance(cameras, list) else None
+        if plain is None or not all(isinstance(camera, Mapping) for camera in plain):
+            raise ConfigError("cameras: must be a list of camera mappings")
+        # As mappings, so that the settings are validated.
+        data["cameras"] = [{**camera, **camera_updates} for camera in plain]
+    return SyncSimConfig.model_validate(data)
+
+
+def _plain(value: Any) -> Any:
+    """A model as its field mapping (anything else unchanged), to be updated and validated."""
+    return value.model_dump() if isinstance(value, ConfigModel) else value
