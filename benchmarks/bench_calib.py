@@ -44,7 +44,7 @@ from typing import Any, Literal
 import numpy as np
 
 from syncaudit.calib import CalibConfig, calibrate_log, se3
-from syncaudit.calib.settings import calib_scene_config
+from syncaudit.simulate.calib_config import calib_scene_config
 from syncaudit.simulate.calib_session import (
     MATRIX,
     matrix_tolerance,

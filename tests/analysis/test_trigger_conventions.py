@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from syncaudit.audit.run import AuditResult, audit_log
+from syncaudit.cli.simulate_controller import ControllerDelays
 from syncaudit.simulate import LidarModel
 from syncaudit.simulate.rig_file import rig_from_truth
 from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
@@ -28,11 +29,13 @@ PER_FRAME_NS = 5_000
 CAMERAS = [CameraSim(name="front", yaw_deg=0.0), CameraSim(name="left", yaw_deg=100.0)]
 
 
-def _run(tmp_path: Path, **config: Any) -> tuple[AuditResult, dict[str, Any]]:
+def _run(
+    tmp_path: Path, delays: ControllerDelays | None = None, **config: Any
+) -> tuple[AuditResult, dict[str, Any]]:
     out = tmp_path / "log.mcap"
     config.setdefault("cameras", CAMERAS)
     config.setdefault("duration_s", 0.6)
-    truth = simulate_sync_log(out, SyncSimConfig(**config))
+    truth = simulate_sync_log(out, SyncSimConfig(**config), delays=delays)
     return audit_log(out, rig_from_truth(truth), jobs=1), truth
 
 
@@ -144,7 +147,7 @@ def test_self_consistency_with_the_controller_changing_the_delay(tmp_path: Path)
         duration_s=2.0,
         lidar_model="VLP-32C",
         trigger_packet="first_after",
-        controller=ControllerConfig(window_frames=5, min_frames=5),
+        delays=ControllerDelays(ControllerConfig(window_frames=5, min_frames=5)),
         cameras=[c.model_copy(update={"delay_error_us": 1500.0}) for c in CAMERAS],
     )
     for cam in result.cameras:

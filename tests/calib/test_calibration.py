@@ -37,16 +37,11 @@ from syncaudit.calib import (
     calibrate_log,
     se3,
 )
-from syncaudit.calib.settings import (
-    AlignmentLimits,
-    CalibSceneConfig,
-    calib_scene_config,
-    load_config,
-    rig_preset,
-)
+from syncaudit.calib.settings import AlignmentLimits, load_config
 from syncaudit.errors import ConfigError, NoDataError
 from syncaudit.report.calib_section import html_section, render_calibration
 from syncaudit.report.report_page import render_calibration_html
+from syncaudit.simulate.calib_config import CalibSceneConfig, calib_scene_config, rig_preset
 from syncaudit.simulate.calib_session import MATRIX, matrix_tolerance, simulate_calib_session
 from syncaudit.writers.atomic import write_text_atomic
 

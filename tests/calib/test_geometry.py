@@ -1,4 +1,4 @@
-"""Rigid transforms, the ray-caster's exact geometry, and PointCloud2 decoding."""
+"""Rigid transforms (round trips), PointCloud2 decoding and the turn checks."""
 
 from __future__ import annotations
 
@@ -15,7 +15,6 @@ from syncaudit.calib.registration import prepare
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.turnchain import verify_turn
 from syncaudit.errors import LogReadError, NoDataError
-from syncaudit.simulate.scene import Box, Pole, Scene
 
 
 def test_rotation_round_trips() -> None:
@@ -43,37 +42,6 @@ def test_transform_difference_is_exact() -> None:
     assert rot_deg == pytest.approx(1.0, abs=1e-9)
     assert trans_m == pytest.approx(0.05, abs=1e-12)
     assert np.allclose(se3.invert(base) @ base, np.eye(4), atol=1e-12)
-
-
-def test_raycast_hits_ground_box_and_pole_exactly() -> None:
-    scene = Scene(
-        boxes=(Box((10.0, 0.0, 1.0), (2.0, 2.0, 2.0), 0.0, "box", 0.5),),
-        poles=(Pole((0.0, 5.0), 0.5, 3.0, 0.9),),
-    )
-    origin = np.array([0.0, 0.0, 1.0])
-    dirs = np.array(
-        [
-            [1.0, 0.0, 0.0],  # box face at x = 9
-            [0.0, 1.0, 0.0],  # pole side at y = 4.5
-            [0.0, 0.0, -1.0],  # ground 1 m below
-            [0.0, 0.0, 1.0],  # sky
-            [1.0, 0.0, -1.0 / 9.0],  # box face, below the top
-        ]
-    )
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    hits = scene.raycast(origin, dirs)
-    assert hits.range_m[0] == pytest.approx(9.0, abs=1e-12)
-    assert hits.range_m[1] == pytest.approx(4.5, abs=1e-12)
-    assert hits.range_m[2] == pytest.approx(1.0, abs=1e-12)
-    assert math.isinf(hits.range_m[3])
-    assert hits.range_m[4] == pytest.approx(math.hypot(9.0, 1.0), abs=1e-12)
-    assert hits.cos_incidence[0] == pytest.approx(1.0)
-    # A rotated box: a ray along its diagonal enters at the corner distance.
-    rotated = Scene(
-        boxes=(Box((5.0, 0.0, 0.0), (2.0, 2.0, 4.0), math.pi / 4, "box", 0.5),), poles=()
-    )
-    hit = rotated.raycast(np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0]]))
-    assert hit.range_m[0] == pytest.approx(5.0 - math.sqrt(2.0), abs=1e-12)
 
 
 def _cloud(

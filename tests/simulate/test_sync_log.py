@@ -11,11 +11,13 @@ import pytest
 from numpy.typing import NDArray
 
 from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
+from syncaudit.cli.simulate_controller import ControllerDelays
 from syncaudit.errors import ConfigError, OutputError
 from syncaudit.lidar.hesai import decode_hesai, pandar_scan_packets
 from syncaudit.lidar.packets import PacketTiming
 from syncaudit.lidar.velodyne import decode_velodyne, velodyne_scan_packets
 from syncaudit.logs import LogReader, open_log
+from syncaudit.simulate.delays import CONSTANT_WINDOW_FRAMES
 from syncaudit.simulate.sync_log import (
     CameraSim,
     LatencyDist,
@@ -358,15 +360,16 @@ def test_controller_runs_live(tmp_path: Path) -> None:
     config = SyncSimConfig(
         lidar_model="PandarXT32",
         duration_s=4.0,
-        controller=controller,
         light=LightModel(tunnel_start_s=100.0),
         cameras=[CameraSim(name="front", yaw_deg=0.0, delay_error_us=4_000.0)],
     )
-    truth = simulate_sync_log(tmp_path / "c.mcap", config)
+    truth = simulate_sync_log(tmp_path / "c.mcap", config, delays=ControllerDelays(controller))
     cam = truth["cameras"]["front"]
     f = _frames(truth, "front")
     assert cam["applied_delay"]["mode"] == "controller"
     assert cam["applied_delay"]["adjustments"]
+    assert truth["config"]["controller"] == controller.model_dump(mode="json")
+    assert cam["t5_window_frames"] == 5
     # Replaying the observations through a fresh controller gives the same delays.
     replay = DelayController(controller, initial_delay_ns=int(f["applied_delay_ns"][0]))
     delays = [int(f["applied_delay_ns"][0])]
@@ -389,6 +392,18 @@ def test_controller_runs_live(tmp_path: Path) -> None:
     last = np.abs(f["error_ns"][-10:]).mean()
     assert first > 3_000_000
     assert last < 500_000
+
+
+def test_constant_delays_name_the_controllers_default_window(tmp_path: Path) -> None:
+    """Without a controller the truth still names the t5 window: the controller's default."""
+    assert ControllerConfig().window_frames == CONSTANT_WINDOW_FRAMES
+    truth = simulate_sync_log(tmp_path / "k.mcap", SyncSimConfig(duration_s=0.5))
+    cam = truth["cameras"]["front"]
+    assert cam["t5_window_frames"] == CONSTANT_WINDOW_FRAMES
+    assert cam["applied_delay"]["mode"] == "constant"
+    assert truth["config"]["controller"] is None
+    assert set(cam["applied_delay"]) >= {"initial_ns", "final_ns"}
+    assert cam["applied_delay"]["min_ns"] == cam["applied_delay"]["max_ns"]
 
 
 def test_latency_distribution() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -114,6 +115,107 @@ def _map_pair(
     return m2m
 
 
+@dataclass
+class _Search:
+    """The map pairs tried for one LiDAR, by how far they can be trusted."""
+
+    pairs: list[MapPairOut] = field(default_factory=list)
+    firm: list[Alignment] = field(default_factory=list)
+    """Accepted over shared stops and as well constrained as a cross-scan alignment."""
+    weak: list[Alignment] = field(default_factory=list)
+    """Accepted over shared stops, but less well constrained."""
+    whole: list[Alignment] = field(default_factory=list)
+    """Accepted over the whole maps (tried only without a firm pair)."""
+    first: Alignment | None = None
+    """The first pair aligned at all (what a rejection reports)."""
+    seen: set[tuple[tuple[int, ...], tuple[int, ...]]] = field(default_factory=set)
+
+    def used(self) -> list[Alignment]:
+        """The estimates to fuse: the firm ones, else the whole-map ones, else the weak."""
+        return self.firm or self.whole or self.weak
+
+
+def _search_pairs(
+    ref: LidarState, other: LidarState, anchors: list[int], rec: F64, config: CalibConfig
+) -> _Search:
+    """Step 5: map pairs over the stops both graphs hold at each anchor, then (when none is
+    firm) over the whole maps at every anchor both LiDARs can use.
+
+    Each anchor's two maps are first built from the stops both graphs hold there: then
+    each is the same vehicle poses seen through one LiDAR, and the pair differs by the
+    extrinsic and the graphs' small errors at those stops. A stop only one graph holds
+    can sit where weak links left it with nothing in the other map to contradict it: on
+    a 16-beam roof drive the reference graph held stops 4-8 2.4-3.1 cm off (links off
+    3-5 cm along directions they barely constrain, as their information allows), the
+    other LiDAR's graph split there, and both whole-map pairs came out 2.3-2.8 cm off;
+    over shared stops 0.2 and 1.0 cm. Fewer stops hold less structure, though: a
+    shared-stop pair is used only when it is as well constrained as a cross-scan
+    alignment must be (`registration.limits`; the map-to-map limits are looser); else
+    the whole maps, aligned only when no anchor's shared stops gave such an estimate (a
+    whole-map estimate fused with shared-stop ones brings back the bias they avoid: a
+    bumper drive, 0.4 -> 1.1 cm). Measured: a 64-beam roof drive whose front graph held
+    4 of 8 stops, shared-stop pair accepted at information 0.011, 2.2 cm off, whole maps
+    0.06 cm; the 16-beam shared-stop pairs above had 0.037 and 0.040.
+    """
+    search = _Search()
+    deferred: list[int] = []
+    for anchor in anchors:
+        ref_poses, other_poses = poses_at(ref, anchor), poses_at(other, anchor)
+        if ref_poses is None or other_poses is None:
+            continue
+        common = set(ref_poses) & set(other_poses)
+        deferred.append(anchor)
+        if len(common) < config.selection.min_stops:
+            continue
+        m2m = _map_pair(ref, other, anchor, rec, config, search.pairs, search.seen, stops=common)
+        search.first = search.first or m2m
+        if m2m is not None and m2m.accepted:
+            (search.firm if _well_constrained(m2m, config) else search.weak).append(m2m)
+    if not search.firm:
+        for anchor in deferred:
+            m2m = _map_pair(ref, other, anchor, rec, config, search.pairs, search.seen, stops=None)
+            search.first = search.first or m2m
+            if m2m is not None and m2m.accepted:
+                search.whole.append(m2m)
+    return search
+
+
+_NOT_CALIBRATED: dict[str, Any] = {
+    "result": None,
+    "rotation_diff_deg": None,
+    "translation_diff_cm": None,
+    "diff_rpy_deg": None,
+    "diff_xyz_cm": None,
+    "passed": False,
+    "stop_angle_disagreement_deg": None,
+    "hand_eye_rotation_residual_deg": None,
+}
+"""The fields of an `ExtrinsicOut` that only a calibrated LiDAR fills."""
+
+
+def _compared(
+    cal: F64, rec: F64, estimates: list[tuple[F64, F64]], config: CalibConfig
+) -> dict[str, Any]:
+    """Step 6: the fused extrinsic against the recorded one, and the estimates' spread."""
+    spreads = [se3.transform_difference(cal, t) for t, _ in estimates]
+    diff = se3.invert(rec) @ cal
+    rot_deg, trans_m = se3.transform_difference(rec, cal)
+    roll, pitch, yaw = (math.degrees(v) for v in se3.matrix_to_rpy(diff[:3, :3]))
+    dx, dy, dz = (float(v) * 100.0 for v in diff[:3, 3])
+    limits = config.validation
+    return {
+        "result": TransformOut.of(cal),
+        "rotation_diff_deg": rot_deg,
+        "translation_diff_cm": trans_m * 100.0,
+        "diff_rpy_deg": (roll, pitch, yaw),
+        "diff_xyz_cm": (dx, dy, dz),
+        "passed": rot_deg <= limits.max_rotation_deg
+        and trans_m * 100.0 <= limits.max_translation_cm,
+        "estimate_spread_deg": max(r for r, _ in spreads) if len(spreads) > 1 else None,
+        "estimate_spread_cm": max(t for _, t in spreads) * 100.0 if len(spreads) > 1 else None,
+    }
+
+
 def extrinsic(
     ref: LidarState,
     other: LidarState,
@@ -131,95 +233,35 @@ def extrinsic(
         "reference_frame_id": ref.frame_id,
         "recorded": TransformOut.of(rec),
     }
-    empty: dict[str, Any] = {
-        "result": None,
-        "rotation_diff_deg": None,
-        "translation_diff_cm": None,
-        "diff_rpy_deg": None,
-        "diff_xyz_cm": None,
-        "passed": False,
-        "stop_angle_disagreement_deg": None,
-        "hand_eye_rotation_residual_deg": None,
-    }
-    pairs: list[MapPairOut] = []
-    firm: list[Alignment] = []
-    weak: list[Alignment] = []
-    whole: list[Alignment] = []
-    first: Alignment | None = None
-    seen: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
-    # Each anchor's two maps are first built from the stops both graphs hold there: then
-    # each is the same vehicle poses seen through one LiDAR, and the pair differs by the
-    # extrinsic and the graphs' small errors at those stops. A stop only one graph holds
-    # can sit where weak links left it with nothing in the other map to contradict it: on
-    # a 16-beam roof drive the reference graph held stops 4-8 2.4-3.1 cm off (links off
-    # 3-5 cm along directions they barely constrain, as their information allows), the
-    # other LiDAR's graph split there, and both whole-map pairs came out 2.3-2.8 cm off;
-    # over shared stops 0.2 and 1.0 cm. Fewer stops hold less structure, though: a
-    # shared-stop pair is used only when it is as well constrained as a cross-scan
-    # alignment must be (`registration.limits`; the map-to-map limits are looser); else
-    # the whole maps, aligned only when no anchor's shared stops gave such an estimate (a
-    # whole-map estimate fused with shared-stop ones brings back the bias they avoid: a
-    # bumper drive, 0.4 -> 1.1 cm). Measured: a 64-beam roof drive whose front graph held
-    # 4 of 8 stops, shared-stop pair accepted at information 0.011, 2.2 cm off, whole maps
-    # 0.06 cm; the 16-beam shared-stop pairs above had 0.037 and 0.040.
-    deferred: list[int] = []
-    for anchor in anchors:
-        ref_poses, other_poses = poses_at(ref, anchor), poses_at(other, anchor)
-        if ref_poses is None or other_poses is None:
-            continue
-        common = set(ref_poses) & set(other_poses)
-        deferred.append(anchor)
-        if len(common) < config.selection.min_stops:
-            continue
-        m2m = _map_pair(ref, other, anchor, rec, config, pairs, seen, stops=common)
-        first = first or m2m
-        if m2m is not None and m2m.accepted:
-            (firm if _well_constrained(m2m, config) else weak).append(m2m)
-    if not firm:
-        for anchor in deferred:
-            m2m = _map_pair(ref, other, anchor, rec, config, pairs, seen, stops=None)
-            first = first or m2m
-            if m2m is not None and m2m.accepted:
-                whole.append(m2m)
-    used = firm or whole or weak
-    first = used[0] if used else first
+    search = _search_pairs(ref, other, anchors, rec, config)
+    used = search.used()
+    first = used[0] if used else search.first
     estimates = [_estimate(m2m, config) for m2m in used]
     if first is None:
         why = ref.reason if not ref.graphs else other.reason
         why = why or f"{other.topic}: no stop anchors both LiDARs' local maps"
-        return ExtrinsicOut(**base, **empty, calibrated=False, reason=why, map_to_map=None)
+        return ExtrinsicOut(
+            **base, **_NOT_CALIBRATED, calibrated=False, reason=why, map_to_map=None
+        )
     if not estimates:
         reason = f"{other.topic}: map-to-map alignment with {ref.topic} rejected: {first.reason}"
         return ExtrinsicOut(
             **base,
-            **empty,
+            **_NOT_CALIBRATED,
             calibrated=False,
             reason=reason,
             map_to_map=AlignmentOut.of(first),
-            map_pairs=pairs,
+            map_pairs=search.pairs,
         )
     cal = posegraph.fuse(estimates)
-    spreads = [se3.transform_difference(cal, t) for t, _ in estimates]
-    diff = se3.invert(rec) @ cal
-    rot_deg, trans_m = se3.transform_difference(rec, cal)
-    roll, pitch, yaw = (math.degrees(v) for v in se3.matrix_to_rpy(diff[:3, :3]))
-    dx, dy, dz = (float(v) * 100.0 for v in diff[:3, 3])
     angle_diff, hand_eye = _consistency(ref, other, cal, anchors)
-    limits = config.validation
     return ExtrinsicOut(
         **base,
+        **_compared(cal, rec, estimates, config),
         calibrated=True,
         reason=None,
-        result=TransformOut.of(cal),
-        rotation_diff_deg=rot_deg,
-        translation_diff_cm=trans_m * 100.0,
-        diff_rpy_deg=(roll, pitch, yaw),
-        diff_xyz_cm=(dx, dy, dz),
-        passed=rot_deg <= limits.max_rotation_deg and trans_m * 100.0 <= limits.max_translation_cm,
         map_to_map=AlignmentOut.of(first),
-        map_pairs=pairs,
-        estimate_spread_deg=max(r for r, _ in spreads) if len(spreads) > 1 else None,
-        estimate_spread_cm=max(t for _, t in spreads) * 100.0 if len(spreads) > 1 else None,
+        map_pairs=search.pairs,
         stop_angle_disagreement_deg=angle_diff,
         hand_eye_rotation_residual_deg=hand_eye,
     )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, get_args
+from typing import TYPE_CHECKING, Annotated, Any, get_args
 
 import typer
 
@@ -13,6 +13,8 @@ from syncaudit.errors import ConfigError, UsageError
 from syncaudit.simulate import LidarModel
 
 if TYPE_CHECKING:
+    from syncaudit.analysis.controller import ControllerConfig
+    from syncaudit.simulate.calib_config import CalibSceneConfig
     from syncaudit.writers.log_writer import LogFormat
 
 simulate_app = typer.Typer(
@@ -33,7 +35,7 @@ OutArgument = Annotated[
     ),
 ]
 SeedOption = Annotated[
-    int, typer.Option("--seed", help="Random seed (the log is a pure function of it).")
+    int | None, typer.Option("--seed", help="Random seed (the log is a pure function of it).")
 ]
 FormatOption = Annotated[
     str | None,
@@ -82,159 +84,180 @@ def _usage(exc: ConfigError) -> UsageError:
     return UsageError(detail)
 
 
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--config",
+        help="Simulator settings from a YAML, TOML or JSON file (the simulator config's "
+        "fields); the options given override it, those left out keep its values, then the "
+        "config's defaults.",
+    ),
+]
+
+
 @simulate_app.command("sync")
 def simulate_sync(
     out: OutArgument,
+    config_file: ConfigOption = None,
     lidar: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--lidar",
             help=f"LiDAR model: {', '.join(LIDAR_MODELS)} (case-insensitive; XT32 = PandarXT32).",
         ),
-    ] = "VLP-16",
+    ] = None,
     duration_s: Annotated[
-        float, typer.Option("--duration", min=0.001, max=3600.0, help="Seconds of log.")
-    ] = 10.0,
-    seed: SeedOption = 0,
+        float | None, typer.Option("--duration", min=0.001, max=3600.0, help="Seconds of log.")
+    ] = None,
+    seed: SeedOption = None,
     fmt: FormatOption = None,
     delay_error_us: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--delay-error-us",
             min=-1e6,
             max=1e6,
             help="Applied trigger delay minus the ideal one, every camera (us).",
         ),
-    ] = 0.0,
+    ] = None,
     clock_offset_s: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--clock-offset-s", min=-1e9, max=1e9, help="LiDAR clock minus host clock (s)."
         ),
-    ] = 0.0,
+    ] = None,
     drop_fraction: Annotated[
-        float,
+        float | None,
         typer.Option("--drop-fraction", min=0.0, max=0.5, help="Fraction of packets dropped."),
-    ] = 0.001,
+    ] = None,
     controller: Annotated[
         bool,
-        typer.Option("--controller", help="Run the self-adaptive delay controller live."),
+        typer.Option(
+            "--controller",
+            help="Run the self-adaptive delay controller live (settings: the config file's "
+            "`controller` mapping, else the controller's defaults).",
+        ),
     ] = False,
     tunnel: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             "--tunnel/--no-tunnel", help="Drive through a tunnel (exposure 2 -> 12 -> 2 ms)."
         ),
-    ] = True,
+    ] = None,
     compressed: Annotated[
         bool, typer.Option("--compressed", help="CompressedImage instead of Image.")
     ] = False,
     trigger_packet: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--trigger-packet",
             help="Packet the triggers are issued from: 'containing' the zero crossing, or "
             "'first_after' it (a driver that cuts revolutions by packet).",
         ),
-    ] = "containing",
+    ] = None,
     trigger_packet_offset: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--trigger-packet-offset",
             min=-32,
             max=32,
             help="Move the trigger packet by this many delivered packets (+ later, - earlier).",
         ),
-    ] = 0,
+    ] = None,
     ros1_seq: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             "--ros1-seq/--no-ros1-seq",
             help="ROS 1 formats: number header seq per frame, or write 0 as some drivers do.",
         ),
-    ] = True,
+    ] = None,
     stamp: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--stamp",
             help="What every camera's image header stamp marks: exposure_start, "
             "exposure_middle, exposure_end or trigger (246).",
         ),
-    ] = "exposure_start",
+    ] = None,
     exposure_messages: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--exposure-messages",
             help="Comma-separated exposure metadata to write: camera_exposure (states its "
             "start), flir_meta (ImageMetaData: the start follows --stamp); '' for none.",
         ),
-    ] = "camera_exposure,flir_meta",
+    ] = None,
     shared_topics: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--shared-topics",
             help="Comma-separated kinds every camera publishes on one topic (image, "
             "exposure, meta, trigger), told apart by header.frame_id.",
         ),
-    ] = "",
+    ] = None,
     trigger_message: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--trigger-message",
             help="The trigger record: trigger_event (TriggerEvent, five checkpoints) or "
             "time_reference (sensor_msgs/TimeReference: 246 only, numbered by header seq).",
         ),
-    ] = "trigger_event",
+    ] = None,
     frame_ids: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             "--frame-ids/--no-frame-ids",
             help="Write each camera's frame in header.frame_id, or leave it empty.",
         ),
-    ] = True,
+    ] = None,
     camera_field: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             "--camera-field/--no-camera-field",
             help="Write the camera name in CameraExposure/TriggerEvent.camera, or leave it empty.",
         ),
-    ] = True,
+    ] = None,
     overwrite: OverwriteFlag = False,
 ) -> None:
     """Write a LiDAR + three cameras log, its truth (OUT.truth.json) and rig (OUT.rig.yaml)."""
 
     def job() -> None:
+        from syncaudit.cli.simulate_controller import ControllerDelays
         from syncaudit.simulate.sync_log import lidar_model, sync_sim_config
         from syncaudit.writers.log_writer import infer_format, log_target
 
+        base, controller_file = _sync_file(config_file) if config_file else ({}, None)
         try:
-            model = lidar_model(lidar)
+            model = None if lidar is None else lidar_model(lidar)
         except ConfigError as exc:
             raise UsageError(f"--lidar: {exc}") from None
         log_format = _format(out, fmt)
         target = log_target(out, log_format)
+        fields = {
+            "seed": seed,
+            "duration_s": duration_s,
+            "packet_drop_fraction": drop_fraction,
+            "trigger_packet": trigger_packet,
+            "trigger_packet_offset": trigger_packet_offset,
+            "ros1_header_seq": ros1_seq,
+            "exposure_messages": None if exposure_messages is None else _names(exposure_messages),
+            "shared_topics": None if shared_topics is None else _names(shared_topics),
+            "trigger_message": trigger_message,
+            "header_frame_ids": frame_ids,
+            "camera_field": camera_field,
+        }
         try:
             config = sync_sim_config(
+                base,
                 lidar=model,
                 tunnel=tunnel,
                 delay_error_us=delay_error_us,
                 clock_offset_s=clock_offset_s,
-                compressed=compressed,
-                controller=controller,
-                seed=seed,
-                duration_s=duration_s,
+                compressed=True if compressed else None,
+                stamp=stamp,
                 log_format=infer_format(target, log_format),
                 overwrite=overwrite,
-                packet_drop_fraction=drop_fraction,
-                trigger_packet=trigger_packet,
-                trigger_packet_offset=trigger_packet_offset,
-                ros1_header_seq=ros1_seq,
-                stamp=stamp,
-                exposure_messages=_names(exposure_messages),
-                shared_topics=_names(shared_topics),
-                trigger_message=trigger_message,
-                header_frame_ids=frame_ids,
-                camera_field=camera_field,
+                **{name: value for name, value in fields.items() if value is not None},
             )
         except ConfigError as exc:
             raise _usage(exc) from None
@@ -243,9 +266,12 @@ def simulate_sync(
         from syncaudit.simulate.rig_file import rig_from_truth, rig_path
         from syncaudit.simulate.sync_log import simulate_sync_log, truth_path
 
+        delays = (
+            ControllerDelays(controller_file) if controller or controller_file is not None else None
+        )
         rig_file = rig_path(target)
         with output_set(overwrite=overwrite, targets=(rig_file,)) as outputs:
-            truth = simulate_sync_log(target, config, outputs=outputs)
+            truth = simulate_sync_log(target, config, outputs=outputs, delays=delays)
             rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
             outputs.write_text(rig_file, yaml.safe_dump(rig, sort_keys=False))
         lidar_truth = truth["lidar"]
@@ -258,6 +284,39 @@ def simulate_sync(
         emit(lambda: print("\n".join(lines)))
 
     run(job)
+
+
+def _sync_file(path: Path) -> tuple[dict[str, Any], ControllerConfig | None]:
+    """A sync simulator config file: its SyncSimConfig fields (checked here, so a bad value
+    names the file), and its `controller` (true or a mapping of controller settings:
+    the controller runs; false, null or absent: constant delays unless --controller).
+
+    Raises:
+        ConfigError: `FILE: key: message` for the first bad key.
+    """
+    from pydantic import ValidationError
+
+    from syncaudit.analysis.controller import ControllerConfig
+    from syncaudit.config import load_mapping, validate_mapping
+    from syncaudit.simulate.sync_log import SyncSimConfig
+
+    what = "simulator config"
+    raw = load_mapping(path, what=what)
+    controller = raw.pop("controller", None)
+    for fixed in ("log_format", "overwrite"):
+        if fixed in raw:
+            raise ConfigError(f"{path}: {fixed}: set by OUT, --format and --overwrite")
+    validate_mapping(path, raw, SyncSimConfig, what=what)
+    if controller is None or controller is False:
+        return raw, None
+    try:
+        if controller is True:
+            return raw, ControllerConfig()
+        return raw, ControllerConfig.model_validate(controller)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(part) for part in ("controller", *first["loc"]))
+        raise ConfigError(f"{path}: {where}: {first['msg']}") from None
 
 
 def _names(option: str) -> tuple[str, ...]:
@@ -296,83 +355,85 @@ def _choice(option: str, value: str, allowed: tuple[str, ...]) -> str:
 @simulate_app.command("calib")
 def simulate_calib(
     out: OutArgument,
+    config_file: ConfigOption = None,
     beams: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--beams",
             help="Beams per LiDAR: 16 (VLP-16-like), 32 (VLP-32C-like), 64 or 128 (OS1-like).",
         ),
-    ] = 32,
+    ] = None,
     stops: Annotated[
-        int, typer.Option("--stops", min=2, max=720, help="Stops of the session (2 or more).")
-    ] = 12,
+        int | None,
+        typer.Option("--stops", min=2, max=720, help="Stops of the session (2 or more)."),
+    ] = None,
     mount: Annotated[
-        str, typer.Option("--mount", help=f"Where the two LiDARs sit: {'|'.join(MOUNTS)}.")
-    ] = "roof_front_rear",
+        str | None, typer.Option("--mount", help=f"Where the two LiDARs sit: {'|'.join(MOUNTS)}.")
+    ] = None,
     motion: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--motion",
             help="turntable (pure turns about a pivot) or drive (25-45 deg turns and 0.3-1.1 m "
             "moves between short stops, motion-distorted scans while moving).",
         ),
-    ] = "turntable",
+    ] = None,
     organized: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--organized",
             help="Which LiDARs publish organised beam x column clouds (zeros for no return): "
             f"{'|'.join(ORGANIZED)}.",
         ),
-    ] = "none",
+    ] = None,
     tf_chain: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--tf-chain",
             help="/tf_static as base_link -> lidar (direct) or base_link -> sensor_kit_base_link "
             "-> lidar (sensor_kit).",
         ),
-    ] = "direct",
+    ] = None,
     odometry: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--odometry",
             help="The vehicle's drifting odometry: none, odometry (nav_msgs/Odometry on /odom), "
             "tf (/tf odom -> base_link) or both.",
         ),
-    ] = "none",
+    ] = None,
     scene: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--scene",
             help="yard (walls, boxes, poles), ground_and_wall or corridor (both degenerate: "
             "not calibratable).",
         ),
-    ] = "yard",
+    ] = None,
     range_noise_m: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--range-noise-m", min=0.0, max=0.5, help="Range noise of every LiDAR (m, 1 sigma)."
         ),
-    ] = 0.01,
+    ] = None,
     rotation_error_deg: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--rotation-error-deg",
             min=0.0,
             max=45.0,
             help="Rotation error of the second LiDAR's recorded extrinsic (deg).",
         ),
-    ] = 0.05,
+    ] = None,
     translation_error_cm: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--translation-error-cm",
             min=0.0,
             max=100.0,
             help="Translation error of the second LiDAR's recorded extrinsic (cm).",
         ),
-    ] = 0.3,
+    ] = None,
     degenerate: Annotated[
         bool,
         typer.Option("--degenerate", help="Alias of --scene ground_and_wall."),
@@ -397,57 +458,50 @@ def simulate_calib(
             "--scans-per-stop >= 2). drive sessions record 10-18 per move.",
         ),
     ] = None,
-    seed: SeedOption = 0,
+    seed: SeedOption = None,
     fmt: FormatOption = None,
     overwrite: OverwriteFlag = False,
 ) -> None:
     """Write a calibration session of two non-overlapping LiDARs and its truth (OUT.truth.json)."""
 
     def job() -> None:
-        from syncaudit.calib.settings import calib_scene_config
+        from syncaudit.simulate.calib_config import DEFAULT_MOUNT
         from syncaudit.simulate.calib_session import simulate_calib_session, truth_path
         from syncaudit.writers.log_writer import log_target
 
-        if beams not in BEAMS:
+        if beams is not None and beams not in BEAMS:
             raise UsageError(f"--beams must be one of {'|'.join(map(str, BEAMS))}, got {beams}")
+        choices = {
+            "--mount": (mount, MOUNTS),
+            "--motion": (motion, MOTIONS),
+            "--organized": (organized, ORGANIZED),
+            "--tf-chain": (tf_chain, TF_CHAINS),
+            "--odometry": (odometry, ODOMETRY),
+            "--scene": (scene, SCENES),
+        }
         chosen = {
-            "mount": _choice("--mount", mount, MOUNTS),
-            "motion": _choice("--motion", motion, MOTIONS),
-            "organized": _choice("--organized", organized, ORGANIZED),
-            "tf_chain": _choice("--tf-chain", tf_chain, TF_CHAINS),
-            "odometry": _choice("--odometry", odometry, ODOMETRY),
-            "scene": _choice("--scene", scene, SCENES),
+            option.removeprefix("--").replace("-", "_"): _choice(option, value, allowed)
+            for option, (value, allowed) in choices.items()
+            if value is not None
         }
         if degenerate:
-            if chosen["scene"] not in ("yard", "ground_and_wall"):
+            if chosen.get("scene", "yard") not in ("yard", "ground_and_wall"):
                 raise UsageError(f"--degenerate conflicts with --scene {chosen['scene']}")
             chosen["scene"] = "ground_and_wall"
-        turntable_only = {"--scans-per-stop": scans_per_stop, "--turning-scans": turning_scans}
-        given = [name for name, value in turntable_only.items() if value is not None]
-        if chosen["motion"] == "drive" and given:
-            raise UsageError(f"{' and '.join(given)} only apply to --motion turntable")
+        preset = {
+            "beams": beams,
+            "range_noise_m": range_noise_m,
+            "rear_rotation_error_deg": rotation_error_deg,
+            "rear_translation_error_cm": translation_error_cm,
+            "n_stops": stops,
+            "seed": seed,
+            "scans_per_stop": scans_per_stop,
+            "turning_scans": turning_scans,
+        }
+        given = {name: value for name, value in preset.items() if value is not None}
         log_format = _format(out, fmt)
         target = log_target(out, log_format)
-        try:
-            config = calib_scene_config(
-                beams=beams,
-                n_stops=stops,
-                seed=seed,
-                range_noise_m=range_noise_m,
-                rear_rotation_error_deg=rotation_error_deg,
-                rear_translation_error_cm=translation_error_cm,
-                **chosen,  # type: ignore[arg-type]
-            )
-            if chosen["motion"] == "turntable":
-                config = type(config).model_validate(
-                    {
-                        **config.model_dump(),
-                        "scans_per_stop": 1 if scans_per_stop is None else scans_per_stop,
-                        "turning_scans": 0 if turning_scans is None else turning_scans,
-                    }
-                )
-        except ConfigError as exc:
-            raise _usage(exc) from None
+        config = _calib_config(config_file, {**chosen, **given})
         with output_set(overwrite=overwrite) as outputs:
             simulate_calib_session(
                 target,
@@ -456,10 +510,65 @@ def simulate_calib(
                 overwrite=overwrite,
                 outputs=outputs,
             )
+        where = chosen.get("mount", DEFAULT_MOUNT) if config_file is None else config_file.name
         line = (
-            f"wrote {target} ({chosen['motion']}, {stops} stops, {beams}-beam LiDARs "
-            f"{chosen['mount']}, {chosen['scene']}), truth {truth_path(target)}"
+            f"wrote {target} ({config.motion}, {config.n_stops} stops, "
+            f"{config.lidars[0].beams}-beam LiDARs {where}, {config.scene.kind}), "
+            f"truth {truth_path(target)}"
         )
         emit(lambda: print(line))
 
     run(job)
+
+
+_PRESET_OPTIONS: dict[str, str] = {
+    "mount": "--mount",
+    "beams": "--beams",
+    "organized": "--organized",
+    "range_noise_m": "--range-noise-m",
+    "rear_rotation_error_deg": "--rotation-error-deg",
+    "rear_translation_error_cm": "--translation-error-cm",
+}
+"""Options that build the LiDARs from a mount preset (a config file lists its LiDARs)."""
+
+
+def _calib_config(config_file: Path | None, settings: dict[str, Any]) -> CalibSceneConfig:
+    """The session: `calib_scene_config` of the options given, or the config file's session
+    with the options given over it. The options' defaults are the config's.
+
+    Raises:
+        UsageError: an option out of range or not applying (exit 64, worded in options).
+        ConfigError: the config file unreadable or invalid (naming the file).
+    """
+    from syncaudit.config import load_model
+    from syncaudit.simulate.calib_config import CalibSceneConfig, calib_scene_config
+
+    base = (
+        None
+        if config_file is None
+        else load_model(config_file, CalibSceneConfig, what="calibration session config")
+    )
+    motion = settings.get("motion", "turntable" if base is None else base.motion)
+    turntable_only = {"--scans-per-stop": "scans_per_stop", "--turning-scans": "turning_scans"}
+    given = [option for option, name in turntable_only.items() if name in settings]
+    if motion == "drive" and given:
+        raise UsageError(f"{' and '.join(given)} only apply to --motion turntable")
+    extra = {name: settings.pop(name) for name in turntable_only.values() if name in settings}
+    try:
+        if base is None:
+            config = calib_scene_config(**settings)
+            return CalibSceneConfig.model_validate({**config.model_dump(), **extra})
+        presets = [option for name, option in _PRESET_OPTIONS.items() if name in settings]
+        if presets:
+            raise UsageError(
+                f"{', '.join(presets)}: the LiDARs come from --config {config_file}; set them there"
+            )
+        data = {**base.model_dump(), **extra}
+        for name in ("seed", "n_stops", "motion", "tf_chain", "odometry"):
+            if name in settings:
+                data[name] = settings[name]
+        if "scene" in settings:
+            data["scene"] = {**data["scene"], "kind": settings["scene"]}
+        return CalibSceneConfig.model_validate(data)
+    except ConfigError as exc:
+        raise _usage(exc) from None

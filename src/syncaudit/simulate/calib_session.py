@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.calib import se3
-from syncaudit.calib.settings import CalibSceneConfig, LidarSimConfig
+from syncaudit.simulate import rigid
+from syncaudit.simulate.calib_config import CalibSceneConfig, LidarSimConfig
 from syncaudit.simulate.scene import Scene, beam_pattern, build_scene, simulate_scan
 from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
 from syncaudit.writers.outputs import OutputSet
@@ -117,8 +117,8 @@ def truth_path(out: Path) -> Path:
 
 def _transform_json(transform: NDArray[np.float64]) -> dict[str, Any]:
     """A 4x4 transform as translation, quaternion, roll/pitch/yaw and the matrix."""
-    qx, qy, qz, qw = se3.matrix_to_quaternion(transform[:3, :3])
-    roll, pitch, yaw = se3.matrix_to_rpy(transform[:3, :3])
+    qx, qy, qz, qw = rigid.quaternion_xyzw(transform[:3, :3])
+    roll, pitch, yaw = rigid.rpy_of(transform[:3, :3])
     return {
         "translation_m": [float(v) for v in transform[:3, 3]],
         "quaternion_xyzw": [qx, qy, qz, qw],
@@ -130,7 +130,7 @@ def _transform_json(transform: NDArray[np.float64]) -> dict[str, Any]:
 def _mount(lidar: LidarSimConfig) -> NDArray[np.float64]:
     """True base_from_lidar transform of a LiDAR from its mounting."""
     roll, pitch, yaw = (math.radians(v) for v in lidar.mount_rpy_deg)
-    return se3.make_transform(se3.rpy_to_matrix(roll, pitch, yaw), lidar.mount_xyz_m)
+    return rigid.transform(rigid.rpy_matrix(roll, pitch, yaw), lidar.mount_xyz_m)
 
 
 def _perturb(
@@ -141,8 +141,9 @@ def _perturb(
     axis /= np.linalg.norm(axis)
     direction = rng.normal(size=3)
     direction /= np.linalg.norm(direction)
-    delta = se3.make_transform(
-        se3.exp_so3(axis * math.radians(rotation_deg)), direction * translation_cm / 100.0
+    delta = rigid.transform(
+        rigid.axis_angle_matrix(axis * math.radians(rotation_deg)),
+        direction * translation_cm / 100.0,
     )
     return true @ delta
 
@@ -167,9 +168,9 @@ def _stops(config: CalibSceneConfig, rng: np.random.Generator) -> list[_Stop]:
     stops = []
     for k in range(config.n_stops):
         yaw = math.radians(k * config.step_deg + rng.normal(0.0, config.stop_jitter_deg))
-        rot = se3.rot_z(yaw)
+        rot = rigid.yaw_matrix(yaw)
         jitter = np.array([*rng.normal(0.0, config.stop_jitter_m, size=2), 0.0])
-        pose = se3.make_transform(rot, -rot @ pivot + jitter)
+        pose = rigid.transform(rot, -rot @ pivot + jitter)
         start = t0 + k * cycle_ns
         stops.append(_Stop(k, yaw, pose, start, start + stop_ns))
     return stops
@@ -191,7 +192,7 @@ def _drive_stops(config: CalibSceneConfig, rng: np.random.Generator) -> list[_St
     stops = []
     for k in range(config.n_stops):
         stop_ns = round(float(rng.uniform(*config.stop_duration_s_range)) * _NS)
-        pose = se3.make_transform(se3.rot_z(yaw), (x, y, 0.0))
+        pose = rigid.transform(rigid.yaw_matrix(yaw), (x, y, 0.0))
         stops.append(_Stop(k, yaw, pose, t, t + stop_ns))
         lo, hi = config.moving_scans_range
         t += stop_ns + int(rng.integers(lo, hi + 1)) * period_ns
@@ -235,7 +236,7 @@ def _pose_at(stops: list[_Stop], t_ns: float) -> NDArray[np.float64]:
             s = s * s * (3.0 - 2.0 * s)  # smooth start and stop of the turntable
             yaw = a.yaw_rad + s * (b.yaw_rad - a.yaw_rad)
             trans = (1.0 - s) * a.world_from_base[:3, 3] + s * b.world_from_base[:3, 3]
-            return se3.make_transform(se3.rot_z(yaw), trans)
+            return rigid.transform(rigid.yaw_matrix(yaw), trans)
     for stop in reversed(stops):
         if t_ns >= stop.start_ns:
             return stop.world_from_base
@@ -341,14 +342,14 @@ def _odometry(
     t0 = stops[0].start_ns - _NS // 2
     stamps = np.arange(t0, stops[-1].end_ns + _NS // 2, step_ns, dtype=np.int64)
     true = _poses_at(stops, stamps.astype(np.float64))
-    origin_inv = se3.invert(true[0])
+    origin_inv = rigid.inverse(true[0])
     true = np.einsum("ij,njk->nik", origin_inv, true)
     scale = 1.0 + float(rng.normal(0.0, config.odom_scale_error))
     yaw_scale = 1.0 + float(rng.normal(0.0, config.odom_yaw_scale_error))
     measured = np.empty_like(true)
     measured[0] = true[0]
     for i in range(1, stamps.size):
-        delta = se3.invert(true[i - 1]) @ true[i]
+        delta = rigid.inverse(true[i - 1]) @ true[i]
         dyaw = math.atan2(delta[1, 0], delta[0, 0])
         moving = np.linalg.norm(delta[:2, 3]) > 1e-9 or abs(dyaw) > 1e-9
         if moving:
@@ -356,7 +357,7 @@ def _odometry(
             dxy = delta[:2, 3] * scale + rng.normal(0.0, config.odom_noise_m, size=2)
         else:
             dxy = np.zeros(2)
-        step = se3.make_transform(se3.rot_z(dyaw), (float(dxy[0]), float(dxy[1]), 0.0))
+        step = rigid.transform(rigid.yaw_matrix(dyaw), (float(dxy[0]), float(dxy[1]), 0.0))
         measured[i] = measured[i - 1] @ step
     return stamps, measured, true
 
@@ -365,7 +366,7 @@ def _odom_msgs(
     writer: LogWriter, config: CalibSceneConfig, stamp_ns: int, pose: NDArray[np.float64]
 ) -> tuple[Any, Any]:
     """(nav_msgs/Odometry, tf2_msgs/TFMessage odom -> base_link) for one odometry pose."""
-    qx, qy, qz, qw = se3.matrix_to_quaternion(pose[:3, :3])
+    qx, qy, qz, qw = rigid.quaternion_xyzw(pose[:3, :3])
     tx, ty, tz = (float(v) for v in pose[:3, 3])
     cov = np.diag([1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-4]).reshape(-1)
     odom = writer.new_msg(
@@ -392,7 +393,7 @@ def _tf_msg(
     """A `tf2_msgs/msg/TFMessage` with one static transform per child frame."""
     transforms = []
     for child, transform in children.items():
-        qx, qy, qz, qw = se3.matrix_to_quaternion(transform[:3, :3])
+        qx, qy, qz, qw = rigid.quaternion_xyzw(transform[:3, :3])
         tx, ty, tz = (float(v) for v in transform[:3, 3])
         transforms.append(
             writer.new_msg(
@@ -421,7 +422,7 @@ def _static_messages(
     frames = {lidar.frame: recorded_ext[lidar.name] for lidar in config.lidars}
     if config.tf_chain == "direct":
         return [_tf_msg(writer, stamp_ns, config.base_frame, frames)]
-    kit_inv = se3.invert(kit)
+    kit_inv = rigid.inverse(kit)
     return [
         _tf_msg(writer, stamp_ns, config.base_frame, {config.sensor_kit_frame: kit}),
         _tf_msg(
@@ -493,7 +494,7 @@ def _simulate(
         )
         for lidar in config.lidars
     }
-    kit = se3.make_transform(se3.rpy_to_matrix(0.0, 0.0, math.radians(0.5)), (0.9, 0.0, 1.6))
+    kit = rigid.transform(rigid.rpy_matrix(0.0, 0.0, math.radians(0.5)), (0.9, 0.0, 1.6))
     period_ns = round(config.scan_period_s * _NS)
     scans: list[dict[str, Any]] = []
     odometry = None if config.odometry == "none" else _odometry(config, stops, odom_rng)
@@ -558,7 +559,7 @@ def _simulate(
         }
     if odometry is not None:
         stamps, measured, true = odometry
-        last_rot, last_trans = se3.transform_difference(true[-1], measured[-1])
+        last_rot, last_trans = rigid.difference(true[-1], measured[-1])
         truth["odometry"] = {
             "kind": config.odometry,
             "samples": int(stamps.size),
@@ -629,9 +630,9 @@ def _truth(
     ref = config.lidars[0]
     lidars = []
     for lidar in config.lidars:
-        true_rel = se3.invert(true_ext[ref.name]) @ true_ext[lidar.name]
-        rec_rel = se3.invert(recorded_ext[ref.name]) @ recorded_ext[lidar.name]
-        rot_deg, trans_m = se3.transform_difference(true_rel, rec_rel)
+        true_rel = rigid.inverse(true_ext[ref.name]) @ true_ext[lidar.name]
+        rec_rel = rigid.inverse(recorded_ext[ref.name]) @ recorded_ext[lidar.name]
+        rot_deg, trans_m = rigid.difference(true_rel, rec_rel)
         lidars.append(
             {
                 "name": lidar.name,

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.calib import se3
-from syncaudit.calib.settings import LidarSimConfig, SceneConfig
+from syncaudit.simulate import rigid
+from syncaudit.simulate.calib_config import LidarSimConfig, SceneConfig
 
 F64 = NDArray[np.float64]
 _EPS_M = 1e-6
@@ -137,7 +137,7 @@ def _near_rays(origins: F64, dirs: F64, center: F64, radius_m: float) -> NDArray
 
 def _ray_box(origins: F64, dirs: F64, box: Box) -> tuple[F64, F64]:
     """Slab test in the box frame: entry distance (inf = miss) and |cos| of incidence."""
-    rot = se3.rot_z(box.yaw_rad)
+    rot = rigid.yaw_matrix(box.yaw_rad)
     p = (origins - np.asarray(box.center_m)) @ rot  # rows: R^T (o - c)
     d = dirs @ rot
     half = np.asarray(box.size_m) / 2.0
@@ -200,7 +200,7 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
     size_x, size_y = config.yard_size_m
     yard_yaw = float(rng.uniform(-math.pi, math.pi))
     offset = rng.uniform(-1.0, 1.0, size=2)
-    rot2 = se3.rot_z(yard_yaw)[:2, :2]
+    rot2 = rigid.yaw_matrix(yard_yaw)[:2, :2]
     boxes: list[Box] = []
     for local_xy, length, along_y in (
         ((size_x / 2.0, 0.0), size_y, True),

@@ -34,8 +34,8 @@ import math
 import struct
 import typing
 import zlib
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any, Literal
@@ -44,7 +44,6 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, model_validator
 
-from syncaudit.analysis.controller import ControllerConfig, DelayController, FrameObservation
 from syncaudit.config import ConfigModel
 from syncaudit.errors import ConfigError
 from syncaudit.lidar.hesai import HESAI_LAYOUTS, RosHeader, returns_per_firing
@@ -56,6 +55,12 @@ from syncaudit.lidar.velodyne_encode import (
     velodyne_revolution_schedule,
 )
 from syncaudit.simulate import LidarModel
+from syncaudit.simulate.delays import (
+    CONSTANT_WINDOW_FRAMES,
+    CameraDelays,
+    FrameTiming,
+    LiveDelays,
+)
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
 
@@ -261,8 +266,6 @@ class SyncSimConfig(_Strict):
     trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
     """Triggers fire from the packet this many delivered packets after (negative: before)
     the one `trigger_packet` picks: a driver that waits for, or predicts, the crossing."""
-    controller: ControllerConfig | None = None
-    """None: constant delays; else the self-adaptive controller runs live per camera."""
 
     @model_validator(mode="after")
     def _check(self) -> SyncSimConfig:
@@ -486,6 +489,58 @@ def _camera_quaternion(yaw_deg: float) -> tuple[float, float, float, float]:
     return ((m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, s / 4, (m[1][0] - m[0][1]) / s)
 
 
+@dataclass(frozen=True, slots=True)
+class _Chain:
+    """One camera's frames before the delay: when each should be exposed, and the chain."""
+
+    n: int
+    """Frames: one per whole revolution."""
+    theta_deg: float
+    """Rotation from the zero crossing to the camera's centre."""
+    t_est: NDArray[np.int64]
+    """When the beam points at the camera's centre (true time): the frame's target."""
+    packet_ns: NDArray[np.int64]
+    """Capture (240) of the packet the trigger fires from."""
+    t1: NDArray[np.int64]
+    t2: NDArray[np.int64]
+    t3: NDArray[np.int64]
+    t4: NDArray[np.int64]
+    t5: NDArray[np.int64]
+    """Exposure durations (even ns)."""
+    exposure_ratio: NDArray[np.float64]
+    ideal: NDArray[np.int64]
+    """The delay that would put the exposure's middle at t_est."""
+
+
+@dataclass(frozen=True, slots=True)
+class _FrameTimes:
+    """Step 3 of a camera: what the applied delays lead to, per frame (true time, ns)."""
+
+    exposure_start: NDArray[np.int64]
+    t_l: NDArray[np.int64]
+    """Middle of the exposure."""
+    error: NDArray[np.int64]
+    """t_l - t_est (signed)."""
+    stamp: NDArray[np.int64]
+    """The image header stamp under the camera's stamp semantics."""
+
+
+def _frame_times(
+    chain: _Chain, applied: NDArray[np.int64], semantics: StampSemantics
+) -> _FrameTimes:
+    """Exposure start, middle, error and image stamp of every frame of a camera."""
+    triggered = chain.packet_ns + chain.t1 + chain.t2 + applied + chain.t3
+    exposure_start = triggered + chain.t4
+    t_l = exposure_start + chain.t5 // 2
+    stamp = {
+        "exposure_start": exposure_start,
+        "exposure_middle": exposure_start + chain.t5 // 2,
+        "exposure_end": exposure_start + chain.t5,
+        "trigger": triggered,
+    }[semantics]
+    return _FrameTimes(exposure_start, t_l, t_l - chain.t_est, stamp)
+
+
 @dataclass(slots=True)
 class _Outgoing:
     """Serialized messages waiting to be written in log-time order."""
@@ -509,9 +564,12 @@ def truth_path(out: Path) -> Path:
 class _Simulation:
     """One run of the simulator: arrays first (vectorised), then messages."""
 
-    def __init__(self, config: SyncSimConfig, outputs: OutputSet) -> None:
+    def __init__(
+        self, config: SyncSimConfig, outputs: OutputSet, delays: LiveDelays | None
+    ) -> None:
         self.cfg = config
         self.outputs = outputs
+        self.delays = delays
         seeds = np.random.SeedSequence(config.seed).spawn(8)
         self.rng_drop, self.rng_t1, self.rng_points = (np.random.default_rng(s) for s in seeds[:3])
         self.camera_seeds = seeds[3]
@@ -666,7 +724,11 @@ class _Simulation:
         }
         truth: dict[str, Any] = {
             "seed": cfg.seed,
-            "config": cfg.model_dump(mode="json"),
+            # `controller` is the last key, as when it was a field of the config.
+            "config": {
+                **cfg.model_dump(mode="json"),
+                "controller": None if self.delays is None else self.delays.settings,
+            },
             "log": {"path": str(out), "format": cfg.log_format},
             "conventions": {
                 "times": "integer ns, true (host) clock; sensor clock = host + clock_offset_ns",
@@ -706,10 +768,75 @@ class _Simulation:
         revs_ns: NDArray[np.float64],
         omega_mean_deg_ns: float,
     ) -> dict[str, Any]:
-        """Per-frame truth of one camera (one frame per whole revolution)."""
+        """Per-frame truth of one camera (one frame per whole revolution).
+
+        In four steps: the trigger chain up to the delay, the applied delays, the times
+        they lead to, and the camera's truth record. The camera's random draws happen in
+        that order (t2, t3, t4, t5, then the image latency and the image pattern's seed).
+        """
         cfg = self.cfg
-        cam = cfg.cameras[index]
         rng = np.random.default_rng(self.camera_seeds.spawn(len(cfg.cameras))[index])
+        chain = self._chain(index, rng, pk, zero_packet, zero_angles)
+        delay_error_ns = round(cfg.cameras[index].delay_error_us * NS_PER_US)
+        initial = max(0, round(float(chain.ideal.mean())) + delay_error_ns)
+        applied, adjustments = self._applied_delays(chain, initial, revs_ns)
+        times = _frame_times(chain, applied, cfg.cameras[index].stamp_semantics)
+        latency = cfg.image_latency.draw_ns(rng, chain.n)
+        image_log = times.exposure_start + chain.t5 + latency
+        pattern_seed = int(rng.integers(0, 2**31))
+        record = self._camera_truth(
+            index, chain, times, zero_true_ns[: chain.n], image_log, omega_mean_deg_ns
+        )
+        record["applied_delay"] = {
+            "mode": "constant" if self.delays is None else "controller",
+            "delay_error_ns": delay_error_ns,
+            "initial_ns": int(applied[0]),
+            "final_ns": int(applied[-1]),
+            "mean_ns": float(applied.mean()),
+            "min_ns": int(applied.min()),
+            "max_ns": int(applied.max()),
+            "adjustments": adjustments,
+        }
+        record["frames"] = _rows(
+            {
+                "frame_sequence": np.arange(chain.n),
+                "lidar_packet_ns": chain.packet_ns,
+                "t1_ns": chain.t1,
+                "t2_ns": chain.t2,
+                "t3_ns": chain.t3,
+                "t4_ns": chain.t4,
+                "applied_delay_ns": applied,
+                "exposure_start_ns": times.exposure_start,
+                "exposure_duration_ns": chain.t5,
+                "t_l_ns": times.t_l,
+                "t_estimated_ns": chain.t_est,
+                "error_ns": times.error,
+                "ideal_delay_ns": chain.ideal,
+                "zero_crossing_ns": zero_true_ns[: chain.n],
+                "packet_phase_ns": zero_true_ns[: chain.n] - chain.packet_ns,
+                "t_rotate_ns": chain.t_est - zero_true_ns[: chain.n],
+                "image_stamp_ns": times.stamp,
+                "image_log_time_ns": image_log,
+            }
+        )
+        record["_arrays"] = {
+            "exposure_ratio": chain.exposure_ratio,
+            "pattern_seed": pattern_seed,
+            "image_stamp": times.stamp,
+            "image_log": image_log,
+        }
+        return record
+
+    def _chain(
+        self,
+        index: int,
+        rng: np.random.Generator,
+        pk: _Packets,
+        zero_packet: NDArray[np.int64],
+        zero_angles: NDArray[np.float64],
+    ) -> _Chain:
+        """Step 1: when each frame should be exposed, and the chain's latencies to it."""
+        cfg = self.cfg
         n = int(zero_packet.size) - 1
         theta = (self.camera_azimuth_deg[index] - self.zero_deg) % 360.0
         t_est_rel = self.rotation.time_at_ns(zero_angles[:n] + theta)
@@ -722,98 +849,54 @@ class _Simulation:
         t4 = cfg.t4.draw_ns(rng, n)
         t5, exposure_ratio = _exposures_ns(cfg.light, t_est_rel / NS_PER_S, cfg.duration_s, rng)
         ideal = t_est - (packet_ns + t1 + t2 + t3 + t4 + t5 // 2)
-        ideal_mean = float(ideal.mean())
-        delay_error_ns = round(cam.delay_error_us * NS_PER_US)
-        initial = max(0, round(ideal_mean) + delay_error_ns)
-        t_rotate_ns = round(theta / omega_mean_deg_ns)
+        return _Chain(n, theta, t_est, packet_ns, t1, t2, t3, t4, t5, exposure_ratio, ideal)
 
-        adjustments: list[dict[str, Any]] = []
-        if cfg.controller is None:
-            applied = np.full(n, initial, dtype=np.int64)
-        else:
-            applied = self._run_controller(
-                cfg.controller, initial, theta, revs_ns, t1, t2, t3, t4, t5, ideal, adjustments
-            )
-        exposure_start = packet_ns + t1 + t2 + applied + t3 + t4
-        t_l = exposure_start + t5 // 2
-        error = t_l - t_est
-        err_mean, err_var = _eq5_eq6(np.abs(error))
-        zero_ns = zero_true_ns[:n]
-        latency = cfg.image_latency.draw_ns(rng, n)
-        image_log = exposure_start + t5 + latency
-        stamp = {
-            "exposure_start": exposure_start,
-            "exposure_middle": exposure_start + t5 // 2,
-            "exposure_end": exposure_start + t5,
-            "trigger": packet_ns + t1 + t2 + applied + t3,
-        }[cam.stamp_semantics]
-        pattern_seed = int(rng.integers(0, 2**31))
-        frames = _rows(
-            {
-                "frame_sequence": np.arange(n),
-                "lidar_packet_ns": packet_ns,
-                "t1_ns": t1,
-                "t2_ns": t2,
-                "t3_ns": t3,
-                "t4_ns": t4,
-                "applied_delay_ns": applied,
-                "exposure_start_ns": exposure_start,
-                "exposure_duration_ns": t5,
-                "t_l_ns": t_l,
-                "t_estimated_ns": t_est,
-                "error_ns": error,
-                "ideal_delay_ns": ideal,
-                "zero_crossing_ns": zero_ns,
-                "packet_phase_ns": zero_ns - packet_ns,
-                "t_rotate_ns": t_est - zero_ns,
-                "image_stamp_ns": stamp,
-                "image_log_time_ns": image_log,
-            }
-        )
+    def _applied_delays(
+        self, chain: _Chain, initial_ns: int, revs_ns: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], list[dict[str, Any]]]:
+        """Step 2: the delay each frame is triggered with, and the changes made to it."""
+        if self.delays is None:
+            return np.full(chain.n, initial_ns, dtype=np.int64), []
+        return self._live_delays(self.delays.for_camera(initial_ns), initial_ns, chain, revs_ns)
+
+    def _camera_truth(
+        self,
+        index: int,
+        chain: _Chain,
+        times: _FrameTimes,
+        zero_ns: NDArray[np.int64],
+        image_log: NDArray[np.int64],
+        omega_mean_deg_ns: float,
+    ) -> dict[str, Any]:
+        """Step 4: the camera's summary in the truth (its frames are added by the caller)."""
+        cam = self.cfg.cameras[index]
+        err_mean, err_var = _eq5_eq6(np.abs(times.error))
+        ideal_mean = float(chain.ideal.mean())
         return {
             "name": cam.name,
             "frame_id": f"{cam.name}_optical_frame",
             "yaw_deg": cam.yaw_deg,
             "azimuth_deg": self.camera_azimuth_deg[index],
-            "theta_deg": theta,
+            "theta_deg": chain.theta_deg,
             "hfov_deg": cam.hfov_deg,
             "stamp_semantics": cam.stamp_semantics,
             "topics": self._camera_topics(cam),
-            "frames_count": n,
-            "t_rotate_ns": t_rotate_ns,
-            "t1_mean_ns": float(t1.mean()),
-            "t2_mean_ns": float(t2.mean()),
-            "t3_mean_ns": float(t3.mean()),
-            "t4_mean_ns": float(t4.mean()),
-            "t5_mean_ns": float(t5.mean()),
+            "frames_count": chain.n,
+            "t_rotate_ns": round(chain.theta_deg / omega_mean_deg_ns),
+            "t1_mean_ns": float(chain.t1.mean()),
+            "t2_mean_ns": float(chain.t2.mean()),
+            "t3_mean_ns": float(chain.t3.mean()),
+            "t4_mean_ns": float(chain.t4.mean()),
+            "t5_mean_ns": float(chain.t5.mean()),
             "t5_window_frames": (
-                cfg.controller.window_frames
-                if cfg.controller is not None
-                else ControllerConfig().window_frames
+                self.delays.window_frames if self.delays is not None else CONSTANT_WINDOW_FRAMES
             ),
-            "packet_phase_mean_ns": float((zero_ns - packet_ns).mean()),
-            "error_signed_mean_ns": float(error.mean()),
+            "packet_phase_mean_ns": float((zero_ns - chain.packet_ns).mean()),
+            "error_signed_mean_ns": float(times.error.mean()),
             "error_mean_ns": err_mean,
             "error_var_ns2": err_var,
             "ideal_delay_ns": round(ideal_mean),
             "ideal_delay_mean_ns": ideal_mean,
-            "applied_delay": {
-                "mode": "constant" if cfg.controller is None else "controller",
-                "delay_error_ns": delay_error_ns,
-                "initial_ns": int(applied[0]),
-                "final_ns": int(applied[-1]),
-                "mean_ns": float(applied.mean()),
-                "min_ns": int(applied.min()),
-                "max_ns": int(applied.max()),
-                "adjustments": adjustments,
-            },
-            "frames": frames,
-            "_arrays": {
-                "exposure_ratio": exposure_ratio,
-                "pattern_seed": pattern_seed,
-                "image_stamp": stamp,
-                "image_log": image_log,
-            },
         }
 
     def _camera_topics(self, cam: CameraSim) -> dict[str, str]:
@@ -834,57 +917,39 @@ class _Simulation:
             topics["image"] += "/compressed"
         return topics
 
-    def _run_controller(
+    def _live_delays(
         self,
-        config: ControllerConfig,
+        policy: CameraDelays,
         initial_ns: int,
-        theta_deg: float,
+        chain: _Chain,
         revs_ns: NDArray[np.float64],
-        t1: NDArray[np.int64],
-        t2: NDArray[np.int64],
-        t3: NDArray[np.int64],
-        t4: NDArray[np.int64],
-        t5: NDArray[np.int64],
-        ideal: NDArray[np.int64],
-        adjustments: list[dict[str, Any]],
-    ) -> NDArray[np.int64]:
-        """Run the controller live: frame i uses the delay decided after frame i - 1.
+    ) -> tuple[NDArray[np.int64], list[dict[str, Any]]]:
+        """Run a caller's policy live: frame i uses the delay decided after frame i - 1.
 
         t_rotate of frame i is theta over the previous revolution's measured rate (the
         nominal rate for the first frame); the error is the frame's true signed error.
         """
-        controller = DelayController(config, initial_delay_ns=initial_ns)
-        n = ideal.size
-        applied = np.empty(n, dtype=np.int64)
+        applied = np.empty(chain.n, dtype=np.int64)
+        adjustments: list[dict[str, Any]] = []
         delay = initial_ns
         w0 = self.rotation.w0_deg_ns
-        lists = [a.tolist() for a in (t1, t2, t3, t4, t5, ideal)]
-        for i in range(n):
+        lists = [a.tolist() for a in (chain.t1, chain.t2, chain.t3, chain.t4, chain.t5)]
+        ideal = chain.ideal.tolist()
+        for i in range(chain.n):
             applied[i] = delay
             omega = w0 if i == 0 else 360.0 / float(revs_ns[i - 1])
-            obs = FrameObservation(
+            frame = FrameTiming(
                 t1_ns=lists[0][i],
                 t2_ns=lists[1][i],
                 t3_ns=lists[2][i],
                 t4_ns=lists[3][i],
                 exposure_ns=lists[4][i],
-                error_ns=delay - lists[5][i],
-                t_rotate_ns=round(theta_deg / omega),
+                error_ns=delay - ideal[i],
+                t_rotate_ns=round(chain.theta_deg / omega),
             )
-            before = len(controller.adjustments)
-            delay = controller.update(obs)
-            for adj in controller.adjustments[before:]:
-                adjustments.append(
-                    {
-                        "after_frame_sequence": adj.frame_index,
-                        "old_delay_ns": adj.old_delay_ns,
-                        "new_delay_ns": adj.new_delay_ns,
-                        "reason": adj.reason,
-                        "window_error_mean_ns": adj.stats.error_mean_ns,
-                        "window_error_var_ns2": adj.stats.error_var_ns2,
-                    }
-                )
-        return applied
+            delay, changes = policy.update(frame)
+            adjustments.extend(asdict(change) for change in changes)
+        return applied, adjustments
 
     # -- writing --------------------------------------------------------------------------
 
@@ -1172,11 +1237,16 @@ def _jpeg_image(writer: LogWriter, header: Any, size: int, seed: int) -> bytes:
 
 
 def simulate_sync_log(
-    out: Path, config: SyncSimConfig, *, outputs: OutputSet | None = None
+    out: Path,
+    config: SyncSimConfig,
+    *,
+    outputs: OutputSet | None = None,
+    delays: LiveDelays | None = None,
 ) -> dict[str, Any]:
     """Write a simulated log to `out` (format `config.log_format`) and its truth to `<out>.truth.json`.
 
-    Returns the truth. Both outputs go through `outputs` (committed by its owner) or, without
+    Returns the truth. `delays` runs live on every camera (a delay controller the caller
+    supplies, see `syncaudit.simulate.delays`); None keeps each camera's delay constant. Both outputs go through `outputs` (committed by its owner) or, without
     one, through an own OutputSet committed here: all or nothing.
 
     Raises:
@@ -1194,7 +1264,7 @@ def simulate_sync_log(
     try:
         truth_file = truth_path(out)
         outputs.add(truth_file)
-        sim = _Simulation(config, outputs)
+        sim = _Simulation(config, outputs, delays)
         truth = sim.run(out)
         for cam in truth["cameras"].values():
             cam.pop("_arrays")
@@ -1235,48 +1305,59 @@ def lidar_model(name: str) -> LidarModel:
 
 
 def sync_sim_config(
+    base: Mapping[str, Any] | None = None,
     *,
-    lidar: str = "VLP-16",
-    tunnel: bool = True,
-    delay_error_us: float = 0.0,
-    clock_offset_s: float = 0.0,
-    compressed: bool = False,
-    controller: bool = False,
-    stamp: str = "exposure_start",
+    lidar: str | None = None,
+    tunnel: bool | None = None,
+    delay_error_us: float | None = None,
+    clock_offset_s: float | None = None,
+    compressed: bool | None = None,
+    stamp: str | None = None,
     **settings: Any,
 ) -> SyncSimConfig:
-    """A SyncSimConfig from the settings `syncaudit simulate sync` offers.
+    """A SyncSimConfig from `base` (SyncSimConfig fields, as a config file holds them), the
+    `settings` over it, and the shorthands `syncaudit simulate sync` offers over both.
 
-    `lidar` accepts the names users write (`XT32`, `vlp-16`); `tunnel=False` keeps the
-    exposure bright all along; `delay_error_us` offsets every camera's applied delay from the
-    ideal; `clock_offset_s` is the LiDAR clock minus the host clock; `stamp` is what every
-    camera's image header stamp marks. Every other keyword is a SyncSimConfig field (`seed`,
-    `duration_s`, `log_format`, `packet_drop_fraction`, `shared_topics`, ...).
+    The shorthands (None: as `base` has it): `lidar` the names users write (`XT32`,
+    `vlp-16`); `tunnel=False` keeps the exposure bright all along; `delay_error_us` offsets
+    every camera's applied delay from the ideal; `clock_offset_s` is the LiDAR clock minus
+    the host clock; `compressed` picks CompressedImage; `stamp` what every camera's image
+    header stamp marks. Every other keyword is a SyncSimConfig field (`seed`, `duration_s`,
+    `log_format`, `packet_drop_fraction`, `shared_topics`, ...). Defaults are the model's.
 
     Raises:
         ConfigError: naming the first setting out of range.
     """
-    base = SyncSimConfig()
-    light = (
-        base.light
-        if tunnel
-        else base.light.model_copy(update={"dark_exposure_us": base.light.bright_exposure_us})
-    )
-    return SyncSimConfig.model_validate(
-        {
-            **settings,
-            "lidar_model": lidar_model(lidar),
-            "clock_offset_ns": round(clock_offset_s * 1e9),
-            "light": light,
-            "cameras": [  # as mappings, so that the settings are validated
-                {
-                    **camera.model_dump(),
-                    "delay_error_us": delay_error_us,
-                    "stamp_semantics": stamp,
-                }
-                for camera in base.cameras
-            ],
-            "image_kind": "compressed" if compressed else "raw",
-            "controller": ControllerConfig() if controller else None,
-        }
-    )
+    data: dict[str, Any] = {**(base or {}), **settings}
+    if lidar is not None:
+        data["lidar_model"] = lidar_model(lidar)
+    if clock_offset_s is not None:
+        data["clock_offset_ns"] = round(clock_offset_s * 1e9)
+    if tunnel is False:
+        light = _plain(data.get("light", LightModel()))
+        if not isinstance(light, Mapping):
+            raise ConfigError("light: must be a mapping of LightModel settings")
+        bright = light.get(
+            "bright_exposure_us", LightModel.model_fields["bright_exposure_us"].default
+        )
+        data["light"] = {**light, "dark_exposure_us": bright}
+    if compressed is not None:
+        data["image_kind"] = "compressed" if compressed else "raw"
+    camera_updates: dict[str, Any] = {}
+    if delay_error_us is not None:
+        camera_updates["delay_error_us"] = delay_error_us
+    if stamp is not None:
+        camera_updates["stamp_semantics"] = stamp
+    if camera_updates:
+        cameras = data.get("cameras", _default_cameras())
+        plain = [_plain(camera) for camera in cameras] if isinstance(cameras, list) else None
+        if plain is None or not all(isinstance(camera, Mapping) for camera in plain):
+            raise ConfigError("cameras: must be a list of camera mappings")
+        # As mappings, so that the settings are validated.
+        data["cameras"] = [{**camera, **camera_updates} for camera in plain]
+    return SyncSimConfig.model_validate(data)
+
+
+def _plain(value: Any) -> Any:
+    """A model as its field mapping (anything else unchanged), to be updated and validated."""
+    return value.model_dump() if isinstance(value, ConfigModel) else value

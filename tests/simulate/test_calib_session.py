@@ -12,9 +12,14 @@ import pytest
 
 from syncaudit.calib import se3
 from syncaudit.calib.io import iter_scans, read_static_transforms
-from syncaudit.calib.settings import CalibSceneConfig, LidarSimConfig, SceneConfig, rig_preset
 from syncaudit.errors import ConfigError
 from syncaudit.logs import open_log
+from syncaudit.simulate.calib_config import (
+    CalibSceneConfig,
+    LidarSimConfig,
+    SceneConfig,
+    rig_preset,
+)
 from syncaudit.simulate.calib_session import simulate_calib_session, truth_path
 
 
@@ -161,7 +166,7 @@ def test_drive_session_layouts_tf_chain_and_odometry(tmp_path: Path) -> None:
     odometry on both carriers, stops and moving scans as the config asks."""
     from syncaudit.calib.extrinsics import from_static_transforms
     from syncaudit.calib.io import read_odometry
-    from syncaudit.calib.settings import calib_scene_config
+    from syncaudit.simulate.calib_config import calib_scene_config
 
     out = tmp_path / "drive.mcap"
     cfg = calib_scene_config(
