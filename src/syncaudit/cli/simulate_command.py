@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, get_args
 
 import typer
 
-from syncaudit.cli.common import OverwriteFlag, SyncauditGroup, app, emit, output_set, run
+from syncaudit.cli.common import (
+    OverwriteFlag,
+    SyncauditGroup,
+    app,
+    emit,
+    option_error,
+    output_set,
+    run,
+)
 from syncaudit.errors import ConfigError, UsageError
 from syncaudit.simulate import LidarModel
 
@@ -75,13 +82,7 @@ _OPTION_OF_FIELD: dict[str, str] = {
 
 def _usage(exc: ConfigError) -> UsageError:
     """A setting the simulator's config refused, worded with the options the user typed."""
-    detail = str(exc)
-    if detail.startswith("invalid "):
-        detail = detail.split(": ", 1)[-1]
-    detail = detail.removeprefix("(top level): ")
-    for field, option in _OPTION_OF_FIELD.items():
-        detail = re.sub(rf"(?<![\w-]){field}\b", option, detail)
-    return UsageError(detail)
+    return option_error(exc, _OPTION_OF_FIELD)
 
 
 ConfigOption = Annotated[
