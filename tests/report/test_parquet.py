@@ -154,7 +154,7 @@ def test_same_typed_schema_without_cameras_or_paired_frames(
         assert len(frames) == 0 and len(cameras) == 0
         with duckdb.connect() as con:
             assert con.execute(f"SELECT count(*) FROM '{odd[0]}'").fetchone() == (0,)
-        assert len(frames.columns) == len(audit.frames().columns) == 24
+        assert len(frames.columns) == len(audit.frames().columns) == 25
         assert json.loads(pq.read_schema(odd[0]).metadata[b"syncaudit"])["verdict"] == "no cameras"
         assert "trigger_pairing" in pq.read_schema(odd[1]).names
     else:

@@ -115,6 +115,8 @@ class CameraSync:
     trigger_pairing: str = "none"
     """How frames were paired with their triggers: 'sequence number', 'time' or 'none' (no
     triggers); where by time although numbers were recorded, a warning says why."""
+    correctable: bool = True
+    """Whether a replayed correction lowers Eq. 5 (set by the advice; False: at its floor)."""
     _frames: pd.DataFrame | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -129,8 +131,9 @@ class CameraSync:
 
     @property
     def needs_correction(self) -> bool:
-        """Whether Eq. 5 or Eq. 6 crossed its threshold over the whole log."""
-        return self.mean_exceeded or self.var_exceeded
+        """Whether Eq. 5 or Eq. 6 crossed its threshold over the whole log and a correction
+        can change that (`correctable`: the camera is not at its floor)."""
+        return (self.mean_exceeded or self.var_exceeded) and self.correctable
 
     @property
     def verdict(self) -> str:
@@ -427,6 +430,8 @@ def _frame_table(
         "applied_delay_ns": applied_ns,
         "rolling_error_mean_ns": rolling_mean(masked, window_frames),
         "rolling_error_var_ns2": rolling_variance(masked, window_frames),
+        # The recommended action's delay per frame: filled by `analysis.advice`.
+        "advised_delay_ns": np.full(len(frames), np.nan),
     }
     return Table(columns, len(frames))
 

@@ -35,6 +35,7 @@ from syncaudit.units import finite_or_none, json_ready, ns_to_us
 if TYPE_CHECKING:
     import pandas as pd
 
+    from syncaudit.analysis.advice import Advice
     from syncaudit.analysis.controller import ControllerConfig
     from syncaudit.analysis.replay import ReplayResult
     from syncaudit.analysis.sync import CameraSync
@@ -59,10 +60,12 @@ class CameraAudit:
     azimuth_deg: float
     azimuth_source: str
     replay: ReplayResult | None
+    advice: Advice
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
         out = self.sync.to_dict()
+        out.update(self.advice.to_dict())
         out["azimuth_deg"] = self.azimuth_deg
         out["azimuth_source"] = self.azimuth_source
         out["corrected"] = (
@@ -204,6 +207,7 @@ def _import_analysis() -> None:
     """Import the analysis while the extraction workers read their first tasks, rather
     than before they start or after the last item, when it would add to the wall time."""
     # Import statements, not importlib: `python -X importtime` names only those.
+    import syncaudit.analysis.advice  # and analysis.feedforward, analysis.floor
     import syncaudit.analysis.replay  # and analysis.controller
     import syncaudit.analysis.sync  # noqa: F401
 
@@ -335,6 +339,7 @@ def _audit(
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
     cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
+    warnings.extend(_floor_warnings(rig, cameras))
     warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in probe.log.warnings)
     return AuditResult(
@@ -388,6 +393,7 @@ def _analyse_cameras(
     """Each placed camera's synchronisation and its replayed controller; what each camera's
     log lacks is added to `missing`."""
     # Imported only now: `_read` has them imported while workers read.
+    from syncaudit.analysis.advice import advise_camera
     from syncaudit.analysis.replay import replay_controller
     from syncaudit.analysis.sync import analyze_camera
 
@@ -406,5 +412,27 @@ def _analyse_cameras(
             analysis=rig.analysis,
             thresholds=rig.thresholds,
         )
-        audits.append(CameraAudit(sync, azimuth, source, replay_controller(sync.table, controller)))
+        replay = replay_controller(sync.table, controller)
+        advice = advise_camera(sync.table, replay)
+        # Judged against what a correction can change; the CSV shows the advised delays.
+        sync.correctable = not advice.at_floor
+        sync.table = sync.table.with_columns({"advised_delay_ns": advice.advised_delay_ns})
+        audits.append(CameraAudit(sync, azimuth, source, replay, advice))
     return audits
+
+
+def _floor_warnings(rig: Rig, cameras: list[CameraAudit]) -> list[str]:
+    """One warning naming the cameras whose floor lies above the Eq. 5 limit."""
+    limit_us = rig.thresholds.error_mean_us
+    below = [
+        f"{c.sync.camera} {c.advice.floor.error_mean_ns / 1e3:.0f} us"
+        for c in cameras
+        if c.advice.floor.error_mean_ns > limit_us * 1e3
+    ]
+    if not below:
+        return []
+    return [
+        f"thresholds.error_mean_us {limit_us:g} is below what this trigger design can reach "
+        f"(floor: {', '.join(below)}): such a camera is judged only on what a correction "
+        "can change"
+    ]

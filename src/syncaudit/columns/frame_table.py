@@ -31,6 +31,7 @@ FRAME_TABLE_DTYPES: dict[str, str] = {
     "applied_delay_ns": "float64",
     "rolling_error_mean_ns": "float64",
     "rolling_error_var_ns2": "float64",
+    "advised_delay_ns": "float64",
 }
 """The per-frame table's columns and their DataFrame dtypes (stamps Int64 ns)."""
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from rich.console import Console
 from rich.table import Table
 
@@ -118,6 +120,20 @@ def _us(value: float | None, fmt: str = "{:.1f}") -> str:
     return _num(value, fmt)
 
 
+ACTIONS = {
+    "shift_trigger": "shift the trigger by {shift} us",
+    "per_frame_compensation": "compensate per frame (exposure feed-forward)",
+    "none": "leave it",
+}
+
+
+def advice_line(camera: str, rec: dict[str, Any]) -> str:
+    """One sentence of advice for a camera, from its `recommendation` JSON object."""
+    shift = rec["shift_us"]
+    action = ACTIONS[rec["action"]].format(shift=_num(shift, "{:+.1f}"))
+    return f"[bold]{camera}[/]: {action}: {rec['why']}"
+
+
 def render_audit(result: AuditResult, console: Console) -> None:
     """The `audit` view: LiDAR side, then one table of the method's quantities per camera."""
     lidar = result.lidar
@@ -133,6 +149,8 @@ def render_audit(result: AuditResult, console: Console) -> None:
         )
         + f", t1 p50/p99 {_num(lidar.t1_p50_us)}/{_num(lidar.t1_p99_us)} us"
     )
+    for cam in result.cameras:
+        console.print(advice_line(cam.sync.camera, cam.advice.recommendation()))
     for cam in result.cameras:
         d = cam.to_dict()
         verdict = (
@@ -189,6 +207,25 @@ def render_audit(result: AuditResult, console: Console) -> None:
                 f"{c['adjustments']} adjustments, final delay {_us(c['final_delay_us'])} us; "
                 f"after the first: error mean {_us(c['settled_error_mean_us'])} us, "
                 f"var {_num(c['settled_error_var_us2'], '{:.1f}')} us^2",
+            )
+        floor = d["floor"]
+        table.add_row(
+            "floor (what this trigger design can reach)",
+            f"Eq. 5 {_us(floor['error_mean_us'])} us; {floor['trigger']} trigger, quantisation "
+            f"{_us(floor['quantisation_us'])} us std, chain jitter {_us(floor['jitter_us'])} us std",
+        )
+        for w in d["what_if"]:
+            table.add_row(
+                f"what if: {w['policy']}",
+                f"Eq. 5 {_us(w['error_mean_us'])} us / Eq. 6 {_num(w['error_var_us2'], '{:.1f}')} "
+                f"us^2, {w['adjustments']} adjustments",
+            )
+        if d["controller"]:
+            k = d["controller"]
+            table.add_row(
+                "our controller's parameters for this log",
+                f"window {k['window_frames']} frames, dead band {k['deadband_us']:.0f} us, "
+                f"exposure trend gain {k['trend_gain']:g}",
             )
         console.print(table)
         for w in cam.sync.warnings:
