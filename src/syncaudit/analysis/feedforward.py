@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,9 +93,9 @@ def replay_feedforward(
         return FeedForwardReplay(config, delays, errors, 0)
     err, applied, exposure = error_ns.tolist(), applied_ns.tolist(), exposure_ns.tolist()
     base = applied[0] + exposure[0] / 2.0
-    window: list[float] = []
-    adjustments = 0
     gain, band, size = config.trend_gain, config.deadband_ns, config.window_frames
+    window: deque[float] = deque(maxlen=size)
+    adjustments = 0
     for i in range(n):
         if i == 0:
             delay = applied[0]
@@ -105,13 +106,23 @@ def replay_feedforward(
         delays[i] = delay
         errors[i] = corrected
         window.append(corrected)
-        if len(window) >= size:
-            median = float(np.median(window[-size:]))
+        if len(window) == size:
+            median = _median(window)
             if abs(median) > band:
                 base -= median
                 adjustments += 1
                 window.clear()
     return FeedForwardReplay(config, delays, errors, adjustments)
+
+
+def _median(values: deque[float]) -> float:
+    """np.median of a few floats, bit for bit (the middle pair's sum halved), ~20x faster:
+    the replay takes one per frame for each of the grid's 27 settings."""
+    ordered = sorted(values)
+    middle = len(ordered) // 2
+    if len(ordered) % 2:
+        return ordered[middle]
+    return (ordered[middle - 1] + ordered[middle]) / 2.0
 
 
 WINDOWS = (5, 10, 20)
