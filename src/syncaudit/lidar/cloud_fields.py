@@ -1,0 +1,131 @@
+"""Which PointCloud2 fields give each point's time and azimuth, and numpy views on them.
+
+Conventions (each checked against the driver's source, see docs/clouds.md):
+
+| field | type | meaning | driver |
+| --- | --- | --- | --- |
+| `time` | float32 | s after the header stamp | ros-drivers/velodyne PointXYZIRT |
+| `t` | uint32 | ns after the header stamp | ouster-ros |
+| `time_stamp` | uint32 | ns after the header stamp | tier4/nebula PointXYZIRCAEDT |
+| `offset_time` | uint32 | ns after the header stamp | Livox (livox_ros_driver2) |
+| `timestamp` | float64 | absolute s | HesaiLidar_ROS_2.0, RoboSense rslidar_sdk |
+| `timestamp` | uint64 (datatype 9) | absolute ns | drivers writing integer stamps |
+
+A relative time is measured from the header stamp; a float field holding values beyond
+1e6 s is taken as absolute whatever its name. `azimuth` (float32, radians; nebula) is the
+vendor's packet azimuth; without it the azimuth is the clockwise angle from the frame's +X
+seen from above, `atan2(-y, x)`, plus the packet azimuth of +X (every supported vendor
+spins clockwise). Only the needed fields are viewed: strided numpy arrays on the message's
+bytes, in the cloud's byte order, whatever the `point_step` padding.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.errors import DecodeError
+from syncaudit.lidar.cloud_layout import DATATYPES, UINT64, CloudField, CloudLayout
+
+__all__ = ["TIME_FIELDS", "CloudTime", "field_view", "point_azimuth_deg", "point_times_ns"]
+
+TIME_FIELDS: tuple[str, ...] = ("time", "t", "time_stamp", "offset_time", "timestamp")
+"""Field names searched for per-point time, in this order."""
+ABSOLUTE_MIN_S = 1e6
+"""A time value beyond this (s) is an absolute stamp, not an offset within a revolution."""
+
+
+@dataclass(frozen=True, slots=True)
+class CloudTime:
+    """The time field of a cloud and how to read it."""
+
+    name: str
+    unit_ns: float
+    """Nanoseconds per unit of the stored value (1e9 for seconds)."""
+
+
+def _dtype(field: CloudField, bigendian: bool) -> np.dtype[Any]:
+    order = ">" if bigendian else "<"
+    if field.datatype == UINT64:
+        return np.dtype(order + "u8")
+    kind = DATATYPES.get(field.datatype)
+    if kind is None:
+        raise DecodeError(f"PointCloud2 field {field.name}: datatype {field.datatype} unknown")
+    return np.dtype(order + kind)
+
+
+def field_view(layout: CloudLayout, data: bytes | memoryview, name: str) -> NDArray[Any]:
+    """(height, width) view of one field of every point (no copy), in the cloud's byte order."""
+    field = layout.fields[name]
+    dtype = _dtype(field, layout.is_bigendian)
+    if field.offset + dtype.itemsize > layout.point_step:
+        raise DecodeError(
+            f"PointCloud2 field {name} at offset {field.offset} overruns point_step "
+            f"{layout.point_step}"
+        )
+    buffer = np.frombuffer(data, dtype=np.uint8, count=layout.data_size, offset=layout.data_offset)
+    if layout.n_points == 0:
+        return np.empty((layout.height, layout.width), dtype=dtype)
+    return np.ndarray(
+        (layout.height, layout.width),
+        dtype=dtype,
+        buffer=buffer,
+        offset=field.offset,
+        strides=(layout.row_step, layout.point_step),
+    )
+
+
+def cloud_time(layout: CloudLayout, time_field: str | None = None) -> CloudTime:
+    """The time field (the rig's, else the first of TIME_FIELDS present) and its unit."""
+    names = (time_field,) if time_field else TIME_FIELDS
+    for name in names:
+        field = layout.fields.get(name)
+        if field is None:
+            continue
+        floating = field.datatype in (7, 8)
+        return CloudTime(name, 1e9 if floating else 1.0)
+    wanted = time_field or ", ".join(TIME_FIELDS)
+    present = ", ".join(layout.fields) or "none"
+    raise DecodeError(f"PointCloud2 has no per-point time field ({wanted}); its fields: {present}")
+
+
+def point_times_ns(
+    layout: CloudLayout, data: bytes | memoryview, time: CloudTime
+) -> tuple[NDArray[np.float64], bool]:
+    """(height, width) time of each point in ns as float64, and whether it is absolute
+    (else relative to the header stamp)."""
+    values = field_view(layout, data, time.name).astype(np.float64)
+    finite = values[np.isfinite(values)]
+    seconds = float(np.max(np.abs(finite))) * time.unit_ns / 1e9 if finite.size else 0.0
+    absolute = seconds > ABSOLUTE_MIN_S
+    return values * time.unit_ns, absolute
+
+
+def point_azimuth_deg(
+    layout: CloudLayout,
+    data: bytes | memoryview,
+    x_axis_azimuth_deg: float,
+    clockwise: bool = True,
+) -> NDArray[np.float64]:
+    """(height, width) packet azimuth of each point in degrees, NaN where a point has none
+    (NaN or zero x/y): the `azimuth` field where there is one, else from x and y."""
+    if "azimuth" in layout.fields:
+        raw = field_view(layout, data, "azimuth").astype(np.float64)
+        finite = raw[np.isfinite(raw)]
+        in_radians = not finite.size or float(np.max(np.abs(finite))) <= 2 * np.pi + 1e-3
+        degrees = np.degrees(raw) if in_radians else raw
+        out: NDArray[np.float64] = degrees % 360.0
+        return out
+    if "x" not in layout.fields or "y" not in layout.fields:
+        raise DecodeError("PointCloud2 has neither an azimuth field nor x and y")
+    x = field_view(layout, data, "x").astype(np.float64)
+    y = field_view(layout, data, "y").astype(np.float64)
+    sign = -1.0 if clockwise else 1.0
+    with np.errstate(invalid="ignore"):
+        angle = np.degrees(np.arctan2(sign * y, x))
+        angle = np.where((x == 0.0) & (y == 0.0), np.nan, angle)
+    azimuth: NDArray[np.float64] = (x_axis_azimuth_deg + angle) % 360.0
+    return azimuth
