@@ -17,6 +17,7 @@ from syncaudit.audit.probe import LogProbe, probe_of
 from syncaudit.camera.azimuth import X_AXIS_AZIMUTH_DEG, camera_azimuth, needs_tf_static
 from syncaudit.camera.camera_topics import detect_cameras
 from syncaudit.errors import NoDataError
+from syncaudit.lidar.cloud_topics import guess_cloud_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 
@@ -29,12 +30,19 @@ def guess_rig(log: LogReader | LogProbe) -> tuple[Rig, list[str]]:
     # The guess `info` shares: IMU packet topics of the same type are set aside.
     lidar_guess = probe.lidar_guess()
     packet_topics = lidar_guess.topics
+    how = "by type"
+    if not packet_topics:
+        clouds = guess_cloud_topics(probe.log)
+        packet_topics = clouds.topics
+        if packet_topics:
+            how = f"PointCloud2 with per-point {clouds.time_fields[packet_topics[0]]}"
     if not packet_topics:
         raise NoDataError(
-            f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) in the log"
+            f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) and no "
+            "PointCloud2 with per-point times in the log"
         )
     cameras, camera_notes = guess_cameras(probe)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes, *camera_notes]
+    guessed = [f"LiDAR topic {packet_topics[0]} ({how})", *lidar_guess.notes, *camera_notes]
     return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
 
 
