@@ -40,3 +40,69 @@ def test_a_cloud_only_log_is_audited_with_a_guessed_rig(tmp_path: Path) -> None:
     assert result.lidar.topic == "/points"
     assert result.lidar.revolutions >= 28
     assert any("PointCloud2 with per-point t" in g for g in result.guessed)
+
+
+def test_info_reports_a_cloud_only_lidar_as_for_packets(tmp_path: Path) -> None:
+    from syncaudit.audit.inspect import inspect_log
+
+    packets_log, clouds_log = tmp_path / "p.mcap", tmp_path / "c.mcap"
+    simulate_sync_log(packets_log, SyncSimConfig(duration_s=3.0))
+    simulate_sync_log(
+        clouds_log, SyncSimConfig(duration_s=3.0, cloud_convention="velodyne", lidar_packets=False)
+    )
+    (p,) = inspect_log(packets_log, jobs=1).lidars
+    (c,) = inspect_log(clouds_log, jobs=1).lidars
+    assert c.topic == "/points"
+    assert c.revolutions == p.revolutions
+    assert c.rpm == pytest.approx(p.rpm, rel=1e-4)
+    assert c.clock_synchronised is p.clock_synchronised is True
+
+
+def test_info_checks_clouds_against_the_packets(tmp_path: Path) -> None:
+    from syncaudit.audit.inspect import inspect_log
+
+    out = tmp_path / "both.mcap"
+    simulate_sync_log(out, SyncSimConfig(duration_s=3.0, cloud_convention="hesai"))
+    report = inspect_log(out, jobs=1)
+    assert [row.topic for row in report.lidars] == ["/velodyne_packets", "/points"]
+    (note,) = [w for w in report.warnings if w.startswith("/points: per-point times")]
+    assert " agree (" in note
+
+
+def test_info_reports_clouds_whose_times_disagree_with_the_packets() -> None:
+    from syncaudit.audit.cloud_info import cloud_agreement
+    from syncaudit.columns.lidar import LidarScan
+
+    def scan(topic: str, zeros: list[int]) -> LidarScan:
+        import numpy as np
+
+        from syncaudit.lidar.revolutions import RevolutionTracker
+
+        columns = RevolutionTracker().finish()
+        revs = type(columns)(
+            **{
+                **{f: getattr(columns, f) for f in columns.__dataclass_fields__},
+                "zero_crossing_sensor_ns": np.array(zeros, dtype=np.int64),
+            }
+        )
+        return LidarScan(
+            topic=topic,
+            vendor="",
+            model="",
+            scans=0,
+            packets=0,
+            return_modes=(),
+            dual_return=False,
+            revolutions=revs,
+            clock=None,
+            omega_blocks_deg_s=float("nan"),
+            cropped_sector=None,
+            outlier_blocks=0,
+        )
+
+    zeros = [k * 100_000_000 for k in range(1, 6)]
+    ok = cloud_agreement(scan("/c", zeros), scan("/p", zeros))
+    assert ok.agrees and ok.paired == 5
+    late = cloud_agreement(scan("/c", [z + 1_327_000 for z in zeros]), scan("/p", zeros))
+    assert not late.agrees
+    assert "DISAGREE" in late.note() and "+1327.0 us" in late.note()
