@@ -38,17 +38,18 @@ _F4, _F8, _U1, _U2, _U4, _U8 = 7, 8, 2, 4, 6, 9
 _Field = tuple[str, int, int, str]  # name, offset, datatype, numpy type
 
 _LAYOUTS: dict[CloudConvention, tuple[list[_Field], int]] = {
-    # ros-drivers/velodyne PointXYZIRT: x y z intensity ring time (float32 s), 4-byte pad.
+    # ros-drivers/velodyne PointcloudXYZIRT (PointCloud2Modifier packs the fields): time
+    # float32 s at byte 18 of 22, unaligned, as `/velodyne_points` shows.
     "velodyne": (
         [
             ("x", 0, _F4, "f4"),
             ("y", 4, _F4, "f4"),
             ("z", 8, _F4, "f4"),
-            ("intensity", 16, _F4, "f4"),
-            ("ring", 20, _U2, "u2"),
-            ("time", 24, _F4, "f4"),
+            ("intensity", 12, _F4, "f4"),
+            ("ring", 16, _U2, "u2"),
+            ("time", 18, _F4, "f4"),
         ],
-        32,
+        22,
     ),
     # ouster-ros PointXYZIRT-like: t uint32 ns, 48-byte padded point, organized.
     "ouster": (
@@ -94,7 +95,8 @@ _LAYOUTS: dict[CloudConvention, tuple[list[_Field], int]] = {
         ],
         24,
     ),
-    # HesaiLidar_ROS_2.0 / rslidar_sdk: absolute float64 s.
+    # HesaiLidar_ROS_2.0 (source_driver_ros2.hpp ToRosMsg): fields packed one after the
+    # other, so the float64 timestamp (absolute s) sits unaligned at byte 18 of 26.
     "hesai": (
         [
             ("x", 0, _F4, "f4"),
@@ -102,9 +104,9 @@ _LAYOUTS: dict[CloudConvention, tuple[list[_Field], int]] = {
             ("z", 8, _F4, "f4"),
             ("intensity", 12, _F4, "f4"),
             ("ring", 16, _U2, "u2"),
-            ("timestamp", 24, _F8, "f8"),
+            ("timestamp", 18, _F8, "f8"),
         ],
-        32,
+        26,
     ),
     "absolute_ns": (
         [
