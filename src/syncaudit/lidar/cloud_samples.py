@@ -15,6 +15,7 @@ last point the sector's stamp lies: host arrival minus sensor time is then the c
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -31,6 +32,12 @@ __all__ = ["SECTOR_NS", "CloudSamples", "CloudSettings", "cloud_samples"]
 
 SECTOR_NS = 1_000_000
 """Width of a sector (ns): 3.6 deg at 600 rpm, ~1 packet of the common sensors."""
+POINTS_READ = 40_000
+"""At most about this many points of a cloud are read: every k-th point of each row, k
+the smallest prime giving so few (k = 7 for a 128-beam cloud of 240k points). A prime
+step skips no beam for good (beams per block are powers of two, 40 or 128), so a
+sector's mean still averages every beam's azimuth offset; a 1 ms sector keeps hundreds."""
+_PRIMES = (1, 2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71)
 RESTARTS_PER_ROW = 2
 """More time restarts than this per cloud row: the times restart per packet, not per cloud."""
 
@@ -60,7 +67,7 @@ class CloudSamples:
 
     samples: PacketSamples
     points: int
-    """Points with a time and an azimuth."""
+    """Points read that have a time and an azimuth (every `read_stride`-th point)."""
     first_ns: int
     last_ns: int
     """Sensor time of the cloud's first and last valid point."""
@@ -79,18 +86,27 @@ def cloud_samples(msg: RawMessage, settings: CloudSettings) -> CloudSamples | No
         return None
     data = msg.data
     time = cloud_time(layout, settings.time_field)
-    t_ns, absolute = point_times_ns(layout, data, time)
+    stride = read_stride(layout.n_points)
+    t_ns, base_ns = point_times_ns(layout, data, time, stride)
     _check_restarts(msg.topic, t_ns, layout.height, time.name)
-    azimuth = point_azimuth_deg(layout, data, settings.x_axis_azimuth_deg, settings.clockwise)
+    azimuth = point_azimuth_deg(
+        layout, data, settings.x_axis_azimuth_deg, settings.clockwise, stride
+    )
     valid = np.isfinite(t_ns) & np.isfinite(azimuth)
     if not valid.any():
         return None
     t = t_ns[valid]
     az = azimuth[valid]
-    origin = 0 if absolute else layout.stamp_ns
-    if not absolute and settings.stamp_marks == "last" and float(t.max()) > 0:
+    origin = layout.stamp_ns if base_ns is None else base_ns
+    if base_ns is None and settings.stamp_marks == "last" and float(t.max()) > 0:
         origin -= round(float(t.max()))
     return _sectors(msg, layout.stamp_ns, origin, t, az, settings, time.name)
+
+
+def read_stride(n_points: int) -> int:
+    """Every how many points a cloud of `n_points` is read (see POINTS_READ)."""
+    wanted = -(-n_points // POINTS_READ)
+    return next((p for p in _PRIMES if p >= wanted), _PRIMES[-1])
 
 
 def _check_restarts(topic: str, t_ns: NDArray[np.float64], rows: int, name: str) -> None:
@@ -155,26 +171,33 @@ def _sectors(
     settings: CloudSettings,
     time_name: str,
 ) -> CloudSamples:
-    """Mean time and azimuth of the points in each sector of the grid."""
-    # Integer sensor times, then sectors of the epoch's grid.
-    t_abs = origin_ns + np.rint(t_rel).astype(np.int64)
-    sector = t_abs // SECTOR_NS
-    first_sector = int(sector.min())
-    index = sector - first_sector
+    """Mean time and azimuth of the points in each sector of the grid.
+
+    Times stay float64 ns after `origin_ns` (exact to far below a ns over a cloud); the
+    grid is placed by the origin's integer remainder, so sectors are the epoch's.
+    """
+    first_sector, remainder = divmod(origin_ns, SECTOR_NS)
+    t_grid = t_rel + float(remainder)  # ns after the start of sector `first_sector`
+    lowest = math.floor(float(t_grid.min()) / SECTOR_NS)
+    first_sector += lowest
+    t_grid -= lowest * SECTOR_NS
+    index = (t_grid * (1.0 / SECTOR_NS)).astype(np.intp)  # >= 0: a truncation is a floor
     counts = np.bincount(index)
     present = np.flatnonzero(counts)
-    start_ns = (first_sector + np.arange(counts.size, dtype=np.int64)) * SECTOR_NS
-    within = (t_abs - start_ns[index]).astype(np.float64)
-    mean_within = np.bincount(index, weights=within)[present] / counts[present]
+    n = counts[present]
+    mean_grid = np.bincount(index, weights=t_grid)[present] / n
     reference = np.zeros(counts.size)
     reference[index] = azimuth  # any point of the sector: the wrap reference
-    offset = (azimuth - reference[index] + 180.0) % 360.0 - 180.0
-    mean_offset = np.bincount(index, weights=offset)[present] / counts[present]
-    sample_time = start_ns[present] + np.rint(mean_within).astype(np.int64)
-    sample_az = reference[present] + mean_offset
-    first_ns, last_ns = int(t_abs.min()), int(t_abs.max())
+    offset = azimuth - reference[index]
+    offset[offset > 180.0] -= 360.0
+    offset[offset < -180.0] += 360.0
+    sample_az = reference[present] + np.bincount(index, weights=offset)[present] / n
+    base = first_sector * SECTOR_NS
+    stamps = base + present.astype(np.int64) * SECTOR_NS
+    sample_time = base + np.rint(mean_grid).astype(np.int64)
+    first_ns = base + round(float(t_grid.min()))
+    last_ns = base + round(float(t_grid.max()))
     sample_time, sample_az, packet = _with_ends(sample_time, sample_az, first_ns, last_ns)
-    stamps = start_ns[present]
     driver = msg.log_time_ns - (last_ns - stamps)
     samples = PacketSamples(
         vendor=settings.vendor,
@@ -190,7 +213,7 @@ def _sectors(
     )
     return CloudSamples(
         samples=samples,
-        points=int(t_abs.size),
+        points=int(t_rel.size),
         first_ns=first_ns,
         last_ns=last_ns,
         stamp_ns=stamp_ns,
