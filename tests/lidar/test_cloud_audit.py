@@ -106,3 +106,13 @@ def test_info_reports_clouds_whose_times_disagree_with_the_packets() -> None:
     late = cloud_agreement(scan("/c", [z + 1_327_000 for z in zeros]), scan("/p", zeros))
     assert not late.agrees
     assert "DISAGREE" in late.note() and "+1327.0 us" in late.note()
+
+
+def test_clouds_read_in_parallel_audit_as_serially(tmp_path: Path) -> None:
+    out = tmp_path / "clouds.mcap"
+    config = SyncSimConfig(duration_s=3.0, cloud_convention="nebula", lidar_packets=False)
+    simulate_sync_log(out, config)
+    serial = audit_log(out, jobs=1).to_dict()
+    parallel = audit_log(out, jobs=2).to_dict()
+    assert parallel == serial
+    assert serial["lidar"]["revolutions"] >= 28

@@ -3,6 +3,7 @@ invalid points, stamp conventions, and the real nebula cloud whose times restart
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -198,3 +199,35 @@ def test_real_nebula_azimuth_is_clockwise_from_x(writer: LogWriter, lidar_data: 
     error = (with_field[ok] - from_xy[ok] + 180) % 360 - 180
     assert ok.sum() > 14_000
     assert np.abs(error).max() < 0.05
+
+
+@pytest.mark.parametrize("cut_blocks", [None, 77, 450])
+def test_where_clouds_are_cut_does_not_move_the_crossings(
+    writer: LogWriter, cut_blocks: int | None
+) -> None:
+    """Per revolution (None: at the zero azimuth), per packet batch (77 blocks) or at a
+    custom angle (450 blocks = 180 deg past the start): the same zero crossings."""
+    from syncaudit.lidar.cloud_scan import CloudFeeder
+    from syncaudit.lidar.scan import LidarScanner
+
+    n_blocks = 5400  # three revolutions at 600 rpm, 55.296 us a block
+    points = _points(n_blocks)
+    per_turn = round(360.0 / (RATE_DEG_NS * 55_296))
+    first = round((360.0 - 10.0) / (RATE_DEG_NS * 55_296))  # the head reaches 0 deg there
+    if cut_blocks is None:
+        cuts = list(range(first, n_blocks, per_turn))
+    else:
+        cuts = list(range(cut_blocks, n_blocks, cut_blocks))
+    bounds = [0, *cuts, n_blocks]
+    feeder = CloudFeeder(LidarScanner.create("/points", zero_azimuth_deg=0.0), CloudSettings())
+    for lo, hi in itertools.pairwise(bounds):
+        part = CloudPoints(points.time_ns[:, lo:hi], points.azimuth_deg[:, lo:hi])
+        _, msg = cloud_message(writer, "nebula", part, "lidar", 0.0)
+        log_ns = int(part.time_ns.max()) + 300_000
+        cloud = cloud_samples(_raw(writer, msg, log_ns), CloudSettings())
+        assert cloud is not None
+        feeder.feed(cloud)
+    zeros = feeder.finish().revolutions.zero_crossing_sensor_ns
+    exact = T0_NS + np.rint((360.0 * np.arange(1, 4) - 10.0) / RATE_DEG_NS).astype(np.int64)
+    assert zeros.size == 3
+    assert np.abs(zeros - exact).max() < 200  # ns
