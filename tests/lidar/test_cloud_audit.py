@@ -32,14 +32,23 @@ def test_packets_and_clouds_of_one_drive_audit_alike(
         assert c["error_mean_us"] == pytest.approx(p["error_mean_us"], abs=2.0)
 
 
-def test_a_cloud_only_log_is_audited_with_a_guessed_rig(tmp_path: Path) -> None:
-    out = tmp_path / "clouds.mcap"
+def test_a_cloud_only_log_is_audited_with_a_guessed_rig_as_its_packets(tmp_path: Path) -> None:
+    """No rig: the cloud topic is guessed by its fields and its +X measured (0: no azimuth
+    field), so the cameras are placed and judged as from the packets of the same drive."""
+    clouds_log, packets_log = tmp_path / "clouds.mcap", tmp_path / "packets.mcap"
     config = SyncSimConfig(duration_s=3.0, cloud_convention="ouster", lidar_packets=False)
-    simulate_sync_log(out, config)
-    result = audit_log(out, jobs=1)
-    assert result.lidar.topic == "/points"
-    assert result.lidar.revolutions >= 28
-    assert any("PointCloud2 with per-point t" in g for g in result.guessed)
+    simulate_sync_log(clouds_log, config)
+    simulate_sync_log(packets_log, SyncSimConfig(duration_s=3.0))
+    clouds = audit_log(clouds_log, jobs=1)
+    packets = audit_log(packets_log, jobs=1).to_dict()
+    assert clouds.lidar.topic == "/points"
+    assert any("PointCloud2 with per-point t; its +X at azimuth 0" in g for g in clouds.guessed)
+    result = clouds.to_dict()
+    assert result["verdict"] == packets["verdict"]
+    assert len(result["cameras"]) == len(packets["cameras"]) == 3
+    for p, c in zip(packets["cameras"], result["cameras"], strict=True):
+        assert c["frames_paired"] == p["frames_paired"]
+        assert c["error_mean_us"] == pytest.approx(p["error_mean_us"], abs=2.0)
 
 
 def test_info_reports_a_cloud_only_lidar_as_for_packets(tmp_path: Path) -> None:

@@ -184,7 +184,7 @@ def test_real_nebula_cloud_with_per_packet_times_is_refused(
 
 def test_real_nebula_azimuth_is_clockwise_from_x(writer: LogWriter, lidar_data: Path) -> None:
     """The file's azimuth field equals atan2(-y, x): what the x/y path computes."""
-    from syncaudit.lidar.cloud_fields import point_azimuth_deg
+    from syncaudit.lidar.cloud_fields import measured_x_axis_deg, point_azimuth_deg
 
     raw = _pcd_cloud(writer, lidar_data / PCD)
     layout = cloud_layout(raw)
@@ -199,6 +199,7 @@ def test_real_nebula_azimuth_is_clockwise_from_x(writer: LogWriter, lidar_data: 
     error = (with_field[ok] - from_xy[ok] + 180) % 360 - 180
     assert ok.sum() > 14_000
     assert np.abs(error).max() < 0.05
+    assert measured_x_axis_deg(layout, raw.data) == 0.0  # what the rig guess measures
 
 
 @pytest.mark.parametrize("cut_blocks", [None, 77, 450])

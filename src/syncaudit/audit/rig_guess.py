@@ -31,11 +31,15 @@ def guess_rig(log: LogReader | LogProbe) -> tuple[Rig, list[str]]:
     lidar_guess = probe.lidar_guess()
     packet_topics = lidar_guess.topics
     how = "by type"
+    x_axis: float | None = None
     if not packet_topics:
         clouds = guess_cloud_topics(probe.log)
         packet_topics = clouds.topics
         if packet_topics:
+            x_axis = clouds.x_axis_deg[packet_topics[0]]
             how = f"PointCloud2 with per-point {clouds.time_fields[packet_topics[0]]}"
+            if x_axis is not None:
+                how += f"; its +X at azimuth {x_axis:g} deg, measured from its points"
     if not packet_topics:
         raise NoDataError(
             f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) and no "
@@ -43,7 +47,8 @@ def guess_rig(log: LogReader | LogProbe) -> tuple[Rig, list[str]]:
         )
     cameras, camera_notes = guess_cameras(probe)
     guessed = [f"LiDAR topic {packet_topics[0]} ({how})", *lidar_guess.notes, *camera_notes]
-    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+    lidar = LidarConfig(topic=packet_topics[0], azimuth_of_x_axis_deg=x_axis)
+    return Rig(lidar=lidar, cameras=cameras), guessed
 
 
 def guess_cameras(log: LogReader | LogProbe) -> tuple[list[CameraConfig], list[str]]:

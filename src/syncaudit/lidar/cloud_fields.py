@@ -145,3 +145,24 @@ def point_azimuth_deg(
     angle[(x == 0) & (y == 0)] = np.nan
     azimuth: NDArray[np.float64] = angle % 360.0
     return azimuth
+
+
+def measured_x_axis_deg(layout: CloudLayout, data: bytes | memoryview) -> float | None:
+    """The packet azimuth of the cloud frame's +X, measured: the circular median of the
+    `azimuth` field less the clockwise angle from +X (`atan2(-y, x)`), to 0.01 deg; 0
+    where there is no azimuth field (the azimuth is then that angle by definition); None
+    where neither tells (no x and y, or no point with both)."""
+    if "x" not in layout.fields or "y" not in layout.fields:
+        return None
+    if "azimuth" not in layout.fields:
+        return 0.0
+    with_field = point_azimuth_deg(layout, data, 0.0, stride=7)
+    fields = {k: v for k, v in layout.fields.items() if k != "azimuth"}
+    bare = CloudLayout(**{**{n: getattr(layout, n) for n in layout.__slots__}, "fields": fields})
+    from_xy = point_azimuth_deg(bare, data, 0.0, stride=7)
+    diff = (with_field - from_xy).reshape(-1)
+    diff = diff[np.isfinite(diff)] % 360.0
+    if not diff.size:
+        return None
+    centre = float(np.median((diff - diff[0] + 180.0) % 360.0 - 180.0)) + float(diff[0])
+    return round(centre % 360.0, 2) % 360.0

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from syncaudit.errors import SyncauditError
-from syncaudit.lidar.cloud_fields import cloud_time
+from syncaudit.lidar.cloud_fields import cloud_time, measured_x_axis_deg
 from syncaudit.lidar.cloud_layout import cloud_layout
 from syncaudit.lidar.cloud_scan import is_cloud_type
 from syncaudit.logs import LogReader
@@ -25,6 +25,8 @@ class CloudTopicGuess:
 
     topics: list[str] = field(default_factory=list)
     time_fields: dict[str, str] = field(default_factory=dict)
+    x_axis_deg: dict[str, float | None] = field(default_factory=dict)
+    """Packet azimuth of each topic's +X, as its first cloud shows (`measured_x_axis_deg`)."""
     set_aside: dict[str, str] = field(default_factory=dict)
 
 
@@ -47,4 +49,5 @@ def guess_cloud_topics(log: LogReader, time_field: str | None = None) -> CloudTo
             continue
         guess.topics.append(topic)
         guess.time_fields[topic] = name
+        guess.x_axis_deg[topic] = measured_x_axis_deg(layout, first.data)
     return guess
