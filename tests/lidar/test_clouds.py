@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from syncaudit.errors import DecodeError
 from syncaudit.lidar.cloud_layout import cloud_layout
@@ -232,3 +233,40 @@ def test_where_clouds_are_cut_does_not_move_the_crossings(
     exact = T0_NS + np.rint((360.0 * np.arange(1, 4) - 10.0) / RATE_DEG_NS).astype(np.int64)
     assert zeros.size == 3
     assert np.abs(zeros - exact).max() < 200  # ns
+
+
+def _stream(
+    writer: LogWriter, shift_ns: int, settings: CloudSettings
+) -> tuple[list[str], NDArray[np.int64]]:
+    """Three revolutions as clouds cut every 1800 blocks (~one turn), logged 300 us after
+    their last beam; each cloud's points are written `shift_ns` later than they fired."""
+    from syncaudit.lidar.cloud_scan import CloudFeeder
+    from syncaudit.lidar.scan import LidarScanner
+
+    points = _points(5400)
+    feeder = CloudFeeder(LidarScanner.create("/points"), settings)
+    for lo in range(0, 5400, 1800):
+        part = CloudPoints(
+            points.time_ns[:, lo : lo + 1800] + shift_ns, points.azimuth_deg[:, lo : lo + 1800]
+        )
+        _, msg = cloud_message(writer, "ouster", part, "lidar", 0.0)
+        log_ns = int(points.time_ns[:, lo : lo + 1800].max()) + 300_000
+        cloud = cloud_samples(_raw(writer, msg, log_ns), settings)
+        assert cloud is not None
+        feeder.feed(cloud)
+    scan = feeder.finish()
+    return feeder.notes, scan.revolutions.zero_crossing_sensor_ns
+
+
+def test_stamps_marking_the_last_point_are_noticed_and_set_right(writer: LogWriter) -> None:
+    """A driver stamping each cloud at its last point while its `t` counts from the first:
+    read as 'first', every point lands one cloud late, which only the arrival shows."""
+    span_ns = int(_points(1800).time_ns.max() - _points(1800).time_ns.min())
+    notes, late = _stream(writer, span_ns, CloudSettings())
+    (note,) = notes
+    assert "set lidar.stamp_marks: last" in note
+    notes_ok, right = _stream(writer, span_ns, CloudSettings(stamp_marks="last"))
+    assert notes_ok == []
+    _, truth = _stream(writer, 0, CloudSettings())
+    assert right.size == truth.size and np.abs(right - truth).max() < 200
+    assert late.size and np.abs(late[0] - truth[0]) > 1_000_000

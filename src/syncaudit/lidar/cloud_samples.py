@@ -73,6 +73,8 @@ class CloudSamples:
     """Sensor time of the cloud's first and last valid point."""
     stamp_ns: int
     time_field: str
+    log_time_ns: int = 0
+    """When the cloud was logged (host clock)."""
 
 
 def cloud_samples(msg: RawMessage, settings: CloudSettings) -> CloudSamples | None:
@@ -217,5 +219,6 @@ def _sectors(
         first_ns=first_ns,
         last_ns=last_ns,
         stamp_ns=stamp_ns,
+        log_time_ns=msg.log_time_ns,
         time_field=time_name,
     )

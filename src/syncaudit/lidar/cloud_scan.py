@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from syncaudit.columns.lidar import LidarScan
 from syncaudit.lidar.cloud_samples import CloudSamples, CloudSettings, cloud_samples
 from syncaudit.lidar.scan import LidarScanner
@@ -21,6 +23,10 @@ __all__ = ["CLOUD_TYPES", "CloudExtractor", "CloudFeeder", "is_cloud_type", "sca
 
 CLOUD_TYPES = frozenset({"sensor_msgs/msg/PointCloud2"})
 OVERLAP_FRACTION = 0.5
+EARLY_CLOUDS = 64
+"""Clouds whose arrival is checked against their own times (the first of the topic)."""
+EARLY_MIN_NS = 1_000_000
+"""A cloud logged more than this before its last point is from the future."""
 """Consecutive clouds overlapping by more than this part of a cloud: stamps mark the end."""
 
 
@@ -65,6 +71,8 @@ class CloudFeeder:
     time_field: str = ""
     overlaps: int = 0
     _previous: tuple[int, int] | None = None
+    _early: list[tuple[int, int]] = field(default_factory=list)
+    """(log time - last point, cloud span) of the first EARLY_CLOUDS clouds."""
     notes: list[str] = field(default_factory=list)
 
     def feed(self, cloud: CloudSamples) -> None:
@@ -78,6 +86,8 @@ class CloudFeeder:
             if first < cloud.first_ns and last - cloud.first_ns > OVERLAP_FRACTION * span:
                 self.overlaps += 1
         self._previous = (cloud.first_ns, cloud.last_ns)
+        if len(self._early) < EARLY_CLOUDS:
+            self._early.append((cloud.log_time_ns - cloud.last_ns, cloud.last_ns - cloud.first_ns))
         self.scanner.feed(cloud.samples)
 
     def finish(self) -> LidarScan:
@@ -91,8 +101,28 @@ class CloudFeeder:
                 f"as the {marks} point: the driver's stamps likely mark the {other} point "
                 f"(set lidar.stamp_marks: {other} in the rig)"
             )
-        scan = self.scanner.finish()
-        return scan
+        self.notes.extend(self._arrival_note())
+        return self.scanner.finish()
+
+    def _arrival_note(self) -> list[str]:
+        """A note where clouds are logged about one cloud before their last point's time:
+        times shifted by a whole cloud (a stamp marking the other end) look like that, and
+        crossings cannot tell it (they recur every turn)."""
+        if len(self._early) < 2:
+            return []
+        lead_ns = -float(np.median([a for a, _ in self._early]))
+        span_ns = float(np.median([s for _, s in self._early]))
+        if not (lead_ns > EARLY_MIN_NS and span_ns > 0 and lead_ns < 1.5 * span_ns):
+            return []
+        marks = self.settings.stamp_marks or "first"
+        other = "last" if marks == "first" else "first"
+        return [
+            f"{self.scanner.topic}: clouds are logged {lead_ns / 1e6:.1f} ms before the "
+            f"time of their last point (a cloud spans {span_ns / 1e6:.1f} ms) with header "
+            f"stamps taken as the {marks} point: the stamps likely mark the {other} point "
+            f"(set lidar.stamp_marks: {other} in the rig), or the LiDAR clock runs ahead "
+            "of the host's"
+        ]
 
 
 def scan_cloud(
