@@ -125,3 +125,25 @@ def test_clouds_read_in_parallel_audit_as_serially(tmp_path: Path) -> None:
     parallel = audit_log(out, jobs=2).to_dict()
     assert parallel == serial
     assert serial["lidar"]["revolutions"] >= 28
+
+
+def test_the_starter_rig_of_a_cloud_only_log_names_the_cloud_and_its_x_axis(
+    tmp_path: Path,
+) -> None:
+    from syncaudit.audit.rig_guess import starter_rig_yaml
+    from syncaudit.rig import load_rig
+
+    out = tmp_path / "clouds.mcap"
+    simulate_sync_log(
+        out, SyncSimConfig(duration_s=3.0, cloud_convention="nebula", lidar_packets=False)
+    )
+    text = starter_rig_yaml(out)
+    assert "a PointCloud2 with per-point times" in text
+    assert "azimuth_of_x_axis_deg: 0  # measured from the first cloud's points" in text
+    rig_file = tmp_path / "rig.yaml"
+    rig_file.write_text(text)
+    rig = load_rig(rig_file)
+    assert rig.lidar.topic == "/points"
+    assert rig.lidar.azimuth_of_x_axis_deg == 0.0
+    result = audit_log(out, rig, jobs=1)
+    assert [c.sync.frames_paired for c in result.cameras] == [29, 29, 29]

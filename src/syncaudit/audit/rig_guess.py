@@ -115,13 +115,21 @@ def render_starter_rig(log: LogReader | LogProbe) -> str:
     vendor = probe.family(lidar.topic)
     tf_yaws = probe.tf_yaws() if any(needs_tf_static(c) for c in rig.cameras) else {}
     x_axis = X_AXIS_AZIMUTH_DEG.get(vendor or "")
+    cloud = vendor is None and lidar.azimuth_of_x_axis_deg is not None
+    if cloud:
+        x_axis = lidar.azimuth_of_x_axis_deg
     lines = [
         f"# Starter rig for {probe.log.summary.path}, written by `syncaudit rig`.",
         "# Every value below was guessed from the log; check each TODO, then run",
         "#   syncaudit audit LOG --rig THIS_FILE",
         "lidar:",
-        f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)",
-        f"  vendor: {_value(vendor)}  # from the packet message type",
+        f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)"
+        if not cloud
+        else f"  topic: {_value(lidar.topic)}  # a PointCloud2 with per-point times "
+        "(no packet topic in the log)",
+        f"  vendor: {_value(vendor)}  # from the packet message type"
+        if not cloud
+        else "  vendor: null  # TODO the LiDAR's vendor (a point cloud does not say)",
         "  # zero_azimuth_deg: TODO packet azimuth at which the trigger chain fires; while",
         "  #   it is not set, the audit starts revolutions where the triggers fire and says",
         "  #   which azimuth that is in a warning",
@@ -129,6 +137,11 @@ def render_starter_rig(log: LogReader | LogProbe) -> str:
     ]
     if x_axis is None:
         lines.append("  azimuth_of_x_axis_deg: null  # TODO packet azimuth of the LiDAR frame's +X")
+    elif cloud:
+        lines.append(
+            f"  azimuth_of_x_axis_deg: {x_axis:g}  # measured from the first cloud's "
+            "points (docs/clouds.md)"
+        )
     else:
         lines.append(
             f"  azimuth_of_x_axis_deg: {x_axis:g}  # the {vendor} ROS driver's frame "
