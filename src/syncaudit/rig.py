@@ -34,6 +34,12 @@ class LidarConfig(_Strict):
     """Detected from the message type and packets when omitted."""
     metadata_topic: str | None = None
     """Ouster only: the std_msgs/String topic with the sensor metadata JSON."""
+    time_field: str | None = None
+    """PointCloud2 topics only: the per-point time field (default: the first of time, t,
+    time_stamp, offset_time, timestamp present; see docs/clouds.md)."""
+    stamp_marks: Literal["first", "last"] | None = None
+    """PointCloud2 topics only: the point a cloud's header stamp marks where per-point
+    times are relative and >= 0 (default 'first': times count from the stamp)."""
     zero_azimuth_deg: float = Field(0.0, ge=0.0, lt=360.0)
     """Packet azimuth at which a revolution starts and the trigger chain fires."""
     azimuth_increases: bool = True

@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from syncaudit.audit.cloud_info import cloud_agreement, info_cloud_scan
 from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_cameras
@@ -26,6 +27,8 @@ from syncaudit.camera.census import SharedCensus, shared_topic_census
 from syncaudit.camera.routing import SharedTopicCount
 from syncaudit.columns.lidar import LidarScan
 from syncaudit.errors import NoDataError, SyncauditError
+from syncaudit.lidar.cloud_scan import is_cloud_type
+from syncaudit.lidar.cloud_topics import guess_cloud_topics
 from syncaudit.lidar.scan import scan_lidar
 from syncaudit.logs import LogReader, open_log
 from syncaudit.logs.parallel import default_jobs
@@ -217,6 +220,10 @@ def _inspect(
     lidar_topics = [rig.lidar.topic] if rig else guess.topics if guess else []
     if guess is not None and lidar_topics:
         report.guessed.append(f"LiDAR packet topics by type: {', '.join(lidar_topics)}")
+    clouds = guess_cloud_topics(log, rig.lidar.time_field if rig else None)
+    if not lidar_topics and clouds.topics:
+        lidar_topics = clouds.topics[:1]
+        report.guessed.append(f"LiDAR cloud topics by type and fields: {', '.join(clouds.topics)}")
     report.warnings.extend(guess.notes if guess else [])
     # The topic `audit` would use decides: the rig's, else the first guessed by name.
     audited = rig.lidar.topic if rig else (lidar_topics[0] if lidar_topics else None)
@@ -234,6 +241,11 @@ def _inspect(
         try:
             if topic not in log.topics:
                 raise NoDataError(f"LiDAR topic {topic} (from the rig) is not in the log")
+            if is_cloud_type(log.topics[topic].msgtype):
+                scan, notes = info_cloud_scan(log, topic, rig, None, jobs)
+                report.warnings.extend(notes)
+                report.lidars.append(lidar_row(scan))
+                continue
             scan = scan_lidar(
                 log,
                 topic,
@@ -260,6 +272,7 @@ def _inspect(
         report.warnings.extend(lidar_warnings(row))
     if failure is None and rig is None and not report.lidars:
         failure = first_problem
+    report.warnings.extend(_check_clouds(log, probe, rig, report, clouds.topics, jobs))
     cameras = _cameras(probe, rig, report)
     try:
         census = shared_topic_census(log, cameras, jobs=jobs)
@@ -280,6 +293,41 @@ def _inspect(
     if not report.cameras:
         report.warnings.append("no camera topic found: only the LiDAR side can be audited")
     return report, failure
+
+
+def _check_clouds(
+    log: LogReader,
+    probe: LogProbe,
+    rig: Rig | None,
+    report: InfoReport,
+    cloud_topics: list[str],
+    jobs: int,
+) -> list[str]:
+    """Where the log has packets and clouds, whether the clouds' times agree with them."""
+    scanned = {row.topic for row in report.lidars}
+    packets = [row.topic for row in report.lidars if probe.family(row.topic) is not None]
+    if not packets:
+        return []
+    notes: list[str] = []
+    vendor = probe.packet_vendor(packets[0])
+    reference = scan_lidar(
+        log,
+        packets[0],
+        zero_azimuth_deg=rig.lidar.zero_azimuth_deg if rig else 0.0,
+        ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
+        jobs=jobs,
+    )
+    for topic in cloud_topics:
+        try:
+            scan, stamp_notes = info_cloud_scan(log, topic, None, vendor, jobs)
+        except SyncauditError as exc:
+            notes.append(f"{topic}: its clouds cannot be checked against the packets: {exc}")
+            continue
+        notes.extend(stamp_notes)
+        if topic not in scanned:
+            report.lidars.append(lidar_row(scan))
+        notes.append(cloud_agreement(scan, reference).note())
+    return notes
 
 
 def _cameras(probe: LogProbe, rig: Rig | None, report: InfoReport) -> list[CameraConfig]:

@@ -13,11 +13,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from syncaudit.audit.probe import LogProbe, probe_of
+from syncaudit.camera.azimuth import x_axis_azimuth_deg
 from syncaudit.camera.extract import CameraTableBuilder
 from syncaudit.camera.frame_rows import CameraRowExtractor
 from syncaudit.camera.routing import CameraRouter
 from syncaudit.errors import NoDataError
 from syncaudit.lidar import ouster
+from syncaudit.lidar.cloud_samples import CloudSettings, cloud_samples
+from syncaudit.lidar.cloud_scan import is_cloud_type
 from syncaudit.lidar.scan import packet_samples_of
 from syncaudit.lidar.stream import find_ouster_metadata_topic
 from syncaudit.logs import LogReader, RawMessage
@@ -37,6 +40,8 @@ class ExtractPlan:
     lidar_family: str
     ouster_meta: ouster.OusterMetadata | None
     cameras: CameraRowExtractor
+    cloud: CloudSettings | None = None
+    """Set where the LiDAR topic is PointCloud2: how to read its timing."""
 
     @property
     def topics(self) -> list[str]:
@@ -53,6 +58,9 @@ class ExtractPlan:
 
     def extract(self, msg: RawMessage, log: LogReader) -> Item | None:
         """The item one message contributes (None for nothing, e.g. an IMU-sized packet)."""
+        if msg.topic == self.lidar_topic and self.cloud is not None:
+            cloud = cloud_samples(msg, self.cloud)
+            return None if cloud is None else ("lidar", msg.topic, cloud)
         if msg.topic == self.lidar_topic:
             samples = packet_samples_of(msg, self.lidar_family, self.ouster_meta)
             return None if samples is None else ("lidar", msg.topic, samples)
@@ -70,6 +78,9 @@ def read_plan(
     probe = probe_of(log)
     lidar = rig.lidar
     family = probe.family(lidar.topic)
+    cloud = None
+    if family is None and is_cloud_type(probe.topics[lidar.topic].msgtype):
+        family, cloud = "cloud", cloud_settings(rig)
     if family is None:
         raise NoDataError(
             f"{lidar.topic}: {probe.topics[lidar.topic].msgtype} is not a LiDAR packet type"
@@ -87,7 +98,20 @@ def read_plan(
     }
     triggers = {t: _owner(o) for t, o in router.topics("trigger").items()}
     rows = CameraRowExtractor(images, exposures, triggers)
-    return ExtractPlan(lidar.topic, family, meta, rows), router
+    return ExtractPlan(lidar.topic, family, meta, rows, cloud), router
+
+
+def cloud_settings(rig: Rig) -> CloudSettings:
+    """How to read the rig's PointCloud2 LiDAR topic: the +X azimuth the cameras use too."""
+    lidar = rig.lidar
+    x_axis, _ = x_axis_azimuth_deg(lidar, lidar.vendor)
+    return CloudSettings(
+        x_axis_azimuth_deg=0.0 if x_axis is None else x_axis,
+        clockwise=lidar.azimuth_clockwise_from_above,
+        time_field=lidar.time_field,
+        stamp_marks=lidar.stamp_marks,
+        vendor=lidar.vendor or "cloud",
+    )
 
 
 def _owner(owners: list[CameraTableBuilder]) -> str:

@@ -17,6 +17,7 @@ from syncaudit.audit.probe import LogProbe, probe_of
 from syncaudit.camera.azimuth import X_AXIS_AZIMUTH_DEG, camera_azimuth, needs_tf_static
 from syncaudit.camera.camera_topics import detect_cameras
 from syncaudit.errors import NoDataError
+from syncaudit.lidar.cloud_topics import guess_cloud_topics
 from syncaudit.logs import LogReader, open_log
 from syncaudit.rig import CameraConfig, LidarConfig, Rig, Thresholds
 
@@ -29,13 +30,25 @@ def guess_rig(log: LogReader | LogProbe) -> tuple[Rig, list[str]]:
     # The guess `info` shares: IMU packet topics of the same type are set aside.
     lidar_guess = probe.lidar_guess()
     packet_topics = lidar_guess.topics
+    how = "by type"
+    x_axis: float | None = None
+    if not packet_topics:
+        clouds = guess_cloud_topics(probe.log)
+        packet_topics = clouds.topics
+        if packet_topics:
+            x_axis = clouds.x_axis_deg[packet_topics[0]]
+            how = f"PointCloud2 with per-point {clouds.time_fields[packet_topics[0]]}"
+            if x_axis is not None:
+                how += f"; its +X at azimuth {x_axis:g} deg, measured from its points"
     if not packet_topics:
         raise NoDataError(
-            f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) in the log"
+            f"{probe.log.summary.path}: no LiDAR packet topic (known packet types) and no "
+            "PointCloud2 with per-point times in the log"
         )
     cameras, camera_notes = guess_cameras(probe)
-    guessed = [f"LiDAR topic {packet_topics[0]} (by type)", *lidar_guess.notes, *camera_notes]
-    return Rig(lidar=LidarConfig(topic=packet_topics[0]), cameras=cameras), guessed
+    guessed = [f"LiDAR topic {packet_topics[0]} ({how})", *lidar_guess.notes, *camera_notes]
+    lidar = LidarConfig(topic=packet_topics[0], azimuth_of_x_axis_deg=x_axis)
+    return Rig(lidar=lidar, cameras=cameras), guessed
 
 
 def guess_cameras(log: LogReader | LogProbe) -> tuple[list[CameraConfig], list[str]]:
@@ -102,13 +115,21 @@ def render_starter_rig(log: LogReader | LogProbe) -> str:
     vendor = probe.family(lidar.topic)
     tf_yaws = probe.tf_yaws() if any(needs_tf_static(c) for c in rig.cameras) else {}
     x_axis = X_AXIS_AZIMUTH_DEG.get(vendor or "")
+    cloud = vendor is None and lidar.azimuth_of_x_axis_deg is not None
+    if cloud:
+        x_axis = lidar.azimuth_of_x_axis_deg
     lines = [
         f"# Starter rig for {probe.log.summary.path}, written by `syncaudit rig`.",
         "# Every value below was guessed from the log; check each TODO, then run",
         "#   syncaudit audit LOG --rig THIS_FILE",
         "lidar:",
-        f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)",
-        f"  vendor: {_value(vendor)}  # from the packet message type",
+        f"  topic: {_value(lidar.topic)}  # the first LiDAR packet topic (by message type)"
+        if not cloud
+        else f"  topic: {_value(lidar.topic)}  # a PointCloud2 with per-point times "
+        "(no packet topic in the log)",
+        f"  vendor: {_value(vendor)}  # from the packet message type"
+        if not cloud
+        else "  vendor: null  # TODO the LiDAR's vendor (a point cloud does not say)",
         "  # zero_azimuth_deg: TODO packet azimuth at which the trigger chain fires; while",
         "  #   it is not set, the audit starts revolutions where the triggers fire and says",
         "  #   which azimuth that is in a warning",
@@ -116,6 +137,11 @@ def render_starter_rig(log: LogReader | LogProbe) -> str:
     ]
     if x_axis is None:
         lines.append("  azimuth_of_x_axis_deg: null  # TODO packet azimuth of the LiDAR frame's +X")
+    elif cloud:
+        lines.append(
+            f"  azimuth_of_x_axis_deg: {x_axis:g}  # measured from the first cloud's "
+            "points (docs/clouds.md)"
+        )
     else:
         lines.append(
             f"  azimuth_of_x_axis_deg: {x_axis:g}  # the {vendor} ROS driver's frame "

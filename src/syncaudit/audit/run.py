@@ -26,6 +26,7 @@ from syncaudit.columns.camera import CameraTables
 from syncaudit.columns.lidar import LidarScan, RevolutionColumns
 from syncaudit.columns.table import MISSING
 from syncaudit.errors import NoDataError
+from syncaudit.lidar.cloud_scan import CloudFeeder
 from syncaudit.lidar.scan import LidarScanner
 from syncaudit.logs import LogReader, open_log
 from syncaudit.logs.parallel import default_jobs, iter_items
@@ -231,7 +232,7 @@ def _locate_cameras(probe: LogProbe, rig: Rig, warnings: list[str]) -> list[Loca
     """Cameras with a known centre azimuth (rig, or /tf_static with the vendor's +X)."""
     # /tf_static is read (and its types built) only for cameras the rig gives no angle.
     tf_yaws = probe.tf_yaws() if any(needs_tf_static(c) for c in rig.cameras) else {}
-    vendor = probe.family(rig.lidar.topic)
+    vendor = probe.family(rig.lidar.topic) or rig.lidar.vendor
     located: list[Located] = []
     for cam in rig.cameras:
         azimuth, source = camera_azimuth(cam, rig.lidar, tf_yaws, vendor)
@@ -265,13 +266,16 @@ def _read(
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
     )
     plan, router = read_plan(probe, rig, [c for c, _, _ in located])
+    clouds = None if plan.cloud is None else CloudFeeder(scanner, plan.cloud)
+    feed = scanner.feed if clouds is None else clouds.feed
     items = iter_items(probe.log, plan, jobs, check_crc=check_crc, meanwhile=_meanwhile(meanwhile))
     for kind, topic, payload in items:
         if kind == "lidar":
-            scanner.feed(payload)
+            feed(payload)
         else:
             router.feed(kind, topic, payload)
-    scan = scanner.finish()
+    scan = scanner.finish() if clouds is None else clouds.finish()
+    warnings.extend([] if clouds is None else clouds.notes)
     if scan.packets == 0:
         raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
     warnings.extend(router.finish())

@@ -30,7 +30,7 @@ def render_info(report: InfoReport, console: Console) -> None:
         )
     console.print(topics)
     if report.lidars:
-        lidars = Table(title="LiDARs (measured from packets)", title_justify="left")
+        lidars = Table(title="LiDARs (measured from packets or point clouds)", title_justify="left")
         for col in (
             "topic",
             "vendor / model",

@@ -55,6 +55,7 @@ from syncaudit.lidar.velodyne_encode import (
     velodyne_revolution_schedule,
 )
 from syncaudit.simulate import LidarModel
+from syncaudit.simulate.cloud_writer import CloudConvention, cloud_message, cloud_points
 from syncaudit.simulate.delays import (
     CONSTANT_WINDOW_FRAMES,
     CameraDelays,
@@ -114,6 +115,7 @@ _VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-
 0xBBFF) share the azimuth sampled when their 53.3 us firing sequence starts."""
 JPEG_FORMAT = "jpeg"
 """`CompressedImage.format` of the JPEG-like payloads written when `image_bytes` is set."""
+CLOUD_TOPIC = "/points"
 _X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0}
 """Packet azimuth of the LiDAR frame's +X axis in the vendors' ROS drivers: Velodyne
 x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise."""
@@ -224,6 +226,14 @@ class SyncSimConfig(_Strict):
     lidar_returns: Literal["smooth", "random"] = "smooth"
     """'smooth': ranges of a simple room (compress well); 'random': noise ranges."""
     lidar_frame: str = "lidar_top"
+    cloud_convention: CloudConvention | None = None
+    """Also write the LiDAR as sensor_msgs/PointCloud2 on /points, one cloud per scan, in
+    this field convention (`simulate.cloud_writer`), from the same firing times."""
+    cloud_beams: int = Field(default=16, ge=1, le=256)
+    """Points per block in the clouds (one per beam): 32 with a VLS-128 gives its ~240k
+    points per revolution at 600 rpm."""
+    lidar_packets: bool = True
+    """Write the packet topic (False with a cloud_convention: a cloud-only log)."""
 
     t1: LatencyDist = LatencyDist(mean_us=300.0, std_us=40.0, min_us=150.0)
     """240 -> 242 per packet: network to the LiDAR driver."""
@@ -715,6 +725,8 @@ class _Simulation:
             "packets_dropped": dropped,
             "revolutions": int(turns.size),
             "scans": int(turns.size),
+            "cloud_topic": CLOUD_TOPIC if cfg.cloud_convention is not None else None,
+            "cloud_convention": cfg.cloud_convention,
             "zero_crossing_ns": [int(v) for v in zero_true_ns],
             "zero_packet_ns": [int(v) for v in pk.capture_ns[zero_packet]],
             "t1_mean_ns": float(pk.t1_ns[written_idx].mean()),
@@ -983,6 +995,40 @@ class _Simulation:
                 )
             yield (log_time, -1, self.topic, payload)
 
+    def _cloud_messages(
+        self, writer: LogWriter, pk: _Packets, zero_packet: NDArray[np.int64]
+    ) -> Iterator[tuple[int, int, str, bytes | Callable[[], bytes]]]:
+        """The scans of `_scan_messages` as point clouds (cfg.cloud_convention), one per
+        scan at the same log time, from the same delivered packets' firing times."""
+        convention = self.cfg.cloud_convention
+        if convention is None:
+            return
+        offset_ns, start_ns = self.cfg.clock_offset_ns, self.cfg.start_time_ns
+        beams = self.cfg.cloud_beams
+
+        def azimuth_at(sensor_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+            t_rel = (sensor_ns - offset_ns - start_ns).astype(np.float64)
+            return self.rotation.angle_deg(t_rel) % 360.0
+
+        begin = 0
+        for zp in zero_packet.tolist():
+            rows = np.arange(begin, zp + 1)
+            begin = zp + 1
+            rows = rows[pk.delivered[rows]]
+            blocks = pk.stamp_sensor_ns[rows][:, None] + self.clock.block_offset_ns[None, :]
+            points = cloud_points(blocks.reshape(-1), beams, azimuth_at)
+            # Published once its last beam has fired and reached the driver (t1 later).
+            log_ns = int(points.time_ns.max()) - offset_ns + int(pk.t1_ns[zp])
+            _, msg = cloud_message(
+                writer,
+                convention,
+                points,
+                self.cfg.lidar_frame,
+                self.x_axis_deg,
+                stamp="last" if convention == "velodyne" else "first",
+            )
+            yield (log_ns, -1, CLOUD_TOPIC, writer.serialize(msg))
+
     def _encode(
         self, azimuth_deg: NDArray[np.float64], stamp_ns: NDArray[np.int64], first_index: int
     ) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
@@ -1180,7 +1226,10 @@ class _Simulation:
             out, cfg.log_format, overwrite=cfg.overwrite, outputs=self.outputs
         ) as writer:
             writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
-            writer.add_topic(self.topic, self.msgtype)
+            if cfg.lidar_packets:
+                writer.add_topic(self.topic, self.msgtype)
+            if cfg.cloud_convention is not None:
+                writer.add_topic(CLOUD_TOPIC, "sensor_msgs/msg/PointCloud2")
             image_type = (
                 "sensor_msgs/msg/Image"
                 if cfg.image_kind == "raw"
@@ -1203,7 +1252,8 @@ class _Simulation:
             camera_msgs = self._camera_messages(writer, cams)
             camera_msgs.items.sort()
             merged = heapq.merge(
-                self._scan_messages(writer, pk, zero_packet),
+                self._scan_messages(writer, pk, zero_packet) if cfg.lidar_packets else iter(()),
+                self._cloud_messages(writer, pk, zero_packet),
                 iter(camera_msgs.items),
                 key=lambda item: (item[0], item[1]),
             )
