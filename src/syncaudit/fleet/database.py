@@ -152,6 +152,7 @@ class ResultsDB:
                 attempts=item["attempts"] or 1,
                 skipped=True,
                 report=item["report"],
+                health=json.loads(item["health"]) if item.get("health") else None,
             )
         return out
 
@@ -222,6 +223,8 @@ def _log_row(log: JudgedLog, now: datetime) -> tuple[Any, ...]:
         log.elapsed_s,
         log.report,
         now,
+        None if log.health is None else bool(log.health.get("intact")),
+        None if log.health is None else json.dumps(log.health, sort_keys=True),
     )
 
 

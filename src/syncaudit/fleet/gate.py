@@ -136,6 +136,7 @@ def _judge(
         remote_read=outcome.remote_read,
         duration_s=outcome.duration_s,
         container=outcome.container,
+        health=None if outcome.audit is None else outcome.audit.get("health"),
     )
 
 

@@ -59,6 +59,13 @@ class TopicsCheck(_Strict):
     enabled: bool = True
 
 
+class Condition(_Strict):
+    """A condition of the log file that must not be present (a cut-off log, no index)."""
+
+    severity: Severity = "fail"
+    enabled: bool = True
+
+
 class CameraChecks(_Strict):
     """Checks of one camera's audit (times in microseconds, variances in us^2)."""
 
@@ -93,6 +100,12 @@ class LogChecks(_Strict):
 
     required_topics: TopicsCheck | None = None
     duration_s: Limit | None = None
+    truncated: Condition | None = Condition(severity="fail")
+    """The file is cut off (or a chunk of it cut or damaged): only what precedes was read."""
+    damaged_messages: Limit | None = Limit(max=0, severity="warn")
+    """Messages skipped because their bytes did not decode, over all topics."""
+    missing_index: Condition | None = Condition(severity="warn")
+    """The index (MCAP summary, ROS 1 index records) is missing: the file was read linearly."""
 
 
 class CalibrationChecks(_Strict):

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from syncaudit import __version__
+from syncaudit.fleet.checks import shown_limit, shown_value
 from syncaudit.fleet.record import JudgedLog
 
 VERDICTS = ("fail", "error", "warn", "pass")
@@ -42,6 +43,8 @@ def summary_dict(
                 "error": log.error,
                 "error_code": log.error_code,
                 "checks": [c.to_dict() for c in log.checks],
+                "health": log.health,
+                **({"why_failed": log.why_failed} if log.why_failed else {}),
                 **({"remote_read": log.remote_read} if log.remote_read else {}),
             }
             for log in sorted(logs, key=lambda item: item.path)
@@ -88,20 +91,23 @@ def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
             failed = log.failed_checks or []
             if not failed:
                 lines.append(
-                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | cameras | no camera judged | |"
+                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | verdict | "
+                    f"{_md(log.why_failed)} | |"
                 )
             for check in failed:
-                value = "not measured" if check.value is None else f"{check.value:.6g} {check.unit}"
                 lines.append(
                     f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {check.severity} | "
-                    f"{_md(check.subject)}: {check.check} | {_md(value.strip())} | "
-                    f"{_md(check.limit)} {_md(check.unit)} |"
+                    f"{_md(check.subject)}: {check.check} | {_md(shown_value(check))} | "
+                    f"{_md(shown_limit(check))} |"
                 )
         lines.append("")
     lines += ["## All logs", "", "| log | vehicle | verdict | checks failed | note |"]
     lines.append("| --- | --- | --- | --- | --- |")
     for log in ranked:
-        note = "unchanged, verdict from the database" if log.skipped else ""
+        notes = ["unchanged, verdict from the database"] if log.skipped else []
+        notes += (log.health or {}).get("problems") or []
+        notes += [log.why_failed] if log.why_failed else []
+        note = "; ".join(notes)
         n_failed = len(log.failed_checks)
         lines.append(
             f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {icon[log.verdict]} {log.verdict} | "
