@@ -143,3 +143,26 @@ def test_health_reads_every_reader_code() -> None:
     assert health.problems[0] == "cut off at byte 4096"
     assert len(health.notes) == 5 and not health.intact
     assert log_health([], []).intact
+
+
+def test_the_gate_report_leads_with_the_policy_verdict(
+    uploads: dict[str, Path], learned: Policy, tmp_path: Path
+) -> None:
+    """Finding 6: a log the gate passes opened with a red "syncaudit audit: FAIL"."""
+    import re
+
+    run = run_gate(
+        [str(uploads["whole"]), str(uploads["cut"])],
+        learned,
+        GateOptions(html_dir=tmp_path / "html", jobs=1),
+    )
+    pages = {Path(log.path).name: Path(log.report or "").read_text() for log in run.logs}
+    whole = pages["whole.mcap"]
+    (first,) = re.findall(r"<h1>(.*?)</h1>", whole)  # one title: the gate's
+    assert first == 'syncaudit gate: <span class="pass" id="gate-verdict">PASS</span>'
+    own = "The audit's own verdict (the rig's thresholds, not the policy's): "
+    assert f'<h2>{own}<span class="fail" id="verdict">FAIL</span></h2>' in whole
+    assert whole.index("gate-verdict") < whole.index("Policy checks") < whole.index(own)
+    cut = pages["cut.mcap"]
+    assert 'id="gate-verdict">FAIL</span></h1><ul><li>log: truncated = true: cut off at' in cut
+    assert "<td>truncated</td><td class=num>true</td><td>== false</td>" in cut

@@ -401,14 +401,23 @@ def _header(result: AuditResult) -> str:
     return facts + body
 
 
-def audit_sections(result: AuditResult) -> str:
-    """The audit's part of a report page: header, LiDAR plots, one section per camera."""
+def audit_sections(result: AuditResult, *, under_gate: bool = False) -> str:
+    """The audit's part of a report page: header, LiDAR plots, one section per camera.
+
+    `under_gate`: the page leads with a gate's policy verdict, so the audit's own verdict
+    (against the rig's thresholds) is a second-level heading saying so, not the title."""
     origin = time_origin_ns(result)
     xr = _x_range(result, origin)
     css = _VERDICT_CSS.get(result.verdict, "warn")
     lidar = "".join(time_plot_svg(p, x_range=xr) for p in lidar_plots(result, origin))
+    verdict = f'<span class="{css}" id="verdict">{_e(result.verdict.upper())}</span>'
+    heading = (
+        f"<h2>The audit's own verdict (the rig's thresholds, not the policy's): {verdict}</h2>"
+        if under_gate
+        else f"<h1>syncaudit audit: {verdict}</h1>"
+    )
     return (
-        f'<h1>syncaudit audit: <span class="{css}" id="verdict">{_e(result.verdict.upper())}</span></h1>'
+        heading
         + _header(result)
         + '<p class="hint">Time plots: hover for values and wall-clock time, drag to zoom '
         "every time axis, double-click to reset.</p>"
