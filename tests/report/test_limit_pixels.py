@@ -1,4 +1,6 @@
-"""Issue 23 finding 7: the Eq. 5 / Eq. 6 limit lines are visible in the rendered pixels.
+"""Issue 23 finding 7: limit lines and refused pairs as the browser paints them.
+
+The Eq. 5 / Eq. 6 limit lines are visible in the rendered pixels.
 
 They were drawn in the rolling plots' stretched data coordinates (µs over seconds), so the
 1.2 px stroke became ~0.04 px: in the DOM, invisible on screen. Here Chromium renders the
@@ -10,6 +12,7 @@ and zoomed to a time window.
 from __future__ import annotations
 
 import base64
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +21,9 @@ import pytest
 from browser import ARTIFACTS, Session, needs_chromium
 from pixels import png_rgb
 from syncaudit.audit.run import AuditResult
+from syncaudit.calib.result import CalibrationResult
 from syncaudit.report.html import render_audit_html
+from syncaudit.report.report_page import render_report_html
 
 pytestmark = needs_chromium
 
@@ -64,3 +69,35 @@ def test_limit_lines_are_drawn_in_pixels(audit: AuditResult, tmp_path: Path, fra
                 name = f"{kind}-{index}-{fragment or 'whole'}"
                 assert _covered(session, kind, index, name) > 0.4, name
         assert session.console == [], session.console
+
+
+def test_refused_calibration_pairs_are_painted_red_as_the_caption_says(
+    calibration: Callable[[str], CalibrationResult], audit: AuditResult, tmp_path: Path
+) -> None:
+    """Finding 7: a stylesheet rule painted every bar blue over the bars' own fill."""
+    result = calibration("calib_turntable_32")
+    expected = [
+        [
+            "rgb(31, 95, 191)" if p.alignment.accepted else "rgb(176, 40, 58)"
+            for p in lidar.pairs
+            if p.alignment.after.rmse_cm is not None
+        ]
+        for lidar in result.lidars
+        if lidar.pairs
+    ]
+    assert any("rgb(176, 40, 58)" in fills for fills in expected)
+    page = tmp_path / "calib.html"
+    page.write_text(render_report_html(audit, result))
+    with Session(height=900) as session:
+        session.open(page)
+        painted = session.evaluate(
+            """[...document.querySelectorAll('figure[data-kind="pair-residuals"]')].map(f =>
+                 [...f.querySelectorAll('rect.bar')].map(r => getComputedStyle(r).fill))"""
+        )
+        histogram = session.evaluate(
+            """[...new Set([...document.querySelectorAll('figure[data-kind="histogram"] rect.bar')]
+                 .map(r => getComputedStyle(r).fill))]"""
+        )
+    # Bars are drawn in the chart's order; compare the colours as multisets per LiDAR.
+    assert [sorted(p) for p in painted] == [sorted(e) for e in expected]
+    assert histogram == ["rgb(31, 95, 191)"]  # the audit's histograms keep the default fill
