@@ -138,6 +138,11 @@ def _judge(
         duration_s=outcome.duration_s,
         container=outcome.container,
         health=None if outcome.audit is None else outcome.audit.get("health"),
+        advice={
+            cam["camera"]: cam["recommendation"]
+            for cam in (outcome.audit or {}).get("cameras", [])
+            if isinstance(cam.get("recommendation"), dict)
+        },
     )
 
 

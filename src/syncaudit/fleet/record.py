@@ -59,6 +59,8 @@ class JudgedLog:
     """From the log's index (also for a calibration session, which has no audit)."""
     health: dict[str, Any] | None = None
     """The file's condition (the audit's `health`: cut off, damaged messages, no index)."""
+    advice: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Per camera, the audit's `recommendation` (absent from audits that have none)."""
 
     @property
     def why_failed(self) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.audit.run import AuditResult, CameraAudit
+from syncaudit.report.advice_text import advice_sentence
 from syncaudit.report.plot import (
     COLOURS,
     Band,
@@ -322,10 +323,12 @@ def _camera_section(
     plots = camera_plots(cam, result, origin)
     err = np.abs(_floats(cam.sync.frames["t_error_ns"])) / 1e3
     warnings = "".join(f'<li class="warn">{_e(w)}</li>' for w in cam.sync.warnings)
+    advice = advice_sentence(cam.sync.camera, cam.to_dict().get("recommendation"))
     return (
         f'<section class="camera" data-camera="{_e(cam.sync.camera)}">'
         f"<h2>camera {_e(cam.sync.camera)}{optional}: "
         f'<span class="{_VERDICT_CSS.get(verdict, "warn")}">{_e(label)}</span>{reason}</h2>'
+        + (f'<p class="advice"><b>Advice</b> — {_e(advice)}</p>' if advice else "")
         + (f'<ul class="notes">{warnings}</ul>' if warnings else "")
         + '<div class="row">'
         + _camera_table(cam)
