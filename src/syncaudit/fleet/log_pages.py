@@ -56,7 +56,7 @@ def gate_verdict_section(
     why = [f"{c.subject}: {c.message}" for c in failed]
     problems = ((audit or {}).get("health") or {}).get("problems") or []
     why += [f"log file: {p}" for p in problems if not any(p in w for w in why)]
-    if verdict == "fail" and not failed:
+    if verdict == "fail" and not any(c.severity == "fail" for c in failed):
         why.append("no camera to judge in this log" if audit is not None else "nothing judged it")
     items = "".join(f"<li>{_e(line)}</li>" for line in why)
     own = (audit or {}).get("verdict")

@@ -64,8 +64,8 @@ class JudgedLog:
 
     @property
     def why_failed(self) -> str:
-        """Why a failing log failed when none of its checks did ('' otherwise)."""
-        if self.verdict != "fail" or self.failed_checks:
+        """Why a failing log failed when none of its `fail` checks did ('' otherwise)."""
+        if self.verdict != "fail" or any(c.severity == "fail" for c in self.failed_checks):
             return ""
         if self.camera_count == 0 or (self.audit is not None and not self.audit.get("cameras")):
             return "no camera to judge in this log (a LiDAR-only log cannot pass the sync gate)"

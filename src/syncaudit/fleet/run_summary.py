@@ -111,7 +111,7 @@ def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
                 )
                 continue
             failed = log.failed_checks or []
-            if not failed:
+            if log.why_failed:
                 lines.append(
                     f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | verdict | "
                     f"{_md(log.why_failed)} | |"
