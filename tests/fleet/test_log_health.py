@@ -166,3 +166,25 @@ def test_the_gate_report_leads_with_the_policy_verdict(
     cut = pages["cut.mcap"]
     assert 'id="gate-verdict">FAIL</span></h1><ul><li>log: truncated = true: cut off at' in cut
     assert "<td>truncated</td><td class=num>true</td><td>== false</td>" in cut
+
+
+def test_a_database_written_before_the_health_columns_gets_them(
+    uploads: dict[str, Path], learned: Policy, tmp_path: Path
+) -> None:
+    import duckdb
+
+    from syncaudit.fleet.schema import ADDED_COLUMNS, create_statements
+
+    db = tmp_path / "old.duckdb"
+    con = duckdb.connect(str(db))
+    for statement in create_statements():
+        if not statement.startswith("ALTER"):
+            con.execute(statement)
+    for name, _ in ADDED_COLUMNS:  # as the first layout had it
+        con.execute(f'ALTER TABLE logs DROP COLUMN "{name}"')
+    con.close()
+    run_gate([str(uploads["cut"])], learned, GateOptions(db=db, jobs=1))
+    con = duckdb.connect(str(db), read_only=True)
+    row = con.execute("SELECT intact, json_extract(health, '$.truncated') FROM logs").fetchone()
+    con.close()
+    assert row == (False, "true")
