@@ -87,3 +87,12 @@ def test_lidar_only_logs_and_clock_disagreement_are_doubts(good_log: Path) -> No
         "the logs disagree on the LiDAR clock: synchronised in good.mcap, not in "
         "1673400471837873222; the clock check would be learnt as off"
     )
+
+
+def test_a_cut_known_good_log_is_a_doubt(tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(THREE_CAMERAS.read_bytes()[:600_000])
+    outcome = _outcome(cut, Path(f"{THREE_CAMERAS}.rig.yaml"))
+    (line,) = [p for p in init_problems([outcome]) if "truncated" in p]
+    assert line.startswith("cut.mcap: fails the default thresholds: ")
+    assert "truncated = true: cut off at byte 597772" in line

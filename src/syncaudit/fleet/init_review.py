@@ -32,7 +32,8 @@ def init_problems(outcomes: list[LogOutcome]) -> list[str]:
                 "as off, so the policy would judge no camera"
             )
         failed = [c for c in evaluate(outcome, defaults, outcome.job.vehicle) if not c.passed]
-        hard = [c for c in failed if c.severity == "fail"]
+        # The file's condition first: a cut log's camera figures are of a part of it.
+        hard = sorted((c for c in failed if c.severity == "fail"), key=lambda c: c.scope != "log")
         if hard:
             shown = "; ".join(
                 f"{c.subject}: {c.message}" if c.scope != "log" else c.message for c in hard[:4]

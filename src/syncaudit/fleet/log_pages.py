@@ -117,9 +117,8 @@ def render_index(logs: list[JudgedLog], links: dict[str, str]) -> str:
     for log in sorted(logs, key=lambda item: (order[item.verdict], item.path)):
         href = links.get(log.key)
         name = f'<a href="{_e(href)}">{_e(log.path)}</a>' if href else _e(log.path)
-        failed = ", ".join(f"{c.subject}: {c.check}" for c in log.failed_checks) or (
-            log.error or ""
-        )
+        failed = ", ".join(f"{c.subject}: {c.check}" for c in log.failed_checks)
+        failed = "; ".join(x for x in (failed, log.error or "", log.why_failed) if x)
         rows.append(
             f"<tr><td>{name}</td><td>{_e(log.job.vehicle or '')}</td>"
             f'<td class="{log.verdict}">{log.verdict}</td><td>{_e(failed)}</td></tr>'
