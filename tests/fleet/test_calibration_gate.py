@@ -138,10 +138,16 @@ def test_sessions_are_judged_on_their_calibration_checks(
     assert not any(c.passed for c in bad.checks)
     assert "limit <= 0.3 deg" in next(c.message for c in bad.checks if c.check == "rotation_deg")
 
-    # Packets, cameras and scans: the sync checks and the calibration checks both judge it.
+    # Packets, cameras and scans: the sync checks and the calibration checks both judge it
+    # (and the file's condition, as every audited log).
     drive = logs["drive_with_scans.mcap"]
     scopes = {c.scope for c in drive.checks}
-    assert scopes == {"camera", "lidar", "calibration"}, drive.error
+    assert scopes == {"camera", "lidar", "calibration", "log"}, drive.error
+    assert {c.check for c in drive.checks if c.scope == "log"} == {
+        "truncated",
+        "damaged_messages",
+        "missing_index",
+    }
     assert drive.camera_count == 3
     failed = [(c.scope, c.check) for c in drive.failed_checks]
     assert failed == [("calibration", "rotation_deg"), ("calibration", "translation_cm")]
@@ -169,7 +175,8 @@ def test_calibration_is_behind_the_policy_switch(sessions: dict[str, Any]) -> No
     assert "no LiDAR packets" in (session.error or "")
     assert "calibration: rotation_deg / translation_cm" in (session.error or "")
     drive = logs["drive_with_scans.mcap"]
-    assert drive.verdict == "pass" and {c.scope for c in drive.checks} == {"camera", "lidar"}
+    assert drive.verdict == "pass"
+    assert {c.scope for c in drive.checks} == {"camera", "lidar", "log"}  # log: its condition
     # Switched on for one vehicle only: that vehicle's session is calibrated.
     per_vehicle = {
         **sync_only,

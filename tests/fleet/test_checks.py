@@ -15,6 +15,7 @@ OFF_CAMERA = {name: None for name in CameraChecks.model_fields}
 OFF = {
     "camera": OFF_CAMERA,
     "lidar": {"clock_synchronised": None},
+    "log": {"truncated": None, "damaged_messages": None, "missing_index": None},
 }
 
 

@@ -176,3 +176,33 @@ def test_fleet_report_outputs_are_all_or_nothing(
     write_report(db, html_dir=site, csv=tmp_path / "fleet.csv", overwrite=True)
     assert "<svg" in (site / "index.html").read_text() and (tmp_path / "fleet.csv").is_file()
     assert not [p for p in tmp_path.rglob(".syncaudit-*")]
+
+
+def test_failing_points_keep_their_colour_and_delays_fill_the_axis(
+    tmp_path: Path, three_cameras_outcome: LogOutcome
+) -> None:
+    """Issue 23 finding 7: a failing log's points were all red (recommended, applied and
+    t1..t4 alike), and the delay axis started at 0 (a 1.5 ms gap on 16 ms: ~14 px)."""
+    from syncaudit.fleet.dashboard import COLOURS
+
+    db = _fleet_db(tmp_path, three_cameras_outcome)
+    out = tmp_path / "dashboard"
+    write_report(db, html_dir=out)
+    page = (out / "index.html").read_text()
+    car2 = page.split('data-vehicle="car2"', 1)[1]
+    front = car2.split('data-camera="front"', 1)[1].split('<div class="camera"', 1)[0]
+    delay, latencies = re.findall(r'<svg class="plot".*?</svg>', front, re.S)[1:3]
+    for svg, names in ((delay, ["recommended", "applied"]), (latencies, ["t1", "t2", "t3", "t4"])):
+        for index, name in enumerate(names):
+            dots = re.findall(rf'<circle class="(\w+)"[^>]*fill="([^"]+)"[^>]*><title>{name}:', svg)
+            assert {fill for _, fill in dots} == {COLOURS[index]}, (name, dots)
+            assert [cls for cls, _ in dots].count("failed") == 1  # the last day of car2
+    assert 'stroke="#b00020"' in delay and "ringed in red" in car2
+    # Recommended 14203.6 us, applied 15703.9 us: the gap spans most of the plot's height.
+    recommended, applied = (
+        {float(y) for y in re.findall(rf'cy="([\d.]+)"[^>]*><title>{name}:', delay)}
+        for name in ("recommended", "applied")
+    )
+    assert len(recommended) == len(applied) == 1
+    plot_height = 200 - 16 - 28
+    assert abs(recommended.pop() - applied.pop()) > 0.6 * plot_height

@@ -86,8 +86,14 @@ def test_init_policy_target_is_checked_first_and_never_an_input(tmp_path: Path) 
     result = runner.invoke(app, ["gate", "--init", str(log), "-o", str(log), "--overwrite"])
     assert result.exit_code == 8 and "is an input of this run" in result.output
     assert log.read_bytes() == THREE_CAMERAS.read_bytes()
-    result = runner.invoke(
+    result = runner.invoke(  # the sample fails the defaults: refused, nothing written
         app, ["gate", "--init", str(THREE_CAMERAS), "-o", str(policy), "--overwrite"]
+    )
+    assert result.exit_code == 10 and policy.read_text() == "previous"
+    assert not _temporaries(tmp_path)
+    result = runner.invoke(
+        app,
+        ["gate", "--init", str(THREE_CAMERAS), "-o", str(policy), "--overwrite", "--accept-bad"],
     )
     assert result.exit_code == 0, result.output
     assert "error_mean_us" in policy.read_text() and not _temporaries(tmp_path)

@@ -54,7 +54,19 @@ def test_overrides_merge_field_by_field_in_order() -> None:
     [
         (
             {"defaults": {"camera": {"eror_mean_us": {"max": 1}}}},
-            ["defaults.camera.eror_mean_us: unknown key"],
+            ["defaults.camera.eror_mean_us: unknown key (did you mean 'error_mean_us'?)"],
+        ),
+        (  # issue 23: as strictly as the rig: a negative limit, a misspelt key's neighbour
+            {"defaults": {"camera": {"error_mean_us": {"max": -5}}}},
+            ["defaults.camera.error_mean_us: max -5 is negative"],
+        ),
+        (
+            {"vehicles": {"car1": {"cameras": {"front": {"error_mean_us": {"mx": 3}}}}}},
+            ["vehicles.car1.cameras.front.error_mean_us.mx: unknown key (did you mean 'max'?)"],
+        ),
+        (
+            {"defaults": {"log": {"truncted": {"severity": "warn"}}}},
+            ["defaults.log.truncted: unknown key (did you mean 'truncated'?)"],
         ),
         (
             {"defaults": {"camera": {"error_mean_us": {"max": "x", "sev": "fail"}}}},

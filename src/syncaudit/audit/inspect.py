@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from syncaudit.audit.cloud_info import cloud_agreement, info_cloud_scan
+from syncaudit.audit.health import log_health
 from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_cameras
@@ -134,6 +135,8 @@ class InfoReport:
     """Why the audit's LiDAR topic cannot be read (None where it can)."""
     exit_code: int = 0
     """The exit code `audit` gives on this log for that error (0 where none)."""
+    health: dict[str, Any] = field(default_factory=dict)
+    """The file's condition as `audit` records it (`audit.health.LogHealth.to_dict`)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; NaN becomes None."""
@@ -284,6 +287,7 @@ def _inspect(
     for cam in cameras:
         report.cameras.append(_camera_row(log, cam, duration, census.topics))
     report.warnings.extend(w.message for w in log.warnings)
+    report.health = log_health(log.warnings, report.warnings).to_dict()
     if failure is not None:
         report.error = str(failure)
         report.exit_code = failure.exit_code

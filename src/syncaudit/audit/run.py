@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from syncaudit.audit.health import LogHealth, log_health
 from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
 from syncaudit.audit.plan import read_plan
 from syncaudit.audit.probe import LogProbe
@@ -103,6 +104,8 @@ class AuditResult:
     """Log start (host clock), the origin of the report's time axes."""
     revolutions: RevolutionColumns | None = field(default=None, repr=False)
     """The LiDAR's per-revolution timing (RPM, drops, clock offset over time)."""
+    health: LogHealth = field(default_factory=LogHealth)
+    """The file's condition: cut off, damaged messages skipped, no index."""
 
     @property
     def not_judged(self) -> list[str]:
@@ -155,6 +158,7 @@ class AuditResult:
                 "missing": self.missing,
                 "guessed": self.guessed,
                 "warnings": self.warnings,
+                "health": self.health.to_dict(),
             }
         )
         return cleaned
@@ -359,6 +363,7 @@ def _audit(
         warnings=warnings,
         start_ns=probe.log.summary.start_ns,
         revolutions=scan.revolutions,
+        health=log_health(probe.log.warnings, warnings),
     )
 
 

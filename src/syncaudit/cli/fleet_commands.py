@@ -92,6 +92,14 @@ def gate(
         Path | None,
         typer.Option("--output", "-o", help="With --init: the policy file to write."),
     ] = None,
+    accept_bad: Annotated[
+        bool,
+        typer.Option(
+            "--accept-bad",
+            help="With --init: write the policy although the known-good logs fail the "
+            "default thresholds, have no camera or disagree on the clock (warned).",
+        ),
+    ] = False,
     db: Annotated[
         Path, typer.Option("--db", help="Results database (DuckDB file), created if absent.")
     ] = Path("fleet.duckdb"),
@@ -139,7 +147,7 @@ def gate(
         if timeout <= 0 or tries < 1:
             raise UsageError("--timeout must be positive and --tries at least 1")
         if init:
-            _init(inputs, _init_target(output, policy), overwrite, jobs, timeout)
+            _init(inputs, _init_target(output, policy), overwrite, jobs, timeout, accept_bad)
             return 0
         if policy is None:
             raise UsageError("missing --policy (write one with --init LOG... -o policy.yaml)")
@@ -222,11 +230,18 @@ def _need_duckdb() -> None:
 
 
 def _init(
-    inputs: list[str], output: Path, overwrite: bool, jobs: int | None, timeout: float
+    inputs: list[str],
+    output: Path,
+    overwrite: bool,
+    jobs: int | None,
+    timeout: float,
+    accept_bad: bool = False,
 ) -> None:
+    from syncaudit.errors import GateFailedError
     from syncaudit.fleet.gate import GateOptions, make_executor
     from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
-    from syncaudit.fleet.init_policy import init_policy_yaml
+    from syncaudit.fleet.init_policy import init_policy_yaml, learn_policy
+    from syncaudit.fleet.init_review import init_problems
     from syncaudit.fleet.inputs import discover
     from syncaudit.fleet.job import JobOptions
     from syncaudit.fleet.policy import Policy
@@ -249,7 +264,17 @@ def _init(
             from syncaudit.errors import LogReadError
 
             raise LogReadError("--init: no log could be audited")
-        out.write_text(output, init_policy_yaml(outcomes))
+        problems = init_problems(outcomes)
+        for line in problems:
+            note(f"[bold red]WARNING:[/] {_escape(line)}")
+        if problems and not accept_bad:
+            raise GateFailedError(
+                f"--init: {len(problems)} reason(s) to doubt the known-good logs (above): "
+                "no policy written; drop those logs, or pass --accept-bad to write it anyway"
+            )
+        for line in learn_policy(outcomes)[1]:
+            note(_escape(f"learnt {line}"))
+        out.write_text(output, init_policy_yaml(outcomes, problems))
     note(_escape(f"policy from {len(outcomes) - len(bad)} log(s) written to {output}"))
 
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from syncaudit.fleet.job import LogOutcome
-from syncaudit.fleet.policy import CheckSet, Flag, Limit, Policy, TopicsCheck
+from syncaudit.fleet.policy import CheckSet, Condition, Flag, Limit, Policy, TopicsCheck
 
 UNITS: dict[str, str] = {
     "error_mean_us": "us",
@@ -25,6 +25,7 @@ UNITS: dict[str, str] = {
     "packets_per_revolution": "packets",
     "required_topics": "topics missing",
     "duration_s": "s",
+    "damaged_messages": "messages",
     "rotation_deg": "deg",
     "translation_cm": "cm",
 }
@@ -58,6 +59,28 @@ class CheckResult:
 
 def _fmt(value: float) -> str:
     return f"{value:.6g}"
+
+
+def is_boolean(check: CheckResult) -> bool:
+    """A yes/no check (a flag or a condition of the file): its value is 0 or 1."""
+    return check.limit in ("== true", "== false")
+
+
+def shown_value(check: CheckResult) -> str:
+    """The measured value as a summary shows it: `true`/`false` for yes/no checks, the
+    missing topics for `required_topics`, else the number with its unit."""
+    if check.value is None:
+        return "not measured"
+    if is_boolean(check):
+        return str(bool(check.value)).lower()
+    if check.check == "required_topics" and not check.passed:
+        return check.message
+    return f"{_fmt(check.value)} {check.unit}".strip()
+
+
+def shown_limit(check: CheckResult) -> str:
+    """The limit with its unit (`<= 250 us`, `== false`, `== 0 topics missing`)."""
+    return f"{check.limit} {check.unit}".strip() if not is_boolean(check) else check.limit
 
 
 def _limit_text(limit: Limit) -> str:
@@ -195,6 +218,45 @@ def _log_checks(base: CheckSet, outcome: LogOutcome, audit: dict[str, Any]) -> l
     if base.log.duration_s is not None and base.log.duration_s.enabled:
         duration = audit.get("duration_s", outcome.duration_s)
         out.append(judge_limit("log", "log", "duration_s", base.log.duration_s, duration))
+    health = audit.get("health")
+    if isinstance(health, dict):
+        out.extend(_health_checks(base, health))
+    return out
+
+
+def _condition(
+    check: str, condition: Condition | None, present: bool, why: str
+) -> list[CheckResult]:
+    """A condition that must be absent: passes when not `present`; `why` says what was found."""
+    if condition is None or not condition.enabled:
+        return []
+    message = f"{check} = {str(present).lower()}" + (f": {why}" if present else "")
+    value = float(present)
+    return [
+        CheckResult(
+            "log", "log", check, value, "== false", "", condition.severity, not present, message
+        )
+    ]
+
+
+def _health_checks(base: CheckSet, health: dict[str, Any]) -> list[CheckResult]:
+    """The file's condition (audit `health`) against the policy's log checks."""
+    checks = base.log
+    notes = "; ".join(health.get("notes") or [])
+    cut = bool(health.get("truncated")) or bool(health.get("cut_chunks"))
+    cut_why = "; ".join(p for p in health.get("problems") or [] if "cut" in p)
+    out = _condition("truncated", checks.truncated, cut, cut_why or notes)
+    out += _condition(
+        "missing_index", checks.missing_index, bool(health.get("missing_index")), notes
+    )
+    limit = checks.damaged_messages
+    if limit is not None and limit.enabled:
+        damaged: dict[str, int] = health.get("damaged_messages") or {}
+        result = judge_limit("log", "log", "damaged_messages", limit, float(sum(damaged.values())))
+        if damaged:
+            per_topic = ", ".join(f"{topic}: {n}" for topic, n in sorted(damaged.items()))
+            result = replace(result, message=f"{result.message}: {per_topic}")
+        out.append(result)
     return out
 
 

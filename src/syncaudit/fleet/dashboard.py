@@ -2,8 +2,9 @@
 
 One HTML file, everything inline (CSS, SVG plots, a few lines of script; no CDN, no
 fetch): per vehicle and camera, Eq. 5 mean error, the recommended (and applied) trigger
-delay and t1..t4 p99 over time (log start time), the policy limits drawn as dashed
-lines, failing logs in red and linked to their HTML reports. The same per-camera table is
+delay (its axis scaled to the data) and t1..t4 p99 over time (log start time), the
+policy limits drawn as dashed lines; a failing log's points keep their series' colour,
+ringed in red and linked to its HTML report. The same per-camera table is
 exported as Parquet or CSV (DuckDB's COPY) for people who use their own tools.
 """
 
@@ -92,8 +93,13 @@ def plot_svg(
     limit: float | None = None,
     width: int = 380,
     height: int = 200,
+    zero_based: bool = True,
 ) -> str:
-    """A small time plot: one polyline per series, a dashed limit line, failing points red."""
+    """A small time plot: one polyline per series, a dashed limit line; a failing log's
+    points keep their series' colour, ringed in red and larger.
+
+    `zero_based=False` scales the value axis to the data (a delay of 16 ms with a 1.5 ms
+    gap between its series: from 0 the gap would be a few pixels)."""
     points = [p for _, pts in series for p in pts]
     left, right, top, bottom = 62, 10, 16, 28
     if not points:
@@ -104,11 +110,13 @@ def plot_svg(
     times = [_epoch(p.time) for p in points]
     values = [p.value for p in points] + ([limit] if limit is not None else [])
     t0, t1 = min(times), max(times)
-    v0, v1 = min(0.0, min(values)), max(values)
+    v0, v1 = (min(0.0, min(values)), max(values)) if zero_based else (min(values), max(values))
     if t1 == t0:
         t0, t1 = t0 - 1, t1 + 1
     if v1 == v0:
-        v1 = v0 + 1
+        v0, v1 = (v0, v0 + 1) if zero_based else (v0 - 1, v1 + 1)
+    if not zero_based:
+        v0 -= (v1 - v0) * 0.1
     v1 += (v1 - v0) * 0.05
 
     def x(t: float) -> float:
@@ -151,10 +159,10 @@ def plot_svg(
                 f'<polyline fill="none" stroke="{colour}" points="{coords}"><title>{_e(name)}</title></polyline>'
             )
         for p in ordered:
-            fill = "#b00020" if p.failed else colour
+            ring = ' stroke="#b00020" stroke-width="2"' if p.failed else ""
             dot = (
                 f'<circle class="{"failed" if p.failed else "point"}" cx="{x(_epoch(p.time)):.1f}" '
-                f'cy="{y(p.value):.1f}" r="{4 if p.failed else 3}" fill="{fill}">'
+                f'cy="{y(p.value):.1f}" r="{5 if p.failed else 3}" fill="{colour}"{ring}>'
                 f"<title>{_e(name)}: {p.value:.6g} {_e(unit)} — {_e(p.label)}</title></circle>"
             )
             parts.append(f'<a href="{_e(p.href)}">{dot}</a>' if p.href else dot)
@@ -221,6 +229,7 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
                             ("applied", points("delay_applied_us")),
                         ],
                         unit="us",
+                        zero_based=False,
                     ),
                     _legend(["recommended", "applied"]),
                 ),
@@ -245,7 +254,11 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
                 else f'<li class="fail">{_e(r["path"])}</li>'
                 for r in failing
             )
-            fail_list = f"<p>Failing logs:</p><ul>{links}</ul>" if failing else ""
+            fail_list = (
+                f"<p>Failing logs (their points ringed in red, linked to the report):</p><ul>{links}</ul>"
+                if failing
+                else ""
+            )
             blocks.append(
                 f'<div class="camera" data-camera="{_e(camera)}"><h3>{_e(camera)} — {len(items)} log(s)</h3>'
                 f'<div class="plots">{figures}</div>{fail_list}</div>'

@@ -152,6 +152,8 @@ class ResultsDB:
                 attempts=item["attempts"] or 1,
                 skipped=True,
                 report=item["report"],
+                health=json.loads(item["health"]) if item.get("health") else None,
+                advice=json.loads(item["advice"]) if item.get("advice") else {},
             )
         return out
 
@@ -222,6 +224,9 @@ def _log_row(log: JudgedLog, now: datetime) -> tuple[Any, ...]:
         log.elapsed_s,
         log.report,
         now,
+        None if log.health is None else bool(log.health.get("intact")),
+        None if log.health is None else json.dumps(log.health, sort_keys=True),
+        json.dumps(log.advice, sort_keys=True) if log.advice else None,
     )
 
 

@@ -112,6 +112,7 @@ def _judge(
     outcome: LogOutcome, policy: Policy, fp: str, rig_fp: str | None, policy_fp: str
 ) -> JudgedLog:
     checks = evaluate(outcome, policy, outcome.job.vehicle)  # the policy's one evaluation
+    judged = verdict(outcome, checks)
     draft = outcome.report_draft
     job = outcome.job
     if is_url(job.path):  # the database and outputs never keep a query string (tokens)
@@ -123,7 +124,7 @@ def _judge(
         rig_fingerprint=rig_fp,
         policy_fingerprint=policy_fp,
         tool_version=__version__,
-        verdict=verdict(outcome, checks),
+        verdict=judged,
         checks=checks,
         audit=outcome.audit,
         start_ns=outcome.start_ns,
@@ -131,11 +132,17 @@ def _judge(
         error_code=outcome.error_code,
         attempts=outcome.attempts,
         elapsed_s=outcome.elapsed_s,
-        html=None if draft is None else render_log_page(draft, checks),
+        html=None if draft is None else render_log_page(draft, checks, judged, outcome.audit),
         camera_count=None if outcome.audit is None else len(outcome.audit.get("cameras", [])),
         remote_read=outcome.remote_read,
         duration_s=outcome.duration_s,
         container=outcome.container,
+        health=None if outcome.audit is None else outcome.audit.get("health"),
+        advice={
+            cam["camera"]: cam["recommendation"]
+            for cam in (outcome.audit or {}).get("cameras", [])
+            if isinstance(cam.get("recommendation"), dict)
+        },
     )
 
 

@@ -153,7 +153,7 @@ def _report_draft(
     """The log's report page but its policy checks: its audit and/or calibration."""
     from syncaudit.report.html import audit_sections, time_origin_ns
 
-    parts = [] if result is None else [audit_sections(result)]
+    parts = [] if result is None else [audit_sections(result, under_gate=True)]
     if calibration is not None:
         from syncaudit.report.calib_section import html_section
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+from syncaudit.fleet.checks import shown_limit, shown_value
 from syncaudit.fleet.record import JudgedLog
 
 
@@ -58,9 +59,7 @@ def render_junit(logs: list[JudgedLog]) -> str:
                 failures += 1
                 ET.SubElement(
                     case, "failure", message=check.message, type="fail"
-                ).text = (
-                    f"measured {check.value} {check.unit}, limit {check.limit} {check.unit}".strip()
-                )
+                ).text = f"measured {shown_value(check)}, limit {shown_limit(check)}"
             else:
                 ET.SubElement(case, "system-out").text = f"WARNING (warn severity): {check.message}"
         suite.set("tests", str(tests))

@@ -6,8 +6,9 @@ import html
 import os
 import re
 from collections import Counter
+from typing import Any
 
-from syncaudit.fleet.checks import CheckResult
+from syncaudit.fleet.checks import CheckResult, shown_limit, shown_value
 from syncaudit.fleet.job import ReportDraft
 from syncaudit.fleet.record import JudgedLog
 
@@ -30,8 +31,8 @@ def checks_section(checks: list[CheckResult]) -> str:
     ordered = sorted(checks, key=lambda c: (c.passed, c.severity != "fail", c.scope, c.subject))
     rows = "".join(
         f"<tr><td>{_e(c.scope)}</td><td>{_e(c.subject)}</td><td>{_e(c.check)}</td>"
-        f"<td class=num>{'-' if c.value is None else f'{c.value:.6g}'}</td>"
-        f"<td>{_e(c.limit)} {_e(c.unit)}</td><td>{_e(c.severity)}</td>"
+        f"<td class=num>{_e(shown_value(c))}</td>"
+        f"<td>{_e(shown_limit(c))}</td><td>{_e(c.severity)}</td>"
         f'<td class="{"pass" if c.passed else c.severity}">{"pass" if c.passed else "FAIL"}</td></tr>'
         for c in ordered
     )
@@ -41,11 +42,50 @@ def checks_section(checks: list[CheckResult]) -> str:
     )
 
 
-def render_log_page(draft: ReportDraft, checks: list[CheckResult]) -> str:
-    """A judged log's report page: the worker's sections, then its policy checks."""
+_GATE_CSS = {"pass": "pass", "warn": "notjudged", "fail": "fail", "error": "fail"}
+
+
+def gate_verdict_section(
+    verdict: str, checks: list[CheckResult], audit: dict[str, Any] | None = None
+) -> str:
+    """The page's lead: the policy's verdict, why (failed checks, the file's condition, or
+    no camera to judge), and what the audit's own verdict below means."""
+    failed = sorted(
+        (c for c in checks if not c.passed), key=lambda c: (c.severity != "fail", c.scope)
+    )
+    why = [f"{c.subject}: {c.message}" for c in failed]
+    problems = ((audit or {}).get("health") or {}).get("problems") or []
+    why += [f"log file: {p}" for p in problems if not any(p in w for w in why)]
+    if verdict == "fail" and not any(c.severity == "fail" for c in failed):
+        why.append("no camera to judge in this log" if audit is not None else "nothing judged it")
+    items = "".join(f"<li>{_e(line)}</li>" for line in why)
+    own = (audit or {}).get("verdict")
+    note = (
+        f"<p>The audit's own verdict below ({_e(own)}) is against the rig's thresholds; "
+        "the gate judges by the policy's checks.</p>"
+        if own is not None
+        else ""
+    )
+    return (
+        f'<h1>syncaudit gate: <span class="{_GATE_CSS.get(verdict, "warn")}" '
+        f'id="gate-verdict">{_e(verdict.upper())}</span></h1>'
+        + (f"<ul>{items}</ul>" if items else "<p>Every policy check passed.</p>")
+        + note
+    )
+
+
+def render_log_page(
+    draft: ReportDraft,
+    checks: list[CheckResult],
+    verdict: str = "",
+    audit: dict[str, Any] | None = None,
+) -> str:
+    """A judged log's report page: the policy's verdict and checks first, then the
+    worker's sections (the audit, with its own verdict second; the calibration)."""
     from syncaudit.report.html import page
 
-    return page(draft.title, draft.body + checks_section(checks), t0_ns=draft.t0_ns)
+    lead = gate_verdict_section(verdict, checks, audit) if verdict else ""
+    return page(draft.title, lead + checks_section(checks) + draft.body, t0_ns=draft.t0_ns)
 
 
 def report_name(log: JudgedLog) -> str:
@@ -77,9 +117,8 @@ def render_index(logs: list[JudgedLog], links: dict[str, str]) -> str:
     for log in sorted(logs, key=lambda item: (order[item.verdict], item.path)):
         href = links.get(log.key)
         name = f'<a href="{_e(href)}">{_e(log.path)}</a>' if href else _e(log.path)
-        failed = ", ".join(f"{c.subject}: {c.check}" for c in log.failed_checks) or (
-            log.error or ""
-        )
+        failed = ", ".join(f"{c.subject}: {c.check}" for c in log.failed_checks)
+        failed = "; ".join(x for x in (failed, log.error or "", log.why_failed) if x)
         rows.append(
             f"<tr><td>{name}</td><td>{_e(log.job.vehicle or '')}</td>"
             f'<td class="{log.verdict}">{log.verdict}</td><td>{_e(failed)}</td></tr>'

@@ -9,9 +9,12 @@ every log, `cameras.<name>` to that camera on every vehicle, `vehicles.<id>` (wi
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 import re
+import types
+import typing
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,6 +41,11 @@ class Limit(_Strict):
 
     @model_validator(mode="after")
     def _ordered(self) -> Limit:
+        for name, bound in (("min", self.min), ("max", self.max)):
+            if bound is not None and bound < 0:
+                raise ValueError(
+                    f"{name} {bound:g} is negative: every check measures a quantity >= 0"
+                )
         if self.min is not None and self.max is not None and self.min > self.max:
             raise ValueError(f"min ({self.min}) is above max ({self.max})")
         return self
@@ -55,6 +63,13 @@ class TopicsCheck(_Strict):
     """The log must hold every topic listed."""
 
     topics: list[str] = Field(default_factory=list)
+    severity: Severity = "fail"
+    enabled: bool = True
+
+
+class Condition(_Strict):
+    """A condition of the log file that must not be present (a cut-off log, no index)."""
+
     severity: Severity = "fail"
     enabled: bool = True
 
@@ -93,6 +108,12 @@ class LogChecks(_Strict):
 
     required_topics: TopicsCheck | None = None
     duration_s: Limit | None = None
+    truncated: Condition | None = Condition(severity="fail")
+    """The file is cut off (or a chunk of it cut or damaged): only what precedes was read."""
+    damaged_messages: Limit | None = Limit(max=0, severity="warn")
+    """Messages skipped because their bytes did not decode, over all topics."""
+    missing_index: Condition | None = Condition(severity="warn")
+    """The index (MCAP summary, ROS 1 index records) is missing: the file was read linearly."""
 
 
 class CalibrationChecks(_Strict):
@@ -250,13 +271,41 @@ def _loc(loc: tuple[Any, ...]) -> str:
     return ".".join(str(part) for part in loc) or "(top level)"
 
 
+def _known_at(loc: tuple[Any, ...]) -> list[str]:
+    """The keys a policy mapping at `loc` (the parent of an unknown key) may hold."""
+    model: type[BaseModel] | None = Policy
+    parts = list(loc)
+    while parts and model is not None:
+        field = model.model_fields.get(str(parts.pop(0)))
+        if field is None:
+            return []
+        inner = field.annotation
+        if typing.get_origin(inner) in (typing.Union, types.UnionType):  # X | None
+            inner = next(a for a in typing.get_args(inner) if a is not type(None))
+        if typing.get_origin(inner) is dict:  # a name (vehicle, camera) comes first
+            if parts:
+                parts.pop(0)
+            inner = typing.get_args(inner)[1]
+        model = inner if isinstance(inner, type) and issubclass(inner, BaseModel) else None
+    return sorted(model.model_fields) if model is not None else []
+
+
+def _did_you_mean(loc: tuple[Any, ...]) -> str:
+    """` (did you mean 'x'?)` for an unknown key near a known one, else the known keys."""
+    known = _known_at(tuple(loc[:-1]))
+    close = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
+    if close:
+        return f" (did you mean {close[0]!r}?)"
+    return f" (known: {', '.join(known)})" if known else ""
+
+
 def policy_errors(exc: ValidationError) -> list[str]:
     """One line per bad key: `where: message`."""
     lines = []
     for error in exc.errors():
         message = " ".join(str(error["msg"]).split()).removeprefix("Value error, ")
         if error["type"] == "extra_forbidden":
-            message = "unknown key"
+            message = "unknown key" + _did_you_mean(error["loc"])
         where = _loc(error["loc"])
         lines.append(
             message if message.startswith(("cameras.", "vehicles.")) else f"{where}: {message}"

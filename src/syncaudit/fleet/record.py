@@ -57,6 +57,21 @@ class JudgedLog:
     duration_s: float | None = None
     container: str | None = None
     """From the log's index (also for a calibration session, which has no audit)."""
+    health: dict[str, Any] | None = None
+    """The file's condition (the audit's `health`: cut off, damaged messages, no index)."""
+    advice: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Per camera, the audit's `recommendation` (absent from audits that have none)."""
+
+    @property
+    def why_failed(self) -> str:
+        """Why a failing log failed when none of its `fail` checks did ('' otherwise)."""
+        if self.verdict != "fail" or any(c.severity == "fail" for c in self.failed_checks):
+            return ""
+        if self.camera_count == 0 or (self.audit is not None and not self.audit.get("cameras")):
+            return "no camera to judge in this log (a LiDAR-only log cannot pass the sync gate)"
+        if not any(c.scope == "calibration" for c in self.checks) and self.camera_count is None:
+            return "nothing judged it: no camera audited and no calibration check ran"
+        return "no check judged it"
 
     @property
     def path(self) -> str:

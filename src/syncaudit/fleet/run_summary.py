@@ -13,7 +13,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from syncaudit import __version__
+from syncaudit.fleet.checks import shown_limit, shown_value
 from syncaudit.fleet.record import JudgedLog
+from syncaudit.report.advice_text import advice_sentence, needs_action
 
 VERDICTS = ("fail", "error", "warn", "pass")
 SUMMARY_VERSION = 1
@@ -42,6 +44,9 @@ def summary_dict(
                 "error": log.error,
                 "error_code": log.error_code,
                 "checks": [c.to_dict() for c in log.checks],
+                "health": log.health,
+                **({"advice": log.advice} if log.advice else {}),
+                **({"why_failed": log.why_failed} if log.why_failed else {}),
                 **({"remote_read": log.remote_read} if log.remote_read else {}),
             }
             for log in sorted(logs, key=lambda item: item.path)
@@ -61,6 +66,25 @@ def _md(text: object) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
+MAX_ADVICE_LINES = 30
+
+
+def _advice_lines(ranked: list[JudgedLog]) -> list[str]:
+    """`## Advice`: one sentence per camera whose recommendation asks for a change."""
+    advice = [
+        f"- `{_md(log.path)}`: {_md(sentence)}"
+        for log in ranked
+        if log.verdict != "error"
+        for camera, rec in sorted(log.advice.items())
+        if needs_action(rec) and (sentence := advice_sentence(camera, rec))
+    ]
+    if not advice:
+        return []
+    more = len(advice) - MAX_ADVICE_LINES
+    tail = [f"- … and {more} more (see the JSON summary)"] if more > 0 else []
+    return ["## Advice", "", *advice[:MAX_ADVICE_LINES], *tail, ""]
+
+
 def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
     """A Markdown page for a CI job summary: counts, then failing logs and checks first."""
     counts = Counter(log.verdict for log in logs)
@@ -74,6 +98,7 @@ def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
     ]
     order = {v: i for i, v in enumerate(VERDICTS)}
     ranked = sorted(logs, key=lambda log: (order[log.verdict], log.path))
+    lines += _advice_lines(ranked)
     bad = [log for log in ranked if log.verdict in ("fail", "error")]
     if bad:
         lines += ["## Failing logs", "", "| log | vehicle | verdict | check | measured | limit |"]
@@ -86,22 +111,25 @@ def render_markdown(logs: list[JudgedLog], warnings: Sequence[str] = ()) -> str:
                 )
                 continue
             failed = log.failed_checks or []
-            if not failed:
+            if log.why_failed:
                 lines.append(
-                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | cameras | no camera judged | |"
+                    f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | fail | verdict | "
+                    f"{_md(log.why_failed)} | |"
                 )
             for check in failed:
-                value = "not measured" if check.value is None else f"{check.value:.6g} {check.unit}"
                 lines.append(
                     f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {check.severity} | "
-                    f"{_md(check.subject)}: {check.check} | {_md(value.strip())} | "
-                    f"{_md(check.limit)} {_md(check.unit)} |"
+                    f"{_md(check.subject)}: {check.check} | {_md(shown_value(check))} | "
+                    f"{_md(shown_limit(check))} |"
                 )
         lines.append("")
     lines += ["## All logs", "", "| log | vehicle | verdict | checks failed | note |"]
     lines.append("| --- | --- | --- | --- | --- |")
     for log in ranked:
-        note = "unchanged, verdict from the database" if log.skipped else ""
+        notes = ["unchanged, verdict from the database"] if log.skipped else []
+        notes += (log.health or {}).get("problems") or []
+        notes += [log.why_failed] if log.why_failed else []
+        note = "; ".join(notes)
         n_failed = len(log.failed_checks)
         lines.append(
             f"| `{_md(log.path)}` | {_md(log.job.vehicle or '')} | {icon[log.verdict]} {log.verdict} | "

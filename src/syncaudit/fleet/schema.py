@@ -8,7 +8,10 @@ Tables (one row per judged log in `logs`, keyed by `log_key`):
   `tool_version`, `rig_fingerprint`, `policy_fingerprint`, `verdict` (pass, warn, fail,
   error), `error` (one line, for error rows), `error_code` (the exit code the error
   carries), `tags` (JSON list), `attempts`, `elapsed_s`, `report` (HTML report path, if
-  written), `judged_at` (UTC, when the row was written).
+  written), `judged_at` (UTC, when the row was written), `intact` (false: the file was cut
+  off, lost damaged messages or its index; null for error rows) and `health` (the audit's
+  `health` record as JSON: `truncated`, `cut_at_byte`, `damaged_messages` per topic, ...)
+  and `advice` (each camera's `recommendation` as JSON, by camera name; null for error rows).
 - `cameras`: every statistic of the audit per camera (times in microseconds).
 - `lidars`: the triggering LiDAR's statistics.
 - `checks`: one row per check: `scope`, `subject`, `check`, `value`, `limit`, `unit`,
@@ -38,7 +41,10 @@ TABLES: dict[str, str] = {
         attempts INTEGER,
         elapsed_s DOUBLE,
         report VARCHAR,
-        judged_at TIMESTAMP NOT NULL
+        judged_at TIMESTAMP NOT NULL,
+        intact BOOLEAN,
+        health VARCHAR,
+        advice VARCHAR
     """,
     "cameras": """
         log_key VARCHAR NOT NULL,
@@ -116,6 +122,14 @@ KEYS: dict[str, tuple[str, ...]] = {
 }
 
 
+ADDED_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("intact", "BOOLEAN"),
+    ("health", "VARCHAR"),
+    ("advice", "VARCHAR"),
+)
+"""Columns of `logs` newer than schema version 1's first layout (added to older files)."""
+
+
 def _column_defs(table: str) -> list[tuple[str, str]]:
     """(name, SQL type and constraints) of each column of a table, in order."""
     defs = []
@@ -139,6 +153,9 @@ def create_statements() -> list[str]:
         cols = ", ".join(f'"{name}" {kind}' for name, kind in _column_defs(table))
         keys = ", ".join(f'"{k}"' for k in KEYS[table])
         statements.append(f"CREATE TABLE IF NOT EXISTS {table} ({cols}, PRIMARY KEY ({keys}))")
+    # Added after the first databases were written: appended, so positional inserts agree.
+    for name, kind in ADDED_COLUMNS:
+        statements.append(f'ALTER TABLE logs ADD COLUMN IF NOT EXISTS "{name}" {kind}')
     statements.append("CREATE TABLE IF NOT EXISTS meta (key VARCHAR PRIMARY KEY, value VARCHAR)")
     statements.append(f"INSERT OR IGNORE INTO meta VALUES ('schema_version', '{SCHEMA_VERSION}')")
     return statements

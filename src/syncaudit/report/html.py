@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.audit.run import AuditResult, CameraAudit
+from syncaudit.report.advice_text import advice_sentence
 from syncaudit.report.plot import (
     COLOURS,
     Band,
@@ -322,10 +323,12 @@ def _camera_section(
     plots = camera_plots(cam, result, origin)
     err = np.abs(_floats(cam.sync.frames["t_error_ns"])) / 1e3
     warnings = "".join(f'<li class="warn">{_e(w)}</li>' for w in cam.sync.warnings)
+    advice = advice_sentence(cam.sync.camera, cam.to_dict().get("recommendation"))
     return (
         f'<section class="camera" data-camera="{_e(cam.sync.camera)}">'
         f"<h2>camera {_e(cam.sync.camera)}{optional}: "
         f'<span class="{_VERDICT_CSS.get(verdict, "warn")}">{_e(label)}</span>{reason}</h2>'
+        + (f'<p class="advice"><b>Advice</b> — {_e(advice)}</p>' if advice else "")
         + (f'<ul class="notes">{warnings}</ul>' if warnings else "")
         + '<div class="row">'
         + _camera_table(cam)
@@ -401,14 +404,23 @@ def _header(result: AuditResult) -> str:
     return facts + body
 
 
-def audit_sections(result: AuditResult) -> str:
-    """The audit's part of a report page: header, LiDAR plots, one section per camera."""
+def audit_sections(result: AuditResult, *, under_gate: bool = False) -> str:
+    """The audit's part of a report page: header, LiDAR plots, one section per camera.
+
+    `under_gate`: the page leads with a gate's policy verdict, so the audit's own verdict
+    (against the rig's thresholds) is a second-level heading saying so, not the title."""
     origin = time_origin_ns(result)
     xr = _x_range(result, origin)
     css = _VERDICT_CSS.get(result.verdict, "warn")
     lidar = "".join(time_plot_svg(p, x_range=xr) for p in lidar_plots(result, origin))
+    verdict = f'<span class="{css}" id="verdict">{_e(result.verdict.upper())}</span>'
+    heading = (
+        f"<h2>The audit's own verdict (the rig's thresholds, not the policy's): {verdict}</h2>"
+        if under_gate
+        else f"<h1>syncaudit audit: {verdict}</h1>"
+    )
     return (
-        f'<h1>syncaudit audit: <span class="{css}" id="verdict">{_e(result.verdict.upper())}</span></h1>'
+        heading
         + _header(result)
         + '<p class="hint">Time plots: hover for values and wall-clock time, drag to zoom '
         "every time axis, double-click to reset.</p>"

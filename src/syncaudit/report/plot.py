@@ -279,7 +279,8 @@ def time_plot_svg(plot: TimePlot, *, x_range: tuple[float, float] | None = None)
     for value, label in plot.limits:
         out.append(
             f'<line class="limit" x1="{x0 - (x1 - x0) * 10:.6g}" x2="{x1 + (x1 - x0) * 10:.6g}" '
-            f'y1="{-value:.6g}" y2="{-value:.6g}"><title>{esc(label)}</title></line>'
+            f'y1="{-value:.6g}" y2="{-value:.6g}" vector-effect="non-scaling-stroke">'
+            f"<title>{esc(label)}</title></line>"
         )
     for s, (sx, sy, gap) in zip(plot.series, drawn, strict=True):
         attrs = (

@@ -25,7 +25,7 @@ svg.plot .xtick{text-anchor:middle;fill:#444}svg.plot .xlabel{text-anchor:middle
 svg.plot .ylabel{text-anchor:middle;fill:#333}svg.plot .legend{fill:#333}
 svg.plot path.line{stroke-width:1.3px}svg.plot path.dots{stroke-width:7px;stroke-linecap:round}
 svg.plot .limit{stroke:#b00020;stroke-width:1.2px;stroke-dasharray:5 3}
-svg.plot .bar{fill:#1f5fbf}svg.plot .cursor{stroke:#555;stroke-dasharray:2 2}
+svg.plot .bar:not([fill]){fill:#1f5fbf}svg.plot .cursor{stroke:#555;stroke-dasharray:2 2}
 svg.plot .sel{fill:#1f5fbf;fill-opacity:.12}svg.plot .hit{fill:transparent;cursor:crosshair}
 .tip{position:fixed;pointer-events:none;background:#fffffff0;border:1px solid #999;
 padding:.25rem .45rem;font-size:12px;white-space:pre;box-shadow:0 1px 4px #0003;z-index:5}
