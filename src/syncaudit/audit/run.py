@@ -59,6 +59,8 @@ class CameraAudit:
     azimuth_deg: float
     azimuth_source: str
     replay: ReplayResult | None
+    design: dict[str, Any] | None = None
+    """The trigger design, its correction and rolling-shutter rows (audit.trigger_design)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
@@ -78,6 +80,7 @@ class CameraAudit:
                 "settled_error_var_us2": finite_or_none(self.replay.settled_error_var_ns2 / 1e6),
             }
         )
+        out["trigger_design"] = self.design
         return out
 
 
@@ -99,6 +102,8 @@ class AuditResult:
     """Log start (host clock), the origin of the report's time axes."""
     revolutions: RevolutionColumns | None = field(default=None, repr=False)
     """The LiDAR's per-revolution timing (RPM, drops, clock offset over time)."""
+    phase_lock: dict[str, Any] | None = None
+    """The LiDAR's phase-lock health (audit.trigger_design)."""
 
     @property
     def not_judged(self) -> list[str]:
@@ -151,6 +156,7 @@ class AuditResult:
                 "missing": self.missing,
                 "guessed": self.guessed,
                 "warnings": self.warnings,
+                "phase_lock": self.phase_lock,
             }
         )
         return cleaned
@@ -335,6 +341,17 @@ def _audit(
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
     cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
+    from syncaudit.audit.trigger_design import add_designs
+
+    phase_lock = add_designs(
+        rig,
+        scan,
+        [cam for cam, _, _ in located],
+        all_tables,
+        cameras,
+        offset_ns=offset,
+        start_ns=probe.log.summary.start_ns,
+    )
     warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in probe.log.warnings)
     return AuditResult(
@@ -350,6 +367,7 @@ def _audit(
         warnings=warnings,
         start_ns=probe.log.summary.start_ns,
         revolutions=scan.revolutions,
+        phase_lock=phase_lock,
     )
 
 
