@@ -29,10 +29,14 @@ def lock_azimuth_at_tos_deg(
     period = _grid_period_ns(omega_deg_s)
     grid = np.rint(zero_ns / period) * period
     az = (zero_azimuth_deg + omega_deg_s * (grid - zero_ns) / 1e9) % 360.0
-    angle = np.radians(az[np.isfinite(az)])
-    if not angle.size:
+    az = az[np.isfinite(az)]
+    if not az.size:
         return math.nan
-    return float(np.degrees(math.atan2(np.sin(angle).mean(), np.cos(angle).mean())) % 360.0)
+    angle = np.radians(az)
+    mean = float(np.degrees(math.atan2(np.sin(angle).mean(), np.cos(angle).mean())))
+    # The median about the circular mean: revolutions out of lock do not pull it.
+    deviation = (az - mean + 180.0) % 360.0 - 180.0
+    return (mean + float(np.median(deviation))) % 360.0
 
 
 def _grid_period_ns(omega_deg_s: NDArray[np.float64]) -> float:
