@@ -8,6 +8,8 @@ units (checked against the simulator's own setting, not the audit's arithmetic).
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -218,3 +220,31 @@ def test_the_method_chain_is_recognised_and_a_stated_design_wins(tmp_path: Path)
     again = audit_log(out, stated, jobs=1).to_dict()
     assert {c["trigger_design"]["design"] for c in again["cameras"]} == {"free_running"}
     assert all("stated by the rig" in c["trigger_design"]["why"] for c in again["cameras"])
+
+
+@pytest.mark.parametrize(
+    ("name", "design"),
+    [
+        ("ptp_free_lidar", "ptp_phase"),
+        ("sync_output", "lidar_sync_output"),
+        ("free_running", "free_running"),
+    ],
+)
+def test_info_says_which_design_and_why(logs: dict[str, Any], name: str, design: str) -> None:
+    _truth, result = logs[name]
+    run = subprocess.run(
+        [sys.executable, "-m", "syncaudit", "info", result["path"], "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    cameras = json.loads(run.stdout)["cameras"]
+    assert {c["trigger_design"] for c in cameras} == {design}
+    assert all(c["trigger_design_why"] for c in cameras)
+    plain = subprocess.run(
+        [sys.executable, "-m", "syncaudit", "info", result["path"]],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert f"camera front: trigger design {design} (" in plain.stdout

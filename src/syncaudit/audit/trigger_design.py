@@ -141,6 +141,17 @@ class _Audited(Protocol):
     design: dict[str, Any] | None
 
 
+CHAIN_WARNING = " not observed in the log (set analysis.assumed_"
+
+
+def _drop_chain_warnings(sync: CameraSync, design: str) -> None:
+    """t2..t4 are latencies of the method's chain: another design has none to observe."""
+    kept = [w for w in sync.warnings if not (w[:2] in {"t2", "t3", "t4"} and CHAIN_WARNING in w)]
+    if len(kept) != len(sync.warnings):
+        kept.append(f"trigger design {design}: the chain's t2..t4 and t_sleep do not apply")
+    sync.warnings[:] = kept
+
+
 def add_designs(
     rig: Rig,
     scan: LidarScan,
@@ -154,6 +165,8 @@ def add_designs(
     """Give every audited camera its design; return the rig's phase lock (and lock advice)."""
     for camera, camera_tables, audit in zip(cameras, tables, audits, strict=True):
         audit.design = camera_design(rig, camera, camera_tables, audit.sync, scan, offset_ns)
+        if audit.design["design"] != "lidar_packet":
+            _drop_chain_warnings(audit.sync, audit.design["design"])
     zero = scan.revolutions.zero_crossing_sensor_ns
     start = (start_ns - offset_ns) if start_ns is not None else (int(zero[0]) if zero.size else 0)
     lock = lidar_phase_lock(rig, scan, start)
