@@ -248,3 +248,17 @@ def test_info_says_which_design_and_why(logs: dict[str, Any], name: str, design:
         check=True,
     )
     assert f"camera front: trigger design {design} (" in plain.stdout
+
+
+def test_the_html_report_shows_error_against_row_for_a_rolling_shutter(
+    logs: dict[str, Any], tmp_path: Path
+) -> None:
+    from syncaudit.audit.run import audit_log as run_audit
+    from syncaudit.report.html import render_audit_html
+
+    truth, result = logs["rolling"]
+    rig = rig_from_truth(json.loads(json.dumps(truth)))
+    page = render_audit_html(run_audit(Path(result["path"]), rig, jobs=1))
+    assert page.count('data-kind="row-error"') == 1  # the front camera only
+    figure = page[page.index('data-kind="row-error"') :]
+    assert "target row 1080" in figure[:3000] and "2160 rows, 20 µs a row" in figure[:3000]

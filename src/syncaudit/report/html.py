@@ -27,6 +27,7 @@ from syncaudit.report.plot import (
     histogram_svg,
     time_plot_svg,
 )
+from syncaudit.report.row_error import row_error_svg
 from syncaudit.report.script import SCRIPT, STYLE
 
 _e = esc
@@ -336,6 +337,7 @@ def _camera_section(
             limit=th.error_mean_us,
             limit_label=f"Eq. 5 limit {th.error_mean_us:g} µs",
         )
+        + row_error_svg((cam.design or {}).get("rolling_shutter"))
         + "</div>"
         + "".join(time_plot_svg(p, x_range=xr) for p in plots[:3])
         + "<h3>Trigger chain t1..t4 per frame</h3><div class='row'>"
