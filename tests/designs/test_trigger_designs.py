@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from syncaudit.audit import audit_log
@@ -216,6 +217,25 @@ def test_the_method_chain_is_recognised_and_a_stated_design_wins(tmp_path: Path)
     rig = rig_from_truth(truth)
     found = audit_log(out, rig, jobs=1).to_dict()
     assert {c["trigger_design"]["design"] for c in found["cameras"]} == {"lidar_packet"}
+    late = tmp_path / "late.mcap"
+    late_truth = simulate_sync_log(
+        late, sync_sim_config(duration_s=3.0, tunnel=False, delay_error_us=600.0)
+    )
+    late_found = audit_log(late, rig_from_truth(late_truth), jobs=1).to_dict()
+    for result, sim, error_us in ((found, truth, 0.0), (late_found, late_truth, 600.0)):
+        for cam in result["cameras"]:
+            rec = cam["trigger_design"]["recommendation"]
+            # The constant delay that minimises Eq. 5 is the frames' median ideal delay.
+            frames = sim["cameras"][cam["camera"]]["frames"]
+            ideal_us = float(np.median([f["ideal_delay_ns"] for f in frames])) / 1e3
+            # The packet a trigger fires from lands anywhere in a 1.33 ms VLP-16 packet:
+            # only the method's per-frame t_sleep (Eq. 2) removes that scatter.
+            assert rec["action"] == "per_frame_compensation", rec["why"]
+            assert "Eq. 2" in rec["why"]
+            assert rec["set"]["parameter"] == "t_sleep"
+            assert rec["set"]["value"] == pytest.approx(ideal_us, abs=TOLERANCE_US)
+            mean_ideal_us = sim["cameras"][cam["camera"]]["ideal_delay_ns"] / 1e3
+            assert rec["set"]["current_value"] == pytest.approx(mean_ideal_us + error_us, abs=1.0)
     stated = Rig.model_validate({**rig.model_dump(), "trigger": {"design": "free_running"}})
     again = audit_log(out, stated, jobs=1).to_dict()
     assert {c["trigger_design"]["design"] for c in again["cameras"]} == {"free_running"}
@@ -270,3 +290,16 @@ def test_the_design_output_validates_against_the_audit_schema(logs: dict[str, An
     schema = json.loads((Path(__file__).parents[2] / "schemas" / "audit.schema.json").read_text())
     for name in ("ptp_together", "rolling", "slipping"):
         jsonschema.validate(logs[name][1], schema)
+
+
+def test_rows_come_from_the_image_height_where_the_rig_gives_none(logs: dict[str, Any]) -> None:
+    truth, result = logs["rolling"]
+    rig = rig_from_truth(json.loads(json.dumps(truth))).model_dump()
+    for cam in rig["cameras"]:
+        cam["rows"] = None
+    found = audit_log(Path(result["path"]), Rig.model_validate(rig), jobs=1).to_dict()
+    front = next(c for c in found["cameras"] if c["camera"] == "front")
+    rows = front["trigger_design"]["rolling_shutter"]
+    # The simulator's images are 24 rows high: 43.2 ms over 24 rows is 1.8 ms a row.
+    assert rows["rows"] == 24 and rows["row_time_us"] == pytest.approx(1800.0)
+    assert rows["target_row"] == 12

@@ -207,10 +207,21 @@ def design_setting(
     *,
     omega_deg_s: float,
     sync_output_angle_deg: float | None,
+    applied_delay_ns: float = math.nan,
 ) -> dict[str, Any] | None:
-    """What to set for a shift of the exposure by `shift_ns`, in the design's own units."""
+    """What to set for a shift of the exposure by `shift_ns`, in the design's own units
+    (`applied_delay_ns`: the chain's recorded t_sleep, for `lidar_packet`)."""
     if not math.isfinite(shift_ns):
         return None
+    if guess.design == "lidar_packet":
+        if not math.isfinite(applied_delay_ns):
+            return None
+        return {
+            "parameter": "t_sleep",
+            "value": round((applied_delay_ns + shift_ns) / 1e3, 3),
+            "unit": "us",
+            "current_value": round(applied_delay_ns / 1e3, 3),
+        }
     if guess.design == "ptp_phase" and guess.phase_deg is not None:
         exact = _wrap_deg(guess.phase_deg + shift_ns / guess.frame_period_ns * FULL_TURN_DEG)
         step = SENSOR_TRIGGER_PHASE_STEP_DEG
@@ -299,6 +310,11 @@ def recommendation(
         why = (
             f"{guess.design}: the error scatters {replay.floor_ns / 1e3:.1f} us about its "
             "centre, above the threshold, which no constant shift removes"
+            + (
+                ": the method's per-frame t_sleep (Eq. 2) follows it"
+                if guess.design == "lidar_packet"
+                else ""
+            )
         )
     if why_extra:
         why = f"{why}; {why_extra}"

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from syncaudit.analysis.designs import guess_design
+from syncaudit.errors import SyncauditError
 
 if TYPE_CHECKING:
     from syncaudit.columns.lidar import LidarScan
@@ -59,3 +60,22 @@ def camera_design(
     )
     guess = guess_design(trigger_ns=times, has_checkpoints=False, frame_ns=times, zero_host_ns=zero)
     return guess.design, guess.why
+
+
+def image_rows(log: LogReader, camera: CameraConfig) -> int | None:
+    """The camera's image height from its first CameraInfo (else its first raw Image): the
+    rows of a rolling shutter whose rig gives the readout but not the rows."""
+    for topic in (camera.info_topic, camera.image_topic):
+        info = log.topics.get(topic) if topic else None
+        if info is None or info.msgtype not in {
+            "sensor_msgs/msg/CameraInfo",
+            "sensor_msgs/msg/Image",
+        }:
+            continue
+        try:
+            for raw in log.messages(info.name):
+                height = int(log.deserialize(raw).height)  # type: ignore[attr-defined]
+                return height if height > 0 else None
+        except (SyncauditError, ValueError, AttributeError, TypeError):
+            continue  # no rows: the rig must give them (the audit warns)
+    return None

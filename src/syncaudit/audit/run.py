@@ -351,6 +351,7 @@ def _audit(
         cameras,
         offset_ns=offset,
         start_ns=probe.log.summary.start_ns,
+        log=probe.log,
     )
     warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in probe.log.warnings)

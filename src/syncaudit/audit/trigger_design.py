@@ -24,11 +24,13 @@ from syncaudit.analysis.designs import (
 from syncaudit.analysis.phase_lock import phase_lock_health
 from syncaudit.analysis.rolling_shutter import per_row, row_offset_ns, row_timing
 from syncaudit.analysis.stamps import present, stamps_ns
+from syncaudit.audit.design_info import image_rows
 
 if TYPE_CHECKING:
     from syncaudit.analysis.sync import CameraSync
     from syncaudit.columns.camera import CameraTables
     from syncaudit.columns.lidar import LidarScan
+    from syncaudit.logs import LogReader
     from syncaudit.rig import CameraConfig, Rig
 
 TOGETHER_SPREAD_NS = 50_000.0
@@ -42,8 +44,10 @@ def camera_design(
     sync: CameraSync,
     scan: LidarScan,
     offset_ns: int,
+    rows_from_log: int | None = None,
 ) -> dict[str, Any]:
-    """The camera's design (recognised or stated), its replayed correction and its rows."""
+    """The camera's design (recognised or stated), its replayed correction and its rows
+    (`rows_from_log`: the image height, where the rig gives a readout but no rows)."""
     triggers = tables.triggers
     trigger_ns = stamps_ns(triggers, "camera_sensor_ns") if not triggers.empty else None
     trigger_ns = trigger_ns[present(trigger_ns)] if trigger_ns is not None else np.empty(0, "i8")
@@ -62,7 +66,7 @@ def camera_design(
     )
     paired = np.asarray(frames["paired"], dtype=bool)
     errors = np.where(paired, np.asarray(frames["error_signed_ns"], np.float64), np.nan)
-    timing = row_timing(camera)
+    timing = row_timing(camera, rows_from_log)
     rows = None
     if timing is not None:
         rows = per_row(errors, timing)
@@ -73,6 +77,7 @@ def camera_design(
         replay.shift_ns,
         omega_deg_s=sync.omega_deg_s,
         sync_output_angle_deg=rig.trigger.sync_output_angle_deg,
+        applied_delay_ns=sync.delay_applied_ns,
     )
     extra = (
         f"at row {timing.target_row} of {timing.rows} (rolling shutter, "
@@ -161,10 +166,24 @@ def add_designs(
     *,
     offset_ns: int,
     start_ns: int | None,
+    log: LogReader | None = None,
 ) -> dict[str, Any]:
-    """Give every audited camera its design; return the rig's phase lock (and lock advice)."""
+    """Give every audited camera its design; return the rig's phase lock (and lock advice).
+
+    `log` gives the image rows of rolling-shutter cameras whose rig states none.
+    """
     for camera, camera_tables, audit in zip(cameras, tables, audits, strict=True):
-        audit.design = camera_design(rig, camera, camera_tables, audit.sync, scan, offset_ns)
+        rows = None
+        if log is not None and camera.readout_us is not None and camera.rows is None:
+            rows = image_rows(log, camera)
+        audit.design = camera_design(
+            rig, camera, camera_tables, audit.sync, scan, offset_ns, rows_from_log=rows
+        )
+        if camera.readout_us is not None and audit.design["rolling_shutter"] is None:
+            audit.sync.warnings.append(
+                "readout_us given but no rows (rig rows, CameraInfo or Image height): "
+                "the rolling-shutter rows are not computed"
+            )
         if audit.design["design"] != "lidar_packet":
             _drop_chain_warnings(audit.sync, audit.design["design"])
     zero = scan.revolutions.zero_crossing_sensor_ns
