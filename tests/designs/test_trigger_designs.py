@@ -282,6 +282,8 @@ def test_the_html_report_shows_error_against_row_for_a_rolling_shutter(
     assert page.count('data-kind="row-error"') == 1  # the front camera only
     figure = page[page.index('data-kind="row-error"') :]
     assert "target row 1080" in figure[:3000] and "2160 rows, 20 µs a row" in figure[:3000]
+    assert "phase lock: locked at 100.0" in page  # deg, measured
+    assert "<b>phase = " in page and "trigger design" in page
 
 
 def test_the_design_output_validates_against_the_audit_schema(logs: dict[str, Any]) -> None:

@@ -1,4 +1,5 @@
-"""A rolling-shutter camera's error against image row: one small inline SVG.
+"""The trigger design in the HTML report: a rolling-shutter camera's error against image row
+(one small inline SVG), the design's table rows, the LiDAR's phase-lock line.
 
 Each row exposes a row time after the one above it, so the error against the LiDAR grows
 down the image; the plot shows the mean signed error at the profile rows the audit gives
@@ -68,3 +69,43 @@ def row_error_svg(rows: dict[str, Any] | None) -> str:
         'text-anchor="middle">image row (top 0) · error µs</text></svg>'
     )
     return f'<figure class="rows" data-kind="row-error">{"".join(parts)}</figure>'
+
+
+def design_rows(design: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """Rows of the camera table: the design, why, and what to set (HTML-escaped)."""
+    if not design:
+        return []
+    rec = design["recommendation"]
+    rows = [
+        ("trigger design", f"<b>{esc(design['design'])}</b> ({esc(design['why'])})"),
+        (
+            "recommendation (replayed)",
+            f"{esc(rec['action'])}, shift {esc(rec['shift_us'])} µs: Eq. 5 "
+            f"{esc(rec['current_error_mean_us'])} -> {esc(rec['expected_error_mean_us'])} µs "
+            f"(floor {esc(rec['floor_us'])} µs)",
+        ),
+    ]
+    if rec.get("set"):
+        s = rec["set"]
+        rows.append(("set", f"<b>{esc(s['parameter'])} = {esc(s['value'])} {esc(s['unit'])}</b>"))
+    return rows
+
+
+def phase_lock_html(lock: dict[str, Any] | None) -> str:
+    """One paragraph on the LiDAR's phase lock ("" where there is nothing to say)."""
+    if not lock:
+        return ""
+    if not lock.get("judged"):
+        return f'<p class="phase-lock">phase lock not judged: {esc(lock.get("why"))}</p>'
+    state = "locked" if lock["locked"] else "not locked"
+    lost = "; ".join(
+        f"lost {span['start_s']}-{span['end_s']} s (up to {span['max_offset_us']} µs)"
+        for span in lock.get("lost_lock", [])
+    )
+    return (
+        f'<p class="phase-lock">phase lock: {state} at {esc(lock["lock_azimuth_deg"])} deg '
+        f"({esc(lock['lock_azimuth_source'])}), offset {esc(lock['offset_mean_us'])} µs, "
+        f"jitter {esc(lock['jitter_us'])} µs, drift {esc(lock['drift_us_per_s'])} µs/s"
+        + (f"; {esc(lost)}" if lost else "")
+        + "</p>"
+    )
