@@ -60,6 +60,13 @@ def logs(
     return {
         "ptp_locked": _run(tmp, "ptp_locked", locked, cameras=_cameras([700.0, -400.0, 250.0])),
         "ptp_together": _run(tmp, "ptp_together", locked, cameras=_cameras([700.0] * 3)),
+        "ptp_unsynced_lidar": _run(
+            tmp,
+            "ptp_unsynced_lidar",
+            locked,
+            cameras=_cameras([700.0, -400.0, 250.0]),
+            clock_offset_s=1531.04,
+        ),
         "ptp_free_lidar": _run(
             tmp,
             "ptp_free_lidar",
@@ -305,3 +312,20 @@ def test_rows_come_from_the_image_height_where_the_rig_gives_none(logs: dict[str
     # The simulator's images are 24 rows high: 43.2 ms over 24 rows is 1.8 ms a row.
     assert rows["rows"] == 24 and rows["row_time_us"] == pytest.approx(1800.0)
     assert rows["target_row"] == 12
+
+
+def test_ptp_phase_with_a_lidar_clock_off_the_host(logs: dict[str, Any]) -> None:
+    """The triggers run on host (PTP) time, the LiDAR on its own clock 1531.04 s off (the
+    VLP-16 sample's offset): the audit maps the LiDAR to the host only up to the network
+    latency, and the shifts carry that bias (a limit of any unsynchronised rig)."""
+    truth, result = logs["ptp_unsynced_lidar"]
+    # Host minus sensor is -1531.04 s; the audit's minimum filter finds it up to the t1
+    # floor (it says so), and every camera's shift is off by exactly that much.
+    bias_us = (result["clock_offset_s"] + 1531.04) * 1e6
+    assert 100.0 < bias_us < 400.0
+    assert any("uncertain by the t1 floor" in w for w in result["warnings"])
+    for cam in result["cameras"]:
+        assert cam["trigger_design"]["design"] == "ptp_phase"
+        true_us = truth["cameras"][cam["camera"]]["trigger_design"]["true_shift_ns"] / 1e3
+        shift_us = cam["trigger_design"]["recommendation"]["shift_us"]
+        assert shift_us - true_us == pytest.approx(bias_us, abs=TOLERANCE_US)

@@ -963,7 +963,6 @@ class _Simulation:
             t4_ns=chain.t4,
             t5_ns=chain.t5,
             pulse_true_ns=pulse,
-            clock_offset_ns=self.cfg.clock_offset_ns,
             delay_error_ns=delay_error_ns,
             rng=rng,
         )
@@ -1270,8 +1269,8 @@ class _Simulation:
                 driver = packet + frame["t1_ns"]
                 cam_driver = driver + frame["t2_ns"]
                 cam_sensor = cam_driver + frame["applied_delay_ns"] + frame["t3_ns"]
-                if "trigger_ns" in frame:  # a trigger design: the bare trigger time
-                    msg = writer.time(frame["trigger_ns"] + cfg.clock_offset_ns)
+                if "trigger_ns" in frame:  # a trigger design: the bare trigger time (host)
+                    msg = writer.time(frame["trigger_ns"])
                 elif cfg.trigger_message == "time_reference":
                     msg = writer.new_msg(
                         "sensor_msgs/msg/TimeReference",

@@ -2,8 +2,8 @@
 
 `SyncSimConfig.trigger_design` picks one (docs/trigger-designs.md):
 
-- `ptp_phase`: every camera fires at `k / frame_rate + phase` of PTP time (the sensor
-  clock), as TIER IV sensor_trigger does, and publishes the bare trigger time
+- `ptp_phase`: every camera fires at `k / frame_rate + phase` of PTP time (the host's
+  system time, as TIER IV sensor_trigger reads it), and publishes the bare trigger time
   (`builtin_interfaces/Time`); the exposure starts t4 after the trigger.
 - `lidar_sync_output`: the LiDAR emits a pulse as it crosses `sync_output_angle_deg`; the
   camera fires its configured delay after it (bare trigger times).
@@ -154,7 +154,6 @@ def design_times(
     t4_ns: NDArray[np.int64],
     t5_ns: NDArray[np.int64],
     pulse_true_ns: Callable[[], NDArray[np.int64]],
-    clock_offset_ns: int,
     delay_error_ns: int,
     rng: np.random.Generator,
 ) -> DesignTimes:
@@ -171,11 +170,12 @@ def design_times(
     ideal_start = t_est_ns - t5_ns // 2 - target_offset
     period = NS_PER_S // design.frame_rate_hz
     if design.design == "ptp_phase":
-        ideal = (ideal_start - t4_ns + clock_offset_ns).astype(np.float64)
+        # sensor_trigger runs on the host's system time (PTP time where PTP runs).
+        ideal = (ideal_start - t4_ns).astype(np.float64)
         phase = _ideal_phase_ns(ideal, period)
         k = np.rint((ideal - phase) / period).astype(np.int64)
         used = round(phase) + delay_error_ns
-        trigger = k * period + used - clock_offset_ns + jitter
+        trigger = k * period + used + jitter
         setting = {"phase_ns": float(used), "ideal_phase_ns": phase, "period_ns": float(period)}
         return DesignTimes(trigger, trigger + t4_ns, target_offset, row_time, setting)
     if design.design == "lidar_sync_output":
