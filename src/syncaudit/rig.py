@@ -85,6 +85,23 @@ class CameraConfig(_Strict):
     optional: bool = False
     """An optional camera that cannot be judged (too few paired frames) does not fail the
     gate; a required one does."""
+    readout_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
+    """Rolling shutter: first row's start to last row's start (rows x row time); the
+    exposure start the log gives is the top row's."""
+    row_time_us: float | None = Field(None, gt=0.0, le=MAX_LATENCY_US)
+    """Rolling shutter: one row's delay after the previous (needs `rows`)."""
+    rows: int | None = Field(None, ge=1, le=100_000)
+    """Image rows (for `row_time_us` or the per-row errors)."""
+    lidar_row: int | None = Field(None, ge=0, le=100_000)
+    """The row the LiDAR must meet at the camera's azimuth centre (default: the centre row)."""
+
+    @model_validator(mode="after")
+    def _rows_for_row_time(self) -> CameraConfig:
+        if self.row_time_us is not None and self.rows is None:
+            raise ValueError(f"camera {self.name!r}: row_time_us needs rows")
+        if self.lidar_row is not None and self.rows is not None and self.lidar_row >= self.rows:
+            raise ValueError(f"camera {self.name!r}: lidar_row must be below rows")
+        return self
 
 
 class Thresholds(_Strict):
@@ -117,6 +134,24 @@ class AnalysisConfig(_Strict):
     correction: Literal["recompute", "shift"] = "recompute"
 
 
+TriggerDesign = Literal["lidar_packet", "ptp_phase", "lidar_sync_output", "free_running"]
+"""How the cameras are triggered (docs/trigger-designs.md): from the LiDAR's packets after a
+delay (the method's chain), at a phase of PTP time (TIER IV sensor_trigger), by the LiDAR's
+sync output pulse, or not at all (free-running)."""
+
+
+class TriggerConfig(_Strict):
+    """The rig's trigger design, where the user states it (else the audit recognises it)."""
+
+    design: TriggerDesign | None = None
+    lidar_phase_lock_deg: float | None = Field(None, ge=0.0, lt=360.0)
+    """Packet azimuth the LiDAR is phase-locked to cross at the top of each second
+    (Velodyne phase lock, Hesai sync angle, Ouster phase_lock_offset / 1000)."""
+    sync_output_angle_deg: float | None = Field(None, ge=0.0, lt=360.0)
+    """lidar_sync_output: the azimuth at which the LiDAR emits its pulse (Ouster
+    sync_pulse_out_angle); without it the correction is a trigger delay."""
+
+
 class Rig(_Strict):
     """A whole rig: one triggering LiDAR, its cameras, thresholds and analysis settings."""
 
@@ -124,6 +159,7 @@ class Rig(_Strict):
     cameras: list[CameraConfig] = Field(default_factory=list)
     thresholds: Thresholds = Field(default_factory=Thresholds)
     analysis: AnalysisConfig = Field(default_factory=AnalysisConfig)
+    trigger: TriggerConfig = Field(default_factory=TriggerConfig)
 
     @model_validator(mode="after")
     def _unique_names(self) -> Rig:

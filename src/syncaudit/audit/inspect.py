@@ -14,7 +14,7 @@ topic several cameras share is counted per camera as the audit routes its messag
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +93,10 @@ class CameraRow:
     """The header.frame_id its messages carry (rig, or the frame the image topic showed)."""
     shared_topics: tuple[str, ...] = ()
     """Its topics that other cameras read too (messages told apart by frame id)."""
+    trigger_design: str | None = None
+    """The trigger design its records look like (audit.design_info) ..."""
+    trigger_design_why: str | None = None
+    """... and why."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,6 +242,7 @@ def _inspect(
         except SyncauditError as exc:
             failure = exc
     first_problem: SyncauditError | None = None
+    scans: dict[str, LidarScan] = {}
     for topic in lidar_topics:
         if failure is not None and topic == audited:
             continue
@@ -269,6 +274,7 @@ def _inspect(
             else:
                 report.warnings.append(f"{topic}: {exc}")
             continue
+        scans[topic] = scan
         row = lidar_row(scan)
         report.lidars.append(row)
         report.warnings.extend(scan.warnings)
@@ -284,8 +290,13 @@ def _inspect(
         census = SharedCensus([], [])
     report.shared_topics.extend(_shared_row(log, count) for count in census.topics)
     report.warnings.extend(census.warnings)
+    from syncaudit.audit.design_info import camera_design
+
+    audited_scan = scans.get(audited) if audited else None
     for cam in cameras:
-        report.cameras.append(_camera_row(log, cam, duration, census.topics))
+        design, why = camera_design(log, cam, rig, audited_scan)
+        cam_row = _camera_row(log, cam, duration, census.topics)
+        report.cameras.append(replace(cam_row, trigger_design=design, trigger_design_why=why))
     report.warnings.extend(w.message for w in log.warnings)
     report.health = log_health(log.warnings, report.warnings).to_dict()
     if failure is not None:

@@ -63,6 +63,8 @@ class CameraAudit:
     azimuth_source: str
     replay: ReplayResult | None
     advice: Advice
+    design: dict[str, Any] | None = None
+    """The trigger design, its correction and rolling-shutter rows (audit.trigger_design)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
@@ -83,6 +85,7 @@ class CameraAudit:
                 "settled_error_var_us2": finite_or_none(self.replay.settled_error_var_ns2 / 1e6),
             }
         )
+        out["trigger_design"] = self.design
         return out
 
 
@@ -106,6 +109,8 @@ class AuditResult:
     """The LiDAR's per-revolution timing (RPM, drops, clock offset over time)."""
     health: LogHealth = field(default_factory=LogHealth)
     """The file's condition: cut off, damaged messages skipped, no index."""
+    phase_lock: dict[str, Any] | None = None
+    """The LiDAR's phase-lock health (audit.trigger_design)."""
 
     @property
     def not_judged(self) -> list[str]:
@@ -159,6 +164,7 @@ class AuditResult:
                 "guessed": self.guessed,
                 "warnings": self.warnings,
                 "health": self.health.to_dict(),
+                "phase_lock": self.phase_lock,
             }
         )
         return cleaned
@@ -348,6 +354,18 @@ def _audit(
     offset = _clock_offset(scan, all_tables, warnings)
     cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
     warnings.extend(_floor_warnings(rig, cameras))
+    from syncaudit.audit.trigger_design import add_designs
+
+    phase_lock = add_designs(
+        rig,
+        scan,
+        [cam for cam, _, _ in located],
+        all_tables,
+        cameras,
+        offset_ns=offset,
+        start_ns=probe.log.summary.start_ns,
+        log=probe.log,
+    )
     warnings.extend(lidar_warnings(lidar_row(scan)))
     warnings.extend(w.message for w in probe.log.warnings)
     return AuditResult(
@@ -364,6 +382,7 @@ def _audit(
         start_ns=probe.log.summary.start_ns,
         revolutions=scan.revolutions,
         health=log_health(probe.log.warnings, warnings),
+        phase_lock=phase_lock,
     )
 
 

@@ -85,6 +85,12 @@ def render_info(report: InfoReport, console: Console) -> None:
                 " ".join(str(c) for c in cam.checkpoints) or "[yellow]none[/]",
             )
         console.print(cams)
+        for cam in report.cameras:
+            if cam.trigger_design:
+                console.print(
+                    f"camera {cam.name}: trigger design {cam.trigger_design} "
+                    f"({cam.trigger_design_why})"
+                )
     if report.shared_topics:
         console.print(_shared_topics_table(report))
     for guess in report.guessed:
@@ -114,6 +120,25 @@ def _shared_topics_table(report: InfoReport) -> Table:
             ", ".join(f"{count} {why}" for why, count in left.items() if count) or "0",
         )
     return table
+
+
+def _design_line(design: dict[str, Any]) -> str:
+    """The design and what to set: `ptp_phase: shift -698.5 us -> set phase = 27.1 deg`."""
+    rec = design["recommendation"]
+    line = f"{design['design']}: {rec['action']}"
+    if rec["action"] != "none":
+        line += f" by {_us(rec['shift_us'])} us"
+    if rec.get("set"):
+        line += f" -> set [bold]{rec['set']['parameter']} = {rec['set']['value']}[/] {rec['set']['unit']}"
+    rows = design.get("rolling_shutter")
+    if rows:
+        line += (
+            f"; rolling shutter rows 0 / {rows['target_row']} / {rows['rows'] - 1}: "
+            f"{_us(rows['top']['error_signed_mean_us'])} / "
+            f"{_us(rows['target']['error_signed_mean_us'])} / "
+            f"{_us(rows['bottom']['error_signed_mean_us'])} us"
+        )
+    return line
 
 
 def _us(value: float | None, fmt: str = "{:.1f}") -> str:
@@ -227,6 +252,8 @@ def render_audit(result: AuditResult, console: Console) -> None:
                 f"window {k['window_frames']} frames, dead band {k['deadband_us']:.0f} us, "
                 f"exposure trend gain {k['trend_gain']:g}",
             )
+        if d.get("trigger_design"):
+            table.add_row("trigger design -> set", _design_line(d["trigger_design"]))
         console.print(table)
         for w in cam.sync.warnings:
             console.print(f"  [yellow]warning[/] {w}")

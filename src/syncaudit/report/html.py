@@ -28,6 +28,7 @@ from syncaudit.report.plot import (
     histogram_svg,
     time_plot_svg,
 )
+from syncaudit.report.row_error import design_rows, phase_lock_html, row_error_svg
 from syncaudit.report.script import SCRIPT, STYLE
 
 _e = esc
@@ -306,6 +307,7 @@ def _camera_table(cam: CameraAudit) -> str:
                 f"{_fmt(c['settled_error_mean_us'])} µs, Eq. 6 {_fmt(c['settled_error_var_us2'])} µs²",
             )
         )
+    rows += design_rows(d.get("trigger_design"))
     return _table(rows)
 
 
@@ -339,6 +341,7 @@ def _camera_section(
             limit=th.error_mean_us,
             limit_label=f"Eq. 5 limit {th.error_mean_us:g} µs",
         )
+        + row_error_svg((cam.design or {}).get("rolling_shutter"))
         + "</div>"
         + "".join(time_plot_svg(p, x_range=xr) for p in plots[:3])
         + "<h3>Trigger chain t1..t4 per frame</h3><div class='row'>"
@@ -425,7 +428,8 @@ def audit_sections(result: AuditResult, *, under_gate: bool = False) -> str:
         + '<p class="hint">Time plots: hover for values and wall-clock time, drag to zoom '
         "every time axis, double-click to reset.</p>"
         + (
-            f'<section class="lidar"><h2>LiDAR {_e(result.lidar.topic)}</h2>{lidar}</section>'
+            f'<section class="lidar"><h2>LiDAR {_e(result.lidar.topic)}</h2>'
+            f"{phase_lock_html(result.phase_lock)}{lidar}</section>"
             if lidar
             else ""
         )

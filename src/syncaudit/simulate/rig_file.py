@@ -33,6 +33,7 @@ def rig_from_truth(truth: dict[str, Any]) -> Rig:
                 "frame_id": cam.get("frame_id"),
                 "hfov_deg": cam["hfov_deg"],
                 "stamp": cam["stamp_semantics"],
+                **_rolling_shutter(cam),
             }
         )
     return Rig.model_validate(
@@ -46,3 +47,11 @@ def rig_from_truth(truth: dict[str, Any]) -> Rig:
             "cameras": cameras,
         }
     )
+
+
+def _rolling_shutter(cam: dict[str, Any]) -> dict[str, Any]:
+    """readout_us and rows of a simulated rolling-shutter camera (none for a global one)."""
+    design = cam.get("trigger_design") or {}
+    if not design.get("row_time_ns"):
+        return {}
+    return {"readout_us": design["row_time_ns"] * design["rows"] / 1e3, "rows": design["rows"]}

@@ -62,6 +62,13 @@ from syncaudit.simulate.delays import (
     FrameTiming,
     LiveDelays,
 )
+from syncaudit.simulate.trigger_designs import (
+    DesignTimes,
+    SlippingRotation,
+    TriggerDesignSim,
+    design_times,
+    locked_start_deg,
+)
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
 
@@ -276,6 +283,9 @@ class SyncSimConfig(_Strict):
     trigger_packet_offset: int = Field(default=0, ge=-32, le=32)
     """Triggers fire from the packet this many delivered packets after (negative: before)
     the one `trigger_packet` picks: a driver that waits for, or predicts, the crossing."""
+    trigger_design: TriggerDesignSim | None = None
+    """Trigger the cameras by another design than the chain (`simulate.trigger_designs`):
+    bare `builtin_interfaces/Time` trigger records, or none for free-running cameras."""
 
     @model_validator(mode="after")
     def _check(self) -> SyncSimConfig:
@@ -551,6 +561,51 @@ def _frame_times(
     return _FrameTimes(exposure_start, t_l, t_l - chain.t_est, stamp)
 
 
+def _design_frame_times(
+    chain: _Chain, design: DesignTimes, semantics: StampSemantics
+) -> _FrameTimes:
+    """Exposure start (top row), middle, error and image stamp under a trigger design."""
+    start = design.exposure_start_ns
+    t_l = start + chain.t5 // 2
+    triggered = design.trigger_ns if design.trigger_ns is not None else start
+    stamp = {
+        "exposure_start": start,
+        "exposure_middle": t_l,
+        "exposure_end": start + chain.t5,
+        "trigger": triggered,
+    }[semantics]
+    return _FrameTimes(start, t_l, t_l - chain.t_est, stamp)
+
+
+def _design_truth(
+    cfg: SyncSimConfig, index: int, design: DesignTimes, times: _FrameTimes
+) -> dict[str, Any]:
+    """The design's truth of one camera: settings, the shift that centres the target row's
+    error, and the error at the top, target and bottom rows."""
+    assert cfg.trigger_design is not None
+    sim = cfg.trigger_design
+    rows = sim.rows
+    error = times.error.astype(np.float64)
+    at_rows = {
+        "top": float(error.mean()),
+        "target": float((error + design.target_row_offset_ns).mean()),
+        "bottom": float((error + design.row_time_ns * (rows - 1)).mean()),
+    }
+    target = error + design.target_row_offset_ns
+    return {
+        "design": sim.design,
+        "lidar_phase_lock_deg": sim.lidar_phase_lock_deg,
+        "setting": design.setting,
+        "rows": rows,
+        "row_time_ns": design.row_time_ns,
+        "target_row": rows // 2 if design.row_time_ns else None,
+        "error_signed_mean_ns_at_rows": at_rows,
+        "true_shift_ns": -float(np.median(target)),
+        "floor_ns": float(np.mean(np.abs(target - np.median(target)))),
+        "delay_error_ns": round(cfg.cameras[index].delay_error_us * NS_PER_US),
+    }
+
+
 @dataclass(slots=True)
 class _Outgoing:
     """Serialized messages waiting to be written in log-time order."""
@@ -595,19 +650,38 @@ class _Simulation:
             if config.zero_azimuth_deg is not None
             else round((self.camera_azimuth_deg[0] - 60.0) % 360.0, 2) % 360.0
         )
-        self.rotation = Rotation(
-            start_deg=config.start_azimuth_deg,
-            w0_deg_ns=config.rpm * 6.0 / NS_PER_S,
-            drift_frac=config.rpm_drift_frac,
-            period_ns=config.rpm_drift_period_s * NS_PER_S,
-            phase_rad=math.radians(config.rpm_drift_phase_deg),
-        )
+        self.rotation: Rotation | SlippingRotation = self._rotation(config)
         self.clock = _packet_clock(config.lidar_model, config.rpm)
         self.topic = "/velodyne_packets" if self.vendor == "velodyne" else "/pandar_packets"
         self.msgtype = (
             "velodyne_msgs/msg/VelodyneScan"
             if self.vendor == "velodyne"
             else "pandar_msgs/msg/PandarScan"
+        )
+
+    @staticmethod
+    def _rotation(config: SyncSimConfig) -> Rotation | SlippingRotation:
+        """The head's rotation; phase-locked (no drift, the lock azimuth at each top of
+        second) and slipping out of lock as `trigger_design` says."""
+        design = config.trigger_design
+        w0 = config.rpm * 6.0 / NS_PER_S
+        lock = None if design is None else design.lidar_phase_lock_deg
+        base = Rotation(
+            start_deg=config.start_azimuth_deg
+            if lock is None
+            else locked_start_deg(lock, w0, config.start_time_ns + config.clock_offset_ns),
+            w0_deg_ns=w0,
+            drift_frac=config.rpm_drift_frac if lock is None else 0.0,
+            period_ns=config.rpm_drift_period_s * NS_PER_S,
+            phase_rad=math.radians(config.rpm_drift_phase_deg),
+        )
+        if design is None or lock is None or design.lock_slip_start_s is None:
+            return base
+        return SlippingRotation(
+            base,
+            design.lock_slip_start_s * NS_PER_S,
+            design.lock_slip_length_s * NS_PER_S,
+            design.lock_slip_deg,
         )
 
     # -- LiDAR ----------------------------------------------------------------------------
@@ -793,6 +867,9 @@ class _Simulation:
         initial = max(0, round(float(chain.ideal.mean())) + delay_error_ns)
         applied, adjustments = self._applied_delays(chain, initial, revs_ns)
         times = _frame_times(chain, applied, cfg.cameras[index].stamp_semantics)
+        design = self._design(index, chain, zero_angles, delay_error_ns, rng)
+        if design is not None:
+            times = _design_frame_times(chain, design, cfg.cameras[index].stamp_semantics)
         latency = cfg.image_latency.draw_ns(rng, chain.n)
         image_log = times.exposure_start + chain.t5 + latency
         pattern_seed = int(rng.integers(0, 2**31))
@@ -831,6 +908,11 @@ class _Simulation:
                 "image_log_time_ns": image_log,
             }
         )
+        if design is not None:
+            record["trigger_design"] = _design_truth(self.cfg, index, design, times)
+            if design.trigger_ns is not None:
+                for row, trigger in zip(record["frames"], design.trigger_ns.tolist(), strict=True):
+                    row["trigger_ns"] = trigger
         record["_arrays"] = {
             "exposure_ratio": chain.exposure_ratio,
             "pattern_seed": pattern_seed,
@@ -862,6 +944,40 @@ class _Simulation:
         t5, exposure_ratio = _exposures_ns(cfg.light, t_est_rel / NS_PER_S, cfg.duration_s, rng)
         ideal = t_est - (packet_ns + t1 + t2 + t3 + t4 + t5 // 2)
         return _Chain(n, theta, t_est, packet_ns, t1, t2, t3, t4, t5, exposure_ratio, ideal)
+
+    def _design(
+        self,
+        index: int,
+        chain: _Chain,
+        zero_angles: NDArray[np.float64],
+        delay_error_ns: int,
+        rng: np.random.Generator,
+    ) -> DesignTimes | None:
+        """The camera's frames under `trigger_design` (None: the chain triggers them)."""
+        design = self.cfg.trigger_design
+        if design is None:
+            return None
+        pulse_deg = (
+            design.sync_output_angle_deg
+            if design.sync_output_angle_deg is not None
+            else self.zero_deg
+        )
+
+        def pulse() -> NDArray[np.int64]:
+            angle = zero_angles[: chain.n] + (pulse_deg - self.zero_deg) % 360.0
+            rel = self.rotation.time_at_ns(angle)
+            return self.cfg.start_time_ns + np.rint(rel).astype(np.int64)
+
+        return design_times(
+            design,
+            self.cfg.cameras[index].name,
+            t_est_ns=chain.t_est,
+            t4_ns=chain.t4,
+            t5_ns=chain.t5,
+            pulse_true_ns=pulse,
+            delay_error_ns=delay_error_ns,
+            rng=rng,
+        )
 
     def _applied_delays(
         self, chain: _Chain, initial_ns: int, revs_ns: NDArray[np.float64]
@@ -920,7 +1036,10 @@ class _Simulation:
             topics["exposure"] = f"{prefix}/exposure"
         if "flir_meta" in cfg.exposure_messages:
             topics["meta"] = f"{prefix}/meta"
-        if cfg.trigger_messages:
+        free_running = (
+            cfg.trigger_design is not None and cfg.trigger_design.design == "free_running"
+        )
+        if cfg.trigger_messages and not free_running:
             topics["trigger"] = f"{prefix}/trigger"
         for kind in topics:
             if kind in cfg.shared_topics:
@@ -1196,7 +1315,9 @@ class _Simulation:
                 driver = packet + frame["t1_ns"]
                 cam_driver = driver + frame["t2_ns"]
                 cam_sensor = cam_driver + frame["applied_delay_ns"] + frame["t3_ns"]
-                if cfg.trigger_message == "time_reference":
+                if "trigger_ns" in frame:  # a trigger design: the bare trigger time (host)
+                    msg = writer.time(frame["trigger_ns"])
+                elif cfg.trigger_message == "time_reference":
                     msg = writer.new_msg(
                         "sensor_msgs/msg/TimeReference",
                         header=hdr(cam_sensor, i, "trigger"),
@@ -1239,7 +1360,9 @@ class _Simulation:
                 "image": image_type,
                 "exposure": "syncaudit_msgs/msg/CameraExposure",
                 "meta": "flir_camera_msgs/msg/ImageMetaData",
-                "trigger": "sensor_msgs/msg/TimeReference"
+                "trigger": "builtin_interfaces/msg/Time"
+                if cfg.trigger_design is not None
+                else "sensor_msgs/msg/TimeReference"
                 if cfg.trigger_message == "time_reference"
                 else "syncaudit_msgs/msg/TriggerEvent",
             }
