@@ -34,6 +34,9 @@ class LidarConfig(_Strict):
     """Detected from the message type and packets when omitted."""
     metadata_topic: str | None = None
     """Ouster only: the std_msgs/String topic with the sensor metadata JSON."""
+    model: str | None = None
+    """Velodyne only: the model, where the product byte cannot tell (early VLP-16s write the
+    HDL-32E's id 0x21); detected from the product byte and packet cadence when omitted."""
     zero_azimuth_deg: float = Field(0.0, ge=0.0, lt=360.0)
     """Packet azimuth at which a revolution starts and the trigger chain fires."""
     azimuth_increases: bool = True

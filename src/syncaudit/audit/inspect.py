@@ -70,6 +70,8 @@ class LidarRow:
     clock_synchronised: bool | None
     t1_p50_us: float | None
     t1_p99_us: float | None
+    azimuth_36000_blocks: int = 0
+    """Blocks whose azimuth read 36000 (the wrap), taken as 0 (modulo 36000)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,6 +164,7 @@ def lidar_row(scan: LidarScan) -> LidarRow:
         clock_synchronised=None if clock is None else clock.synchronised,
         t1_p50_us=None if clock is None else clock.t1_p50_ns / 1e3,
         t1_p99_us=None if clock is None else clock.t1_p99_ns / 1e3,
+        azimuth_36000_blocks=scan.wrap_blocks,
     )
 
 
@@ -241,6 +244,7 @@ def _inspect(
                 azimuth_increases=rig.lidar.azimuth_increases if rig else True,
                 ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
                 jobs=jobs,
+                model=rig.lidar.model if rig else None,
             )
             if scan.packets == 0:
                 raise NoDataError(f"LiDAR topic {topic} holds no packets")

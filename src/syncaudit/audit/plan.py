@@ -37,6 +37,8 @@ class ExtractPlan:
     lidar_family: str
     ouster_meta: ouster.OusterMetadata | None
     cameras: CameraRowExtractor
+    lidar_model: str | None = None
+    """The rig's `lidar.model` (Velodyne), else None: the packets tell."""
 
     @property
     def topics(self) -> list[str]:
@@ -54,7 +56,7 @@ class ExtractPlan:
     def extract(self, msg: RawMessage, log: LogReader) -> Item | None:
         """The item one message contributes (None for nothing, e.g. an IMU-sized packet)."""
         if msg.topic == self.lidar_topic:
-            samples = packet_samples_of(msg, self.lidar_family, self.ouster_meta)
+            samples = packet_samples_of(msg, self.lidar_family, self.ouster_meta, self.lidar_model)
             return None if samples is None else ("lidar", msg.topic, samples)
         return self.cameras.extract(msg, log)
 
@@ -87,7 +89,7 @@ def read_plan(
     }
     triggers = {t: _owner(o) for t, o in router.topics("trigger").items()}
     rows = CameraRowExtractor(images, exposures, triggers)
-    return ExtractPlan(lidar.topic, family, meta, rows), router
+    return ExtractPlan(lidar.topic, family, meta, rows, lidar.model), router
 
 
 def _owner(owners: list[CameraTableBuilder]) -> str:

@@ -111,8 +111,11 @@ def packet_family(
     return family, read_ouster_metadata(log, meta_topic)
 
 
-def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
-    """Decode one multi-packet scan message (None when it holds no packet).
+def decode_scan(
+    family: str, msg: RawMessage, index: int, model: str | None = None
+) -> PacketChunk | None:
+    """Decode one multi-packet scan message (None when it holds no packet); `model` is
+    the rig's statement of a Velodyne model (else the packets tell).
 
     Raises UnknownTypeError where the message encoding is not cdr/ros1.
     """
@@ -121,7 +124,7 @@ def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
         stamps, data = velodyne.velodyne_scan_packets(msg.data, msg.encoding)
         if stamps.size == 0:
             return None
-        timing = velodyne.decode_velodyne(data, stamps)
+        timing = velodyne.decode_velodyne(data, stamps, model)
     else:
         if family == "hesai":
             stamps, data, sizes = hesai.pandar_scan_packets(msg.data, msg.encoding)
@@ -131,7 +134,7 @@ def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
         if stamps.size == 0:
             return None
         if family == "nebula" and _looks_velodyne(data, sizes):
-            timing = velodyne.decode_velodyne(data[:, :VELODYNE_PACKET_BYTES], stamps)
+            timing = velodyne.decode_velodyne(data[:, :VELODYNE_PACKET_BYTES], stamps, model)
         else:
             timing = hesai.decode_hesai(data, sizes, stamps)
     log_time = np.full(stamps.size, msg.log_time_ns, dtype=np.int64)
