@@ -82,6 +82,8 @@ class LidarScan:
     product_id_model: str = ""
     """The model the packets' product byte names where `model` (from the packet cadence or
     the rig) differs from it."""
+    decoder_notes: tuple[str, ...] = ()
+    """What the decoder derived rather than read (older Ouster metadata), warned about."""
 
     @property
     def rpm_disagreement(self) -> float:
@@ -93,7 +95,7 @@ class LidarScan:
     @property
     def warnings(self) -> list[str]:
         """What the topic's own packets say is wrong with the decoded timing."""
-        notes = []
+        notes = [f"{self.topic}: {note}" for note in self.decoder_notes]
         if self.product_id_model:
             notes.append(
                 f"{self.topic}: the product byte says {self.product_id_model} but the packets "

@@ -44,6 +44,8 @@ class PacketTiming:
     product_id_model: str = ""
     """The model the packets' product byte names where `model` differs from it (early
     VLP-16 firmware writes the HDL-32E's id; the packet cadence or the rig told them apart)."""
+    notes: tuple[str, ...] = ()
+    """What the decoder derived rather than read (e.g. fields older Ouster metadata lacks)."""
 
     @property
     def n_packets(self) -> int:

@@ -58,6 +58,8 @@ class PacketSamples:
     """Blocks whose azimuth read 36000 (the wrap), taken as 0."""
     product_id_model: str = ""
     """The model the product byte names where the decoder timed another (PacketTiming)."""
+    notes: tuple[str, ...] = ()
+    """The decoder's notes (PacketTiming.notes)."""
 
     @property
     def n_packets(self) -> int:
@@ -150,6 +152,7 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
         declared_rpm_count=rpm_count,
         wrap_blocks=timing.wrap_blocks,
         product_id_model=timing.product_id_model,
+        notes=timing.notes,
     )
 
 
@@ -241,4 +244,5 @@ def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
         declared_rpm_count=sum(p.declared_rpm_count for p in parts),
         wrap_blocks=sum(p.wrap_blocks for p in parts),
         product_id_model=next((p.product_id_model for p in parts if p.product_id_model), ""),
+        notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
     )

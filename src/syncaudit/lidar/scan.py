@@ -43,6 +43,7 @@ class LidarScanner:
     declared_rpm_count: int = 0
     wrap_blocks: int = 0
     product_id_model: str = ""
+    notes: dict[str, None] = field(default_factory=dict)
     _pending: list[PacketSamples] = field(default_factory=list)
     _pending_packets: int = 0
 
@@ -75,6 +76,8 @@ class LidarScanner:
         self.declared_rpm_count += samples.declared_rpm_count
         self.wrap_blocks += samples.wrap_blocks
         self.product_id_model = self.product_id_model or samples.product_id_model
+        for note in samples.notes:
+            self.notes.setdefault(note)
         self._pending.append(samples)
         self._pending_packets += samples.n_packets
         if self._pending_packets >= FEED_PACKETS:
@@ -110,6 +113,7 @@ class LidarScanner:
             else float("nan"),
             wrap_blocks=self.wrap_blocks,
             product_id_model=self.product_id_model,
+            decoder_notes=tuple(self.notes),
         )
 
 

@@ -160,7 +160,9 @@ def _looks_velodyne(data: NDArray[np.uint8], sizes: NDArray[np.integer[Any]]) ->
 def _ouster_chunks(
     messages: Iterator[RawMessage], meta: ouster.OusterMetadata
 ) -> Iterator[PacketChunk]:
-    """Batch single-packet Ouster messages; packets of another size (IMU) are skipped."""
+    """Batch single-packet Ouster messages; packets of another size (IMU) are skipped, but
+    where the metadata did not state the packet shape the first lidar-sized packet fits it
+    (`ouster.fit_packet_size`)."""
     size = meta.packet_bytes
     buffers: list[NDArray[np.uint8]] = []
     times: list[int] = []
@@ -169,7 +171,10 @@ def _ouster_chunks(
         _check_encoding(msg)
         buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
         if buf.size != size:
-            continue
+            fitted = None if buffers else ouster.fit_packet_size(meta, int(buf.size))
+            if fitted is None:
+                continue
+            meta, size = fitted, fitted.packet_bytes
         buffers.append(buf)
         times.append(msg.log_time_ns)
         if len(buffers) == OUSTER_BATCH:
@@ -183,9 +188,10 @@ def decode_ouster_message(msg: RawMessage, meta: ouster.OusterMetadata) -> Packe
     """Decode one single-packet Ouster message (None for other packet sizes, e.g. IMU)."""
     _check_encoding(msg)
     buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
-    if buf.size != meta.packet_bytes:
+    fitted = ouster.fit_packet_size(meta, int(buf.size))
+    if fitted is None:
         return None
-    return _ouster_batch([buf], [msg.log_time_ns], meta, 0)
+    return _ouster_batch([buf], [msg.log_time_ns], fitted, 0)
 
 
 def _ouster_batch(
