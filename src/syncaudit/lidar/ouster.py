@@ -15,7 +15,8 @@ Layouts (little endian, as documented by Ouster and checked against a real OS-0-
   as ouster-sdk's profile table and the sensor's packets give them): 32-byte packet header (u16 packet type, u16 frame id, u24 init id,
   u40 serial number, shot-limiting / thermal bytes), then per column a 12-byte header (u64
   timestamp, u16 measurement id, u16 status) and pixels of 12, 16, 4, 20 or 8 bytes, then a
-  32-byte packet footer (FuSa: a CRC-64 in it). The real OS-1-128 FuSa capture checks the
+  32-byte packet footer (FuSa: a CRC-64 in it). The FuSa header differs (ouster-sdk's
+  packet_format): u8 packet type, u24 init id, u32 frame id, u40 serial number at byte 11. The real OS-1-128 FuSa capture checks the
   sizes: 32 + 16 x (12 + 128 x 8) + 32 = 16640 bytes.
 
 Older metadata (firmware 1.x-2.0 tools) may lack `prod_line`, `data_format` or fields of it;
@@ -72,6 +73,8 @@ _PIXEL_BYTES: dict[str, int] = {
 }
 
 _DUAL_PROFILES = frozenset({"RNG19_RFL8_SIG16_NIR16_DUAL", "FUSA_RNG15_RFL8_NIR8_DUAL"})
+_FUSA_PROFILES = frozenset({"FUSA_RNG15_RFL8_NIR8_DUAL"})
+"""Profiles with the FuSa packet header: 8-bit packet type, 32-bit frame id."""
 _COLUMNS_PER_PACKET_CHOICES = (16, 8, 4, 2, 1)
 """Columns per packet the sensor can be configured to (firmware 2.x-3.x), most common first."""
 _FAMILY_BY_SPAN_DEG = ((60.0, "OS-0"), (25.0, "OS-1"), (0.0, "OS-2"))
@@ -516,6 +519,25 @@ def ouster_packet_dtype(meta: OusterMetadata) -> np.dtype[np.void]:
     columns = ("columns", _column_dtype(meta), (meta.columns_per_packet,))
     if meta.is_legacy:
         dtype: np.dtype[np.void] = np.dtype([columns])
+    elif meta.udp_profile_lidar in _FUSA_PROFILES:
+        # FuSa header (ouster-sdk packet_format): u8 packet type, u24 init id, u32 frame id,
+        # 3 reserved bytes, u40 serial number, then the same status bytes at 16..19.
+        dtype = np.dtype(
+            [
+                ("packet_type", "u1"),
+                ("init_id", "u1", (3,)),
+                ("frame_id", "<u4"),
+                ("reserved0", "V3"),
+                ("prod_sn", "u1", (5,)),
+                ("countdown_thermal_shutdown", "u1"),
+                ("countdown_shot_limiting", "u1"),
+                ("thermal_shutdown", "u1"),
+                ("shot_limiting", "u1"),
+                ("reserved1", "V12"),
+                columns,
+                ("footer", f"V{_EUDP_FOOTER_BYTES}"),
+            ]
+        )
     else:
         dtype = np.dtype(
             [
@@ -703,7 +725,8 @@ def encode_ouster(
         cols["status"] = np.where(ok, _LEGACY_VALID, 0).astype(np.uint32)
     else:
         packets["packet_type"] = LIDAR_PACKET_TYPE
-        packets["frame_id"] = (fid & 0xFFFF).astype(np.uint16)
+        wide = meta.udp_profile_lidar in _FUSA_PROFILES
+        packets["frame_id"] = fid & (0xFFFFFFFF if wide else 0xFFFF)
         init_id = meta.initialization_id or 0
         serial = int(meta.prod_sn) if meta.prod_sn.isdigit() else 0
         packets["init_id"] = np.frombuffer((init_id & 0xFFFFFF).to_bytes(3, "little"), np.uint8)
