@@ -181,16 +181,22 @@ def lidar_warnings(row: LidarRow) -> list[str]:
 
 
 def inspect_log(
-    path: str | Path, rig: Rig | None = None, *, partial: bool = False, jobs: int | None = None
+    path: str | Path,
+    rig: Rig | None = None,
+    *,
+    partial: bool = False,
+    jobs: int | None = None,
+    lidar_metadata: str | Path | None = None,
+    lidar_capture: str | Path | None = None,
 ) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
     Raises the error that makes `audit` fail on the LiDAR topic, unless `partial`: then
     the report is returned with `error` and `exit_code` set. `jobs` worker processes read
     the LiDAR and shared camera topics where the log allows, as `audit` does (default:
-    one per core).
+    one per core). `lidar_metadata` / `lidar_capture`: as `logs.open_log`.
     """
-    with open_log(path) as log:
+    with open_log(path, lidar_metadata=lidar_metadata, lidar_capture=lidar_capture) as log:
         report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
     if failure is not None and not partial:
         raise failure

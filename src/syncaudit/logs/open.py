@@ -79,15 +79,32 @@ def _remote_log(url: str) -> LogReader:
     return open_remote_bag(url)
 
 
-def open_log(path: str | Path, *, lidar_metadata: str | Path | None = None) -> LogReader:
+def open_log(
+    path: str | Path,
+    *,
+    lidar_metadata: str | Path | None = None,
+    lidar_capture: str | Path | None = None,
+) -> LogReader:
     """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`), a ROS 1 `.bag`, or a
     `.pcap` / `.pcapng` capture of LiDAR traffic (`lidar_metadata`: the Ouster sensor
     metadata JSON for it, by default the `.json` of the same stem beside it).
+
+    `lidar_capture`: a capture recorded beside the log on the same host, whose LiDAR
+    streams join the log's topics (`logs.combined`).
 
     Files are opened read-only. Every failure is a LogOpenError (exit 2) or, for a file
     damaged past reading, a LogReadError (exit 3), with a one-line message naming the path.
     An indexed MCAP or ROS 1 bag may also be a URL (http(s)://, or s3:// etc. via fsspec).
     """
+    if lidar_capture is not None:
+        from syncaudit.logs.combined import CombinedLog
+
+        main = open_log(path)
+        try:
+            return CombinedLog(main, open_log(lidar_capture, lidar_metadata=lidar_metadata))
+        except BaseException:
+            main.close()
+            raise
     if isinstance(path, str) and "://" in path:
         return _remote_log(path)
     path = Path(path)

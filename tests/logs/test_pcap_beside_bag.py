@@ -1,0 +1,82 @@
+"""`audit LOG --lidar-capture CAPTURE`: the LiDAR timing from a capture recorded beside the
+cameras' log, and a capture's packets written into a bag give the same `info`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pcap_writer import Datagram, write_capture
+from syncaudit.audit.inspect import inspect_log
+from syncaudit.audit.run import audit_log
+from syncaudit.lidar.velodyne import velodyne_scan_packets
+from syncaudit.logs import open_log
+from syncaudit.rig import Rig
+from syncaudit.simulate.rig_file import rig_from_truth
+from syncaudit.simulate.sync_log import CameraSim, SyncSimConfig, simulate_sync_log
+from syncaudit.writers.log_writer import open_writer
+
+CAPTURE_TOPIC = "/pcap/192_168_1_201_2368/velodyne_packets"
+
+
+def _capture_of(log_path: Path, topic: str, out: Path) -> None:
+    """The log's Velodyne packets as a capture, each at its driver stamp (the host's
+    receive time: what tcpdump beside the driver would have stamped)."""
+    datagrams = []
+    with open_log(log_path) as log:
+        for msg in log.messages([topic]):
+            stamps, data = velodyne_scan_packets(msg.data, msg.encoding)
+            for stamp, packet in zip(stamps.tolist(), data, strict=True):
+                datagrams.append(Datagram(int(stamp), packet.tobytes(), 2368))
+    out.write_bytes(write_capture(sorted(datagrams, key=lambda d: d.time_ns)))
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Rig, Path]:
+    folder = tmp_path_factory.mktemp("beside")
+    out = folder / "drive.mcap"
+    config = SyncSimConfig(
+        seed=3,
+        lidar_model="VLP-16",
+        duration_s=3.0,
+        cameras=[CameraSim(name="front", yaw_deg=0.0, delay_error_us=800.0)],
+    )
+    rig = rig_from_truth(simulate_sync_log(out, config))
+    capture = folder / "lidar.pcap"
+    _capture_of(out, rig.lidar.topic, capture)
+    return out, rig, capture
+
+
+def test_audit_takes_the_lidar_from_the_capture(simulated: tuple[Path, Rig, Path]) -> None:
+    out, rig, capture = simulated
+    bag = audit_log(out, rig, jobs=1)
+    lidar = rig.lidar.model_copy(update={"topic": CAPTURE_TOPIC})
+    capture_rig = rig.model_copy(update={"lidar": lidar})
+    beside = audit_log(out, capture_rig, jobs=1, lidar_capture=capture)
+    assert beside.lidar.topic == CAPTURE_TOPIC
+    assert beside.lidar.packets == bag.lidar.packets
+    assert beside.lidar.revolutions == bag.lidar.revolutions
+    (a,), (b,) = bag.cameras, beside.cameras
+    assert b.sync.frames_paired == a.sync.frames_paired
+    assert b.sync.delay_recommended_ns == pytest.approx(a.sync.delay_recommended_ns, abs=1_000)
+    assert b.sync.error_mean_ns == pytest.approx(a.sync.error_mean_ns, abs=1_000)
+    parallel = audit_log(out, capture_rig, jobs=2, lidar_capture=capture)
+    assert parallel.cameras[0].sync.delay_recommended_ns == b.sync.delay_recommended_ns
+
+
+def test_the_capture_written_into_a_bag_gives_the_same_info(
+    simulated: tuple[Path, Rig, Path], tmp_path: Path
+) -> None:
+    _out, _rig, capture = simulated
+    bag = tmp_path / "from_capture.bag"
+    with open_log(capture) as log, open_writer(bag, "bag") as writer:
+        for topic in log.topics.values():
+            writer.add_topic(topic.name, topic.msgtype)
+        for msg in log.messages():
+            writer.write(msg.topic, msg.log_time_ns, msg.data)
+    (from_capture,) = inspect_log(capture, jobs=1).lidars
+    (from_bag,) = inspect_log(bag, jobs=1).lidars
+    assert from_bag == from_capture
+    assert np.isfinite(from_bag.rpm)
