@@ -11,6 +11,7 @@ import pytest
 from pcap_writer import Datagram, write_capture
 from syncaudit.audit.inspect import inspect_log
 from syncaudit.audit.run import audit_log
+from syncaudit.lidar.hesai import pandar_scan_packets
 from syncaudit.lidar.velodyne import velodyne_scan_packets
 from syncaudit.logs import open_log
 from syncaudit.rig import Rig
@@ -22,14 +23,20 @@ CAPTURE_TOPIC = "/pcap/192_168_1_201_2368/velodyne_packets"
 
 
 def _capture_of(log_path: Path, topic: str, out: Path) -> None:
-    """The log's Velodyne packets as a capture, each at its driver stamp (the host's
-    receive time: what tcpdump beside the driver would have stamped)."""
+    """The log's Velodyne or Hesai packets as a capture, each at its driver stamp (the
+    host's receive time: what tcpdump beside the driver would have stamped)."""
     datagrams = []
     with open_log(log_path) as log:
+        msgtype = log.topics[topic].msgtype
         for msg in log.messages([topic]):
-            stamps, data = velodyne_scan_packets(msg.data, msg.encoding)
-            for stamp, packet in zip(stamps.tolist(), data, strict=True):
-                datagrams.append(Datagram(int(stamp), packet.tobytes(), 2368))
+            if msgtype == "velodyne_msgs/msg/VelodyneScan":
+                stamps, data = velodyne_scan_packets(msg.data, msg.encoding)
+                packets = [p.tobytes() for p in data]
+            else:
+                stamps, data, sizes = pandar_scan_packets(msg.data, msg.encoding)
+                packets = [p[:n].tobytes() for p, n in zip(data, sizes.tolist(), strict=True)]
+            for stamp, packet in zip(stamps.tolist(), packets, strict=True):
+                datagrams.append(Datagram(int(stamp), packet, 2368))
     out.write_bytes(write_capture(sorted(datagrams, key=lambda d: d.time_ns)))
 
 
@@ -66,10 +73,13 @@ def test_audit_takes_the_lidar_from_the_capture(simulated: tuple[Path, Rig, Path
     assert parallel.cameras[0].sync.delay_recommended_ns == b.sync.delay_recommended_ns
 
 
-def test_the_capture_written_into_a_bag_gives_the_same_info(
-    simulated: tuple[Path, Rig, Path], tmp_path: Path
-) -> None:
-    _out, _rig, capture = simulated
+@pytest.mark.parametrize("model", ["VLP-16", "PandarXT32", "Pandar40P"])
+def test_the_capture_written_into_a_bag_gives_the_same_info(tmp_path: Path, model: str) -> None:
+    out = tmp_path / "drive.mcap"
+    config = SyncSimConfig(seed=5, lidar_model=model, duration_s=1.0)  # type: ignore[arg-type]
+    rig = rig_from_truth(simulate_sync_log(out, config))
+    capture = tmp_path / "lidar.pcap"
+    _capture_of(out, rig.lidar.topic, capture)
     bag = tmp_path / "from_capture.bag"
     with open_log(capture) as log, open_writer(bag, "bag") as writer:
         for topic in log.topics.values():
