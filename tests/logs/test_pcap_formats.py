@@ -161,3 +161,19 @@ def test_not_a_capture_is_refused(tmp_path: Path) -> None:
     path.write_bytes(b"\x0a\x0d\x0d\x0a\x1c\x00\x00\x00\x00\x00\x00\x00")
     with pytest.raises(LogOpenError, match="byte-order magic"):
         open_log(path)
+
+
+def test_fragments_across_range_ends_are_read_once(
+    tmp_path: Path, datagrams: list[Datagram], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "fragments.pcap"
+    path.write_bytes(write_capture(datagrams, mtu=256))  # 5-6 fragments per packet
+    whole = _row(path)
+    monkeypatch.setattr(pcap_reader, "UNIT_BYTES", 16 * 1024)
+    with open_log(path) as log:
+        assert len(log.read_units(frozenset(log.topics)) or []) > 50
+    chunked = _row(path)
+    assert chunked.scans > whole.scans  # scan messages end with each range
+    assert dataclasses.replace(chunked, scans=whole.scans) == whole
+    assert _row(path, jobs=2) == chunked
+    assert (whole.packets, whole.dropped_packets) == (876, 0)

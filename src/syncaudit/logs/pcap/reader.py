@@ -43,6 +43,8 @@ count every topic's messages exactly)."""
 SCAN_PACKETS = 128
 """Velodyne / Hesai packets per scan message (a VLP-16 sends ~75 per revolution at 600 RPM)."""
 UNIT_KIND = "pcap-range"
+TAIL_RECORDS = 256
+"""Records read past a range's end, at most, to complete its fragmented datagrams."""
 
 _TYPES = {
     "velodyne": ros.VELODYNE_SCAN,
@@ -111,11 +113,11 @@ class RangeMessages:
         """(log time, channel id, serialized message) of the range, in capture order."""
         batches = _Batches()
         last: dict[StreamKey, int] = {}
-        for record in self.stream.iter_range(start, stop):
+        for record in self._records(start, stop):
             if record.link_type not in LINK_TYPES:
                 self.udp.not_udp += 1
                 continue
-            dgram = self.udp.datagram(record.data, record.link_type)
+            dgram = self.udp.datagram(record.data, record.link_type, new=record.offset < stop)
             if dgram is None:
                 continue
             kind = classify(dgram.port, dgram.payload, None)
@@ -140,6 +142,17 @@ class RangeMessages:
             raw = batches.flush(key)
             if raw is not None:
                 yield last[key], self.wanted[key], raw
+
+    def _records(self, start: int, stop: int) -> Iterator[Record]:
+        """The range's records, then those after it that complete its fragmented
+        datagrams (at most TAIL_RECORDS; the next range skips their fragments)."""
+        yield from self.stream.iter_range(start, stop)
+        if not self.udp.awaiting:
+            return
+        for count, record in enumerate(self.stream.iter_range(stop, self.stream.size)):
+            yield record
+            if not self.udp.awaiting or count >= TAIL_RECORDS:
+                return
 
 
 def _channels(topics: dict[str, TopicInfo]) -> dict[int, ChannelInfo]:

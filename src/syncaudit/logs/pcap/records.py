@@ -43,8 +43,12 @@ MAX_RECORDS = 2**32 - 1
 """More records than a 32-bit counter holds: refused (a hostile or looping file)."""
 MAX_BLOCK_BYTES = 16 * 1024 * 1024
 """A pcapng block longer than this is damage (snap lengths stop at 256 KiB)."""
-SYNC_CHAIN = 4
+SYNC_CHAIN = 16
 """Record headers that must chain for a byte offset to count as a record boundary."""
+SYNC_CHAIN_MIN = 4
+"""Chained headers enough where the read window ends first (records of up to 256 KiB)."""
+SYNC_SPAN_S = 7 * 86_400
+"""A classic record boundary's time stamp lies within this of the capture's first one."""
 READ_BYTES = 4 * 1024 * 1024
 """Bytes read from the file at a time."""
 
@@ -85,6 +89,8 @@ class CaptureFormat:
     endian: str
     interfaces: list[Interface] = field(default_factory=list)
     first_record: int = FILE_HEADER_BYTES
+    first_second: int | None = None
+    """Classic pcap: the first record's seconds (what `sync_offset` checks stamps against)."""
 
 
 def read_format(handle: BinaryIO, path: str, size: int) -> CaptureFormat:
@@ -101,7 +107,10 @@ def read_format(handle: BinaryIO, path: str, size: int) -> CaptureFormat:
         if snaplen == 0:
             raise LogOpenError(f"{path}: pcap snap length is 0 (no packet could be captured)")
         snap = min(snaplen, MAX_SNAPLEN) if snaplen < 2**31 else MAX_SNAPLEN
-        return CaptureFormat("pcap", endian, [Interface(link & 0x0FFFFFFF, unit_ns, snap)])
+        first = handle.read(4)
+        second = struct.unpack(endian + "I", first)[0] if len(first) == 4 else None
+        iface = Interface(link & 0x0FFFFFFF, unit_ns, snap)
+        return CaptureFormat("pcap", endian, [iface], first_second=second)
     if head[:4] == PCAPNG_MAGIC:
         return _read_ng_head(handle, path, size)
     raise LogOpenError(f"{path}: not a pcap or pcapng capture")
@@ -309,7 +318,7 @@ def sync_offset(handle: BinaryIO, fmt: CaptureFormat, size: int, offset: int) ->
     record header, and the SYNC_CHAIN - 1 after it, are plausible and chain."""
     if offset <= fmt.first_record:
         return fmt.first_record
-    window = 4 * MAX_SNAPLEN + 64 * 1024
+    window = 2 * MAX_SNAPLEN + 64 * 1024
     handle.seek(offset)
     buf = handle.read(window)
     step = 4 if fmt.kind == "pcapng" else 1
@@ -321,20 +330,22 @@ def sync_offset(handle: BinaryIO, fmt: CaptureFormat, size: int, offset: int) ->
 
 
 def _chains(buf: bytes, pos: int, fmt: CaptureFormat, at: int, size: int) -> bool:
-    """Whether SYNC_CHAIN plausible record headers chain from `buf[pos]` (the last one may
-    end the file exactly)."""
+    """Whether SYNC_CHAIN plausible record headers chain from `buf[pos]` (SYNC_CHAIN_MIN
+    where the window ends first; the last one may end the file exactly)."""
     endian = fmt.endian
-    for _ in range(SYNC_CHAIN):
+    for checked in range(SYNC_CHAIN):
         if at == size:
             return True
         if pos + 16 > len(buf):
-            return False
+            return checked >= SYNC_CHAIN_MIN
         if fmt.kind == "pcap":
-            _sec, sub, incl, orig = struct.unpack_from(endian + "IIII", buf, pos)
+            sec, sub, incl, orig = struct.unpack_from(endian + "IIII", buf, pos)
             unit_ns = fmt.interfaces[0].unit_ns
             if sub * unit_ns >= 1e9 or incl > fmt.interfaces[0].snaplen or orig < incl:
                 return False
-            if incl == 0:
+            if incl == 0 or orig > MAX_SNAPLEN * 256:
+                return False
+            if fmt.first_second is not None and abs(sec - fmt.first_second) > SYNC_SPAN_S:
                 return False
             step = RECORD_HEADER_BYTES + incl
         else:

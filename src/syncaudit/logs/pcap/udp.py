@@ -86,8 +86,19 @@ class UdpDecoder:
     """Fragmented datagrams never completed (a fragment lost, or cut off by the capture)."""
     _pending: OrderedDict[tuple[bytes, int], _Pending] = field(default_factory=OrderedDict)
 
-    def datagram(self, frame: bytes, link_type: int) -> Datagram | None:
-        """The datagram `frame` completes (None: a fragment awaiting others, or not UDP)."""
+    @property
+    def awaiting(self) -> bool:
+        """Whether fragmented datagrams await more fragments."""
+        return bool(self._pending)
+
+    def datagram(self, frame: bytes, link_type: int, *, new: bool = True) -> Datagram | None:
+        """The datagram `frame` completes (None: a fragment awaiting others, or not UDP).
+
+        A datagram's fragments are gathered from its first one (offset 0) on: a later
+        fragment whose first was never seen belongs to a datagram begun before the range
+        read, which the range before reads to its end. `new=False` (past a range's end)
+        completes awaited datagrams only.
+        """
         ip = ipv4_of(frame, link_type)
         if ip is None or len(ip) < 20 or ip[0] >> 4 != 4:
             self.not_udp += 1
@@ -109,17 +120,23 @@ class UdpDecoder:
         more = bool(flags_frag & 0x2000)
         offset = (flags_frag & 0x1FFF) * 8
         body = ip[ihl:total]
+        if not (more or offset or new):
+            return None  # past the range: read by the next one
         if more or offset:
-            whole = self._reassemble(ip, offset, more, body)
+            whole = self._reassemble(ip, offset, more, body, new)
             if whole is None:
                 return None
             body = whole
         return self._udp(ip, body)
 
-    def _reassemble(self, ip: bytes, offset: int, more: bool, body: bytes) -> bytes | None:
+    def _reassemble(
+        self, ip: bytes, offset: int, more: bool, body: bytes, new: bool
+    ) -> bytes | None:
         key = (ip[12:20], (ip[4] << 8) | ip[5])
         pending = self._pending.get(key)
         if pending is None:
+            if offset or not new:
+                return None
             pending = self._pending[key] = _Pending()
             if len(self._pending) > MAX_PENDING_DATAGRAMS:
                 self._pending.popitem(last=False)
