@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from syncaudit.audit.inspect import InfoReport, inspect_log
 from syncaudit.logs import open_log
 
@@ -98,3 +100,23 @@ def test_monterey_wrap_block_is_packet_857_block_4(pcap_data: Path) -> None:
     azimuth = data[:, :1200].reshape(-1, 12, 100)[:, :, 2:4].copy().view("<u2")[..., 0]
     assert [tuple(x) for x in np.argwhere(azimuth == 36000)] == [(857, 4)]
     assert azimuth[857, 3:6].tolist() == [35979, 36000, 18]
+
+
+@pytest.mark.parametrize("name", [OS0, OS1_32, OS1_FUSA, VLP16, HDL32, MONTEREY])
+def test_the_same_packets_in_a_bag_give_the_same_info(
+    pcap_data: Path, tmp_path: Path, name: str
+) -> None:
+    from syncaudit.writers.log_writer import open_writer
+
+    bag = tmp_path / "same.bag"
+    with open_log(pcap_data / name) as log, open_writer(bag, "bag") as writer:
+        for topic in log.topics.values():
+            writer.add_topic(topic.name, topic.msgtype)
+        for msg in log.messages():
+            writer.write(msg.topic, msg.log_time_ns, msg.data)
+    capture, written = _info(pcap_data, name), inspect_log(bag, jobs=1)
+    assert [repr(r) for r in written.lidars] == [repr(r) for r in capture.lidars]  # NaN too
+    assert [(t.name, t.count) for t in written.topics] == [
+        (t.name, t.count) for t in capture.topics
+    ]
+    assert sorted(written.warnings) == sorted(capture.warnings)
