@@ -25,6 +25,7 @@ from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, LogSummary, RawMessage, ReadUnit, TopicInfo
 from syncaudit.logs.pcap import ros_messages as ros
+from syncaudit.logs.pcap.clock_source import PositionClock, ouster_timestamp_mode
 from syncaudit.logs.pcap.records import (
     CaptureFormat,
     Record,
@@ -32,7 +33,12 @@ from syncaudit.logs.pcap.records import (
     read_format,
     sync_offset,
 )
-from syncaudit.logs.pcap.sensors import OUSTER_LIDAR_PORT, StreamKey, classify
+from syncaudit.logs.pcap.sensors import (
+    OUSTER_LIDAR_PORT,
+    VELODYNE_POSITION_PORT,
+    StreamKey,
+    classify,
+)
 from syncaudit.logs.pcap.udp import LINK_TYPES, UdpDecoder
 
 UNIT_BYTES = 16 * 1024 * 1024
@@ -268,6 +274,7 @@ class PcapLog(LogReader):
     def _discover(self) -> LogSummary:
         """Streams from the first DISCOVER_BYTES, the end (and any cut) from the last range."""
         udp = UdpDecoder()
+        clocks: dict[StreamKey, PositionClock] = {}
         counts: dict[StreamKey, int] = {}
         per_unit: dict[tuple[StreamKey, int], int] = {}
         first_ns: int | None = None
@@ -278,9 +285,11 @@ class PcapLog(LogReader):
             first_ns = record.time_ns if first_ns is None else first_ns
             while record.offset >= self._bounds[unit + 1]:
                 unit += 1
-            key = self._key(udp, record)
+            key, payload = self._key(udp, record)
             if key is not None:
                 counts[key] = counts.get(key, 0) + 1
+                if key.kind == "position" and key.port == VELODYNE_POSITION_PORT:
+                    clocks.setdefault(key, PositionClock()).add(payload)
                 per_unit[key, unit] = per_unit.get((key, unit), 0) + 1
         whole = stop == self.size
         for start in self._bounds[:-1]:
@@ -310,6 +319,11 @@ class PcapLog(LogReader):
             if key.kind == "ouster" and self.metadata_text is not None:
                 meta = key.topic.rsplit("/", 1)[0] + "/metadata"
                 topics[meta] = TopicInfo(meta, ros.STRING, "ros1", 1, False)
+        for key, clock in sorted(clocks.items(), key=lambda kv: kv[0].topic):
+            self.warn("clock-source", f"{key.topic}: {clock.describe()}")
+        mode = ouster_timestamp_mode(self.metadata_text)
+        if mode is not None and any(k.kind == "ouster" for k in counts):
+            self.warn("clock-source", f"Ouster metadata: timestamp_mode {mode}")
         other = sum(n for k, n in counts.items() if k.kind == "other")
         if other:
             self.warn("not-sensor", f"{other} UDP datagrams of no LiDAR stream (not read)")
@@ -319,16 +333,16 @@ class PcapLog(LogReader):
         total = sum(t.count or 0 for t in topics.values()) if whole else None
         return LogSummary(str(self.path), kind, first_ns, last_ns, total, topics)
 
-    def _key(self, udp: UdpDecoder, record: Record) -> StreamKey | None:
+    def _key(self, udp: UdpDecoder, record: Record) -> tuple[StreamKey | None, bytes]:
         if record.link_type not in LINK_TYPES:
-            return None
+            return None, b""
         dgram = udp.datagram(record.data, record.link_type)
         if dgram is None:
-            return None
+            return None, b""
         kind = classify(dgram.port, dgram.payload, None)
         if kind == "other" and dgram.port in self._ouster:
             kind = "ouster"
-        return StreamKey(kind, dgram.source, dgram.port)
+        return StreamKey(kind, dgram.source, dgram.port), dgram.payload
 
     def _first_time(self, start: int, default: int | None) -> int:
         for record in self._stream().iter_range(start, self.size):
