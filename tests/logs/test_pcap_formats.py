@@ -177,3 +177,24 @@ def test_fragments_across_range_ends_are_read_once(
     assert dataclasses.replace(chunked, scans=whole.scans) == whole
     assert _row(path, jobs=2) == chunked
     assert (whole.packets, whole.dropped_packets) == (876, 0)
+
+
+def test_pcapng_interfaces_described_late_are_read_in_order(
+    tmp_path: Path, datagrams: list[Datagram], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second interface block after the first packets: read serially, packets counted."""
+    import struct
+
+    raw = bytearray(write_capture(datagrams, ng=True))
+    idb = struct.pack("<IIHHI", 1, 20, 1, 0, 65535) + struct.pack("<I", 20)
+    first_epb = raw.index(struct.pack("<I", 6))  # section + interface blocks come first
+    cut = first_epb + int.from_bytes(raw[first_epb + 4 : first_epb + 8], "little")
+    raw[cut:cut] = idb
+    path = tmp_path / "late.pcapng"
+    path.write_bytes(bytes(raw))
+    monkeypatch.setattr(pcap_reader, "UNIT_BYTES", 64 * 1024)
+    with open_log(path) as log:
+        assert log.read_units(frozenset(log.topics)) is None
+        topic = next(t for t in log.topics if t.endswith("velodyne_packets"))
+        assert sum(1 for _ in log.messages(topic)) == log.topics[topic].count
+    assert _row(path).packets == 876

@@ -292,6 +292,9 @@ class PcapLog(LogReader):
                     clocks.setdefault(key, PositionClock()).add(payload)
                 per_unit[key, unit] = per_unit.get((key, unit), 0) + 1
         whole = stop == self.size
+        # pcapng interfaces described after the first packet: a range read from the middle
+        # would not know them, so such a capture is read in order (no read units).
+        self.serial = len(stream.fmt.interfaces) > len(self.fmt.interfaces)
         for start in self._bounds[:-1]:
             self.unit_start_ns.append(self._first_time(start, first_ns))
         tail = self._stream()
@@ -310,11 +313,12 @@ class PcapLog(LogReader):
             count = None
             if whole:  # every record was seen: the messages each stream makes, exactly
                 batched = key.kind in ("velodyne", "hesai")
-                count = sum(
-                    -(-n // SCAN_PACKETS) if batched else n
-                    for (k, _u), n in per_unit.items()
-                    if k == key
+                runs = (
+                    [counts[key]]
+                    if self.serial
+                    else [n for (k, _u), n in per_unit.items() if k == key]
                 )
+                count = sum(-(-n // SCAN_PACKETS) if batched else n for n in runs)
             topics[key.topic] = TopicInfo(key.topic, _TYPES[key.kind], "ros1", count, False)
             if key.kind == "ouster" and self.metadata_text is not None:
                 meta = key.topic.rsplit("/", 1)[0] + "/metadata"
@@ -352,7 +356,10 @@ class PcapLog(LogReader):
     # ---- reading ---------------------------------------------------------------------------
 
     def read_units(self, topics: frozenset[str]) -> list[ReadUnit] | None:
-        """One unit per byte range of records (metadata is read by `messages()`)."""
+        """One unit per byte range of records (metadata is read by `messages()`); None for
+        a pcapng capture describing interfaces after its first packet."""
+        if self.serial:
+            return None
         units = []
         for i, start in enumerate(self._bounds[:-1]):
             stop = self._bounds[i + 1]
@@ -392,9 +399,10 @@ class PcapLog(LogReader):
             return
         wanted = {k: c for c, i in channels.items() if (k := key_of_topic(i.topic)) is not None}
         ports = self._ouster | {k.port for k in wanted if k.kind == "ouster"}
-        for i, begin in enumerate(self._bounds[:-1]):
+        bounds = [self._bounds[0], self._bounds[-1]] if self.serial else self._bounds
+        for i, begin in enumerate(bounds[:-1]):
             reader = RangeMessages(self._stream(), wanted, ports)
-            for time_ns, cid, raw in reader.messages(begin, self._bounds[i + 1]):
+            for time_ns, cid, raw in reader.messages(begin, bounds[i + 1]):
                 if (start_ns is not None and time_ns < start_ns) or (
                     stop_ns is not None and time_ns >= stop_ns
                 ):
