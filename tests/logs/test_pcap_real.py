@@ -127,3 +127,19 @@ def test_the_same_packets_in_a_bag_give_the_same_info(
     # position topic is one more topic): the rest is the same.
     shown = [w for w in capture.warnings if "PPS " not in w and "timestamp_mode" not in w]
     assert sorted(written.warnings) == sorted(shown)
+
+
+def test_ouster_without_metadata_says_how_to_give_it(pcap_data: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from syncaudit.errors import NoDataError
+
+    copy = tmp_path / "bare.pcap"
+    shutil.copyfile(pcap_data / OS0, copy)
+    report = inspect_log(copy, jobs=1, partial=True)
+    assert isinstance(report.error, str) and "metadata" in report.error
+    assert any("--lidar-metadata FILE" in w for w in report.warnings)
+    given = inspect_log(copy, jobs=1, lidar_metadata=pcap_data / OS0.replace(".pcap", ".json"))
+    assert given.lidars[0].model == "OS-0-128"
+    with pytest.raises(NoDataError):
+        inspect_log(copy, jobs=1)

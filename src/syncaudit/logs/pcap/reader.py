@@ -325,6 +325,12 @@ class PcapLog(LogReader):
                 topics[meta] = TopicInfo(meta, ros.STRING, "ros1", 1, False)
         for key, clock in sorted(clocks.items(), key=lambda kv: kv[0].topic):
             self.warn("clock-source", f"{key.topic}: {clock.describe()}")
+        if self.metadata_text is None and any(k.kind == "ouster" for k in counts):
+            self.warn(
+                "no-metadata",
+                f"Ouster packets but no {self.path.with_suffix('.json').name} beside the "
+                "capture: pass its sensor metadata with --lidar-metadata FILE",
+            )
         mode = ouster_timestamp_mode(self.metadata_text)
         if mode is not None and any(k.kind == "ouster" for k in counts):
             self.warn("clock-source", f"Ouster metadata: timestamp_mode {mode}")
