@@ -143,3 +143,11 @@ def test_ouster_without_metadata_says_how_to_give_it(pcap_data: Path, tmp_path: 
     assert given.lidars[0].model == "OS-0-128"
     with pytest.raises(NoDataError):
         inspect_log(copy, jobs=1)
+
+
+def test_audit_of_a_capture_is_its_lidar_side(pcap_data: Path) -> None:
+    from syncaudit.audit.run import audit_log
+
+    result = audit_log(pcap_data / MONTEREY, jobs=1)
+    assert (result.lidar.model, result.lidar.packets, result.cameras) == ("HDL-32E", 2702, [])
+    assert any("1 block read azimuth 36000" in w for w in result.warnings)

@@ -177,6 +177,12 @@ def lidar_warnings(row: LidarRow) -> list[str]:
         warnings.append(
             f"{row.topic}: {row.outlier_blocks} blocks ignored, their azimuth contradicts their packet"
         )
+    if row.azimuth_36000_blocks:
+        warnings.append(
+            f"{row.topic}: {row.azimuth_36000_blocks} "
+            f"block{'s' if row.azimuth_36000_blocks != 1 else ''} read azimuth 36000 (the "
+            "wrap, as real sensors write it), taken as 0"
+        )
     return warnings
 
 
