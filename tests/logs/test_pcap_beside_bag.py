@@ -90,3 +90,25 @@ def test_the_capture_written_into_a_bag_gives_the_same_info(tmp_path: Path, mode
     (from_bag,) = inspect_log(bag, jobs=1).lidars
     assert from_bag == from_capture
     assert np.isfinite(from_bag.rpm)
+
+
+def test_the_cli_takes_lidar_capture(simulated: tuple[Path, Rig, Path], tmp_path: Path) -> None:
+    import json
+
+    import yaml
+    from typer.testing import CliRunner
+
+    from syncaudit.cli import app
+
+    out, rig, capture = simulated
+    lidar = rig.lidar.model_copy(update={"topic": CAPTURE_TOPIC})
+    rig_file = tmp_path / "capture.rig.yaml"
+    rig_file.write_text(
+        yaml.safe_dump(rig.model_copy(update={"lidar": lidar}).model_dump(mode="json"))
+    )
+    args = ["audit", str(out), "--rig", str(rig_file), "--lidar-capture", str(capture), "--json"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code in (0, 10), result.output
+    assert json.loads(result.output)["lidar"]["topic"] == CAPTURE_TOPIC
+    missing = CliRunner().invoke(app, [*args[:5], str(tmp_path / "none.pcap"), "--json"])
+    assert missing.exit_code == 2
