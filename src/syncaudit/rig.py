@@ -40,6 +40,9 @@ class LidarConfig(_Strict):
     stamp_marks: Literal["first", "last"] | None = None
     """PointCloud2 topics only: the point a cloud's header stamp marks where per-point
     times are relative and >= 0 (default 'first': times count from the stamp)."""
+    model: str | None = None
+    """Velodyne only: the model, where the product byte cannot tell (early VLP-16s write the
+    HDL-32E's id 0x21); detected from the product byte and packet cadence when omitted."""
     zero_azimuth_deg: float = Field(0.0, ge=0.0, lt=360.0)
     """Packet azimuth at which a revolution starts and the trigger chain fires."""
     azimuth_increases: bool = True

@@ -74,6 +74,8 @@ class LidarRow:
     clock_synchronised: bool | None
     t1_p50_us: float | None
     t1_p99_us: float | None
+    azimuth_36000_blocks: int = 0
+    """Blocks whose azimuth read 36000 (the wrap), taken as 0 (modulo 36000)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,6 +174,7 @@ def lidar_row(scan: LidarScan) -> LidarRow:
         clock_synchronised=None if clock is None else clock.synchronised,
         t1_p50_us=None if clock is None else clock.t1_p50_ns / 1e3,
         t1_p99_us=None if clock is None else clock.t1_p99_ns / 1e3,
+        azimuth_36000_blocks=scan.wrap_blocks,
     )
 
 
@@ -184,20 +187,32 @@ def lidar_warnings(row: LidarRow) -> list[str]:
         warnings.append(
             f"{row.topic}: {row.outlier_blocks} blocks ignored, their azimuth contradicts their packet"
         )
+    if row.azimuth_36000_blocks:
+        warnings.append(
+            f"{row.topic}: {row.azimuth_36000_blocks} "
+            f"block{'s' if row.azimuth_36000_blocks != 1 else ''} read azimuth 36000 (the "
+            "wrap, as real sensors write it), taken as 0"
+        )
     return warnings
 
 
 def inspect_log(
-    path: str | Path, rig: Rig | None = None, *, partial: bool = False, jobs: int | None = None
+    path: str | Path,
+    rig: Rig | None = None,
+    *,
+    partial: bool = False,
+    jobs: int | None = None,
+    lidar_metadata: str | Path | None = None,
+    lidar_capture: str | Path | None = None,
 ) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
     Raises the error that makes `audit` fail on the LiDAR topic, unless `partial`: then
     the report is returned with `error` and `exit_code` set. `jobs` worker processes read
     the LiDAR and shared camera topics where the log allows, as `audit` does (default:
-    one per core).
+    one per core). `lidar_metadata` / `lidar_capture`: as `logs.open_log`.
     """
-    with open_log(path) as log:
+    with open_log(path, lidar_metadata=lidar_metadata, lidar_capture=lidar_capture) as log:
         report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
     if failure is not None and not partial:
         raise failure
@@ -261,6 +276,7 @@ def _inspect(
                 azimuth_increases=rig.lidar.azimuth_increases if rig else True,
                 ouster_metadata_topic=rig.lidar.metadata_topic if rig else None,
                 jobs=jobs,
+                model=rig.lidar.model if rig else None,
             )
             if scan.packets == 0:
                 raise NoDataError(f"LiDAR topic {topic} holds no packets")

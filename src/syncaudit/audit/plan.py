@@ -42,6 +42,8 @@ class ExtractPlan:
     cameras: CameraRowExtractor
     cloud: CloudSettings | None = None
     """Set where the LiDAR topic is PointCloud2: how to read its timing."""
+    lidar_model: str | None = None
+    """The rig's `lidar.model` (Velodyne), else None: the packets tell."""
 
     @property
     def topics(self) -> list[str]:
@@ -62,7 +64,7 @@ class ExtractPlan:
             cloud = cloud_samples(msg, self.cloud)
             return None if cloud is None else ("lidar", msg.topic, cloud)
         if msg.topic == self.lidar_topic:
-            samples = packet_samples_of(msg, self.lidar_family, self.ouster_meta)
+            samples = packet_samples_of(msg, self.lidar_family, self.ouster_meta, self.lidar_model)
             return None if samples is None else ("lidar", msg.topic, samples)
         return self.cameras.extract(msg, log)
 
@@ -98,7 +100,7 @@ def read_plan(
     }
     triggers = {t: _owner(o) for t, o in router.topics("trigger").items()}
     rows = CameraRowExtractor(images, exposures, triggers)
-    return ExtractPlan(lidar.topic, family, meta, rows, cloud), router
+    return ExtractPlan(lidar.topic, family, meta, rows, cloud, lidar.model), router
 
 
 def cloud_settings(rig: Rig) -> CloudSettings:

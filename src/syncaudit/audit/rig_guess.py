@@ -158,12 +158,12 @@ def render_starter_rig(log: LogReader | LogProbe) -> str:
     return "\n".join(lines) + "\n"
 
 
-def starter_rig_yaml(path: str | Path) -> str:
+def starter_rig_yaml(path: str | Path, lidar_metadata: str | Path | None = None) -> str:
     """The starter rig of the log at `path` (see `render_starter_rig`).
 
     Raises:
         LogOpenError, LogReadError: the log cannot be read.
         NoDataError: the log has no LiDAR packet topic.
     """
-    with open_log(path) as log:
+    with open_log(path, lidar_metadata=lidar_metadata) as log:
         return render_starter_rig(log)

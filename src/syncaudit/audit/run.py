@@ -181,8 +181,11 @@ def audit_log(
     jobs: int | None = None,
     check_crc: bool = False,
     meanwhile: Callable[[], object] | None = None,
+    lidar_metadata: str | Path | None = None,
+    lidar_capture: str | Path | None = None,
 ) -> AuditResult:
     """Audit the LiDAR-camera synchronisation of a log; `rig=None` guesses topics.
+    `lidar_metadata` / `lidar_capture`: as `logs.open_log` (the LiDAR from a capture).
 
     `jobs` worker processes extract an indexed MCAP's chunks in parallel (default: one
     per core); other containers, and `jobs=1`, read serially. The result is the same.
@@ -196,7 +199,7 @@ def audit_log(
         LogOpenError, LogReadError, UnknownTypeError, DecodeError: the log cannot be read.
         NoDataError: the log holds nothing to audit (no messages, no LiDAR packets).
     """
-    with open_log(path) as log:
+    with open_log(path, lidar_metadata=lidar_metadata, lidar_capture=lidar_capture) as log:
         if log.summary.message_count == 0:
             raise NoDataError(f"{log.summary.path}: the log holds no messages")
         probe = LogProbe(log)

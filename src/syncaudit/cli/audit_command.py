@@ -13,6 +13,8 @@ from syncaudit.cli.common import (
     HtmlOption,
     JsonFlag,
     JsonOutOption,
+    LidarCaptureOption,
+    LidarMetadataOption,
     LogArgument,
     OverwriteFlag,
     RigOption,
@@ -83,6 +85,8 @@ def audit(
             "ROS 1 lz4 chunk's checksums.",
         ),
     ] = False,
+    lidar_metadata: LidarMetadataOption = None,
+    lidar_capture: LidarCaptureOption = None,
 ) -> None:
     """Audit LiDAR-camera sync per camera (Eq 1-6), the recommended delay and the verdict."""
 
@@ -93,11 +97,18 @@ def audit(
         calibration = _load_calibration(calibration_json) if calibration_json else None
         with output_set(
             overwrite=overwrite,
-            inputs=(*local_paths(source), rig, calibration_json),
+            inputs=(*local_paths(source), rig, calibration_json, lidar_metadata, lidar_capture),
             targets=targets.files(),
         ) as outputs:
             targets.claim_pairings(outputs)
-            result = _audit(source, rig, jobs=jobs, check_crc=check_crc, tables=not as_json)
+            result = _audit(
+                source,
+                rig,
+                jobs=jobs,
+                check_crc=check_crc,
+                tables=not as_json,
+                lidar=(lidar_metadata, lidar_capture),
+            )
             data = result.to_dict()
             targets.write(outputs, result, data, calibration, overwrite=overwrite)
         _show(result, data, as_json=as_json)
@@ -181,7 +192,13 @@ class _Targets:
 
 
 def _audit(
-    log: str | Path, rig: Path | None, *, jobs: int | None, check_crc: bool, tables: bool
+    log: str | Path,
+    rig: Path | None,
+    *,
+    jobs: int | None,
+    check_crc: bool,
+    tables: bool,
+    lidar: tuple[Path | None, Path | None] = (None, None),
 ) -> AuditResult:
     """The audit of `log`; the tables' modules are imported while the workers read."""
     from syncaudit.audit.run import audit_log
@@ -193,6 +210,8 @@ def _audit(
         jobs=jobs,
         check_crc=check_crc,
         meanwhile=_import_tables if tables else None,
+        lidar_metadata=lidar[0],
+        lidar_capture=lidar[1],
     )
 
 

@@ -254,14 +254,30 @@ def _root(
 LogArgument = Annotated[
     str,
     typer.Argument(
-        help="MCAP file, ROS 2 bag (dir/.db3/.mcap) or ROS 1 .bag; or its URL (s3://, gs://, "
-        "az://, http(s)://)."
+        help="MCAP file, ROS 2 bag (dir/.db3/.mcap), ROS 1 .bag or .pcap/.pcapng capture; or "
+        "its URL (s3://, gs://, az://, http(s)://)."
     ),
 ]
 RigOption = Annotated[
     Path | None,
     typer.Option(
         "--rig", help="Rig file (YAML/TOML/JSON); topics and cameras are guessed without it."
+    ),
+]
+LidarMetadataOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--lidar-metadata",
+        help="Ouster sensor metadata JSON for a .pcap/.pcapng capture (default: the .json "
+        "of the same name beside it).",
+    ),
+]
+LidarCaptureOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--lidar-capture",
+        help="A .pcap/.pcapng capture of the LiDAR recorded beside LOG on the same host: "
+        "the LiDAR timing is taken from it (its clock is the log's host clock).",
     ),
 ]
 JsonFlag = Annotated[

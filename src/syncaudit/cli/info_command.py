@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from syncaudit.cli.common import (
     JsonFlag,
+    LidarCaptureOption,
+    LidarMetadataOption,
     LogArgument,
     RigOption,
     app,
@@ -17,7 +19,13 @@ from syncaudit.cli.startup import one_blas_thread
 
 
 @app.command(short_help="Summarise a log: topics, LiDARs, cameras.")
-def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> None:
+def info(
+    log: LogArgument,
+    rig: RigOption = None,
+    as_json: JsonFlag = False,
+    lidar_metadata: LidarMetadataOption = None,
+    lidar_capture: LidarCaptureOption = None,
+) -> None:
     """Summarise a log: topics, each LiDAR (measured RPM, drops, clock) and each camera.
 
     A LiDAR topic that `audit` could not read is printed as far as it was read, then
@@ -28,7 +36,13 @@ def info(log: LogArgument, rig: RigOption = None, as_json: JsonFlag = False) -> 
         from syncaudit.audit.inspect import inspect_log
         from syncaudit.rig import load_rig
 
-        report = inspect_log(log_location(log), load_rig(rig) if rig else None, partial=True)
+        report = inspect_log(
+            log_location(log),
+            load_rig(rig) if rig else None,
+            partial=True,
+            lidar_metadata=lidar_metadata,
+            lidar_capture=lidar_capture,
+        )
         if as_json:
             print_json(report.to_dict())
         else:

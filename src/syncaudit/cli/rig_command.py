@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from syncaudit.cli.common import (
+    LidarMetadataOption,
     LogArgument,
     OverwriteFlag,
     app,
@@ -31,6 +32,7 @@ def rig(
         Path | None, typer.Option("--output", "-o", help="Write the rig here (default: stdout).")
     ] = None,
     overwrite: OverwriteFlag = False,
+    lidar_metadata: LidarMetadataOption = None,
 ) -> None:
     """Write a starter rig guessed from the log: every guess and TODO commented."""
 
@@ -40,7 +42,7 @@ def rig(
         with output_set(overwrite=overwrite, inputs=local_paths(source), targets=(out,)) as outputs:
             from syncaudit.audit.rig_guess import starter_rig_yaml
 
-            text = starter_rig_yaml(source)
+            text = starter_rig_yaml(source, lidar_metadata)
             if out is not None:
                 outputs.write_text(out, text)
         if out is None:

@@ -104,7 +104,7 @@ def simulate_sync(
         str | None,
         typer.Option(
             "--lidar",
-            help=f"LiDAR model: {', '.join(LIDAR_MODELS)} (case-insensitive; XT32 = PandarXT32).",
+            help=f"LiDAR model: {', '.join(LIDAR_MODELS)} (case-insensitive; XT32 = PandarXT32, ouster = OS-1-64).",
         ),
     ] = None,
     duration_s: Annotated[

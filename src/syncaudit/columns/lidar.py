@@ -76,6 +76,14 @@ class LidarScan:
     declared_rpm: float = float("nan")
     """Mean rotation rate the packets themselves declare (Hesai tail motor speed, Ouster
     lidar_mode), RPM; NaN where the vendor's packets carry none (Velodyne)."""
+    wrap_blocks: int = 0
+    """Blocks whose azimuth read 36000 (real Velodyne sensors write it at the wrap), taken
+    as 0 (modulo 36000, as ros-drivers/velodyne does)."""
+    product_id_model: str = ""
+    """The model the packets' product byte names where `model` (from the packet cadence or
+    the rig) differs from it."""
+    decoder_notes: tuple[str, ...] = ()
+    """What the decoder derived rather than read (older Ouster metadata), warned about."""
 
     @property
     def rpm_disagreement(self) -> float:
@@ -87,15 +95,23 @@ class LidarScan:
     @property
     def warnings(self) -> list[str]:
         """What the topic's own packets say is wrong with the decoded timing."""
+        notes = [f"{self.topic}: {note}" for note in self.decoder_notes]
+        if self.product_id_model:
+            notes.append(
+                f"{self.topic}: the product byte says {self.product_id_model} but the packets "
+                f"are timed as a {self.model} (their cadence, or the rig's lidar.model): "
+                "early VLP-16 firmware wrote the HDL-32E's id"
+            )
         off = self.rpm_disagreement
         if not abs(off) > RPM_TOLERANCE:
-            return []
+            return notes
         source = _DECLARED_BY.get(self.vendor, "the packets")
-        return [
+        notes.append(
             f"{self.topic}: decoded rotation {self.rpm:.2f} RPM disagrees with the "
             f"{self.declared_rpm:.0f} RPM of {source} ({off:+.1%}): revolutions, "
             "packets/rev and drops are suspect (wrong return-mode grouping or packet clock?)"
-        ]
+        )
+        return notes
 
     @property
     def rpm(self) -> float:

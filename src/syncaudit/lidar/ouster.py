@@ -11,10 +11,18 @@ Layouts (little endian, as documented by Ouster and checked against a real OS-0-
   u16 frame id, u32 encoder count), `pixels_per_column` x 12-byte pixels, u32 status
   (0xFFFFFFFF when valid).
 * eUDP profiles (RNG19_RFL8_SIG16_NIR16, RNG19_RFL8_SIG16_NIR16_DUAL, RNG15_RFL8_NIR8,
-  FIVE_WORD_PIXEL): 32-byte packet header (u16 packet type, u16 frame id, u24 init id,
+  FIVE_WORD_PIXEL, FUSA_RNG15_RFL8_NIR8_DUAL: every profile of firmware 2.x-3.x, pixel sizes
+  as ouster-sdk's profile table and the sensor's packets give them): 32-byte packet header (u16 packet type, u16 frame id, u24 init id,
   u40 serial number, shot-limiting / thermal bytes), then per column a 12-byte header (u64
-  timestamp, u16 measurement id, u16 status) and pixels of 12, 16, 4 or 20 bytes, then a
-  32-byte packet footer.
+  timestamp, u16 measurement id, u16 status) and pixels of 12, 16, 4, 20 or 8 bytes, then a
+  32-byte packet footer (FuSa: a CRC-64 in it). The FuSa header differs (ouster-sdk's
+  packet_format): u8 packet type, u24 init id, u32 frame id, u40 serial number at byte 11. The real OS-1-128 FuSa capture checks the
+  sizes: 32 + 16 x (12 + 128 x 8) + 32 = 16640 bytes.
+
+Older metadata (firmware 1.x-2.0 tools) may lack `prod_line`, `data_format` or fields of it;
+what the packets need is then derived (columns from `lidar_mode`, pixels from the `beam_*`
+arrays, the model line from the beams' altitude span, the profile and columns per packet
+from the packet size: `fit_packet_size`), each derivation noted in `OusterMetadata.notes`.
 
 Azimuth convention: `block_azimuth_deg` is Ouster's *encoder angle*, 0 deg at the lidar frame's
 +X axis (the connector side, where frames start) and growing with time. The sensor spins
@@ -27,7 +35,7 @@ from __future__ import annotations
 import json
 import re
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -51,6 +59,7 @@ UDP_PROFILE_CODES: dict[str, int] = {
     "RNG19_RFL8_SIG16_NIR16": 3,
     "RNG15_RFL8_NIR8": 4,
     "FIVE_WORD_PIXEL": 5,
+    "FUSA_RNG15_RFL8_NIR8_DUAL": 6,
 }
 """Ouster's `UDPProfileLidar` enum values; used as `PacketTiming.return_mode`."""
 
@@ -60,9 +69,17 @@ _PIXEL_BYTES: dict[str, int] = {
     "RNG19_RFL8_SIG16_NIR16": 12,
     "RNG15_RFL8_NIR8": 4,
     "FIVE_WORD_PIXEL": 20,
+    "FUSA_RNG15_RFL8_NIR8_DUAL": 8,
 }
 
-_DUAL_PROFILES = frozenset({"RNG19_RFL8_SIG16_NIR16_DUAL"})
+_DUAL_PROFILES = frozenset({"RNG19_RFL8_SIG16_NIR16_DUAL", "FUSA_RNG15_RFL8_NIR8_DUAL"})
+_FUSA_PROFILES = frozenset({"FUSA_RNG15_RFL8_NIR8_DUAL"})
+"""Profiles with the FuSa packet header: 8-bit packet type, 32-bit frame id."""
+_COLUMNS_PER_PACKET_CHOICES = (16, 8, 4, 2, 1)
+"""Columns per packet the sensor can be configured to (firmware 2.x-3.x), most common first."""
+_FAMILY_BY_SPAN_DEG = ((60.0, "OS-0"), (25.0, "OS-1"), (0.0, "OS-2"))
+"""Model line from the beams' altitude span: OS-0 ~90 deg, OS-1 ~45 deg (gradient beam
+spacing ~28 deg), OS-2 ~22 deg."""
 _EUDP_HEADER_BYTES = 32
 _EUDP_FOOTER_BYTES = 32
 _LEGACY_VALID = 0xFFFFFFFF
@@ -100,6 +117,11 @@ class OusterMetadata:
     """Per-beam azimuth offset in degrees (added to the column's angle in the lidar frame)."""
     beam_altitude_angles_deg: tuple[float, ...]
     lidar_origin_to_beam_origin_mm: float
+    notes: tuple[str, ...] = ()
+    """What older metadata omitted and was derived (warned about by `info`/`audit`)."""
+    stated_shape: bool = True
+    """False where the profile and columns per packet were not in the metadata (defaults):
+    `fit_packet_size` may then take them from the packets' size."""
 
     @property
     def rotation_rate_rpm(self) -> float:
@@ -236,15 +258,28 @@ def _build_metadata(
     azimuths = _floats(beams, "beam_azimuth_angles", beams_where)
     altitudes = _floats(beams, "beam_altitude_angles", beams_where)
     origin_mm = _number(beams, "lidar_origin_to_beam_origin_mm", beams_where, 0.0)
+    notes: list[str] = []
+    stated_shape = True
     if fmt is None:  # firmware < 2.0 sent no data_format: 16-column LEGACY packets
         columns_per_frame, columns_per_packet = mode_columns, default_columns_per_packet
         pixels, profile = len(altitudes), "LEGACY"
         window = (0, mode_columns - 1)
+        stated_shape = False
+        notes.append(
+            f"no data_format: {columns_per_frame} columns from lidar_mode, {pixels} pixels from "
+            "the beam arrays, LEGACY profile and 16 columns per packet unless the packets' "
+            "size says otherwise"
+        )
     else:
-        columns_per_frame = _int(fmt, "columns_per_frame", fmt_where)
-        columns_per_packet = _int(fmt, "columns_per_packet", fmt_where)
-        pixels = _int(fmt, "pixels_per_column", fmt_where)
+        columns_per_frame = _derived_int(fmt, "columns_per_frame", fmt_where, mode_columns, notes)
+        stated_shape = "columns_per_packet" in fmt and "udp_profile_lidar" in fmt
+        columns_per_packet = _derived_int(
+            fmt, "columns_per_packet", fmt_where, default_columns_per_packet, notes
+        )
+        pixels = _derived_int(fmt, "pixels_per_column", fmt_where, len(altitudes), notes)
         profile = fmt.get("udp_profile_lidar", "LEGACY")
+        if "udp_profile_lidar" not in fmt:
+            notes.append(f"no {fmt_where}.udp_profile_lidar: LEGACY (firmware < 2.2 default)")
         raw_window = fmt.get("column_window", [0, columns_per_frame - 1])
         if (
             not isinstance(raw_window, list)
@@ -270,6 +305,12 @@ def _build_metadata(
         raise _fail(
             f"{len(azimuths)} azimuth / {len(altitudes)} altitude angles for {pixels} pixels"
         )
+    if not prod_line:
+        prod_line = _derived_prod_line(altitudes)
+        notes.append(
+            f"no prod_line: {prod_line} from {pixels} beams spanning "
+            f"{max(altitudes) - min(altitudes):.1f} deg of altitude"
+        )
     return OusterMetadata(
         lidar_mode=lidar_mode,
         columns_per_frame=columns_per_frame,
@@ -286,7 +327,43 @@ def _build_metadata(
         beam_azimuth_angles_deg=azimuths,
         beam_altitude_angles_deg=altitudes,
         lidar_origin_to_beam_origin_mm=origin_mm,
+        notes=tuple(notes),
+        stated_shape=stated_shape,
     )
+
+
+def _derived_int(d: dict[str, Any], key: str, where: str, default: int, notes: list[str]) -> int:
+    """`d[key]`, else `default` with a note saying so."""
+    if key in d:
+        return _int(d, key, where)
+    notes.append(f"no {where}.{key}: {default} derived")
+    return default
+
+
+def _derived_prod_line(altitudes: tuple[float, ...]) -> str:
+    """'OS-<0|1|2>-<beams>' from the beams' altitude span (metadata without prod_line)."""
+    span = max(altitudes) - min(altitudes) if altitudes else 0.0
+    family = next(name for floor, name in _FAMILY_BY_SPAN_DEG if span >= floor)
+    return f"{family}-{len(altitudes)}"
+
+
+def fit_packet_size(meta: OusterMetadata, size: int) -> OusterMetadata | None:
+    """`meta` fitted to lidar packets of `size` bytes: itself when it fits, else (where the
+    metadata did not state the shape) the first profile and columns per packet whose packet
+    is `size` bytes, with a note; None when nothing fits (e.g. an IMU packet)."""
+    if size == meta.packet_bytes:
+        return meta
+    if meta.stated_shape:
+        return None
+    for profile in UDP_PROFILE_CODES:
+        for columns in _COLUMNS_PER_PACKET_CHOICES:
+            if columns > meta.columns_per_frame:
+                continue
+            trial = replace(meta, udp_profile_lidar=profile, columns_per_packet=columns)
+            if trial.packet_bytes == size:
+                note = f"{size}-byte packets: profile {profile}, {columns} columns per packet"
+                return replace(trial, notes=(*meta.notes, note), stated_shape=True)
+    return None
 
 
 def _sn(d: dict[str, Any], where: str) -> str:
@@ -316,7 +393,7 @@ def _parse_nested(root: dict[str, Any]) -> OusterMetadata:
         fmt=fmt,
         fmt_where="lidar_data_format",
         default_columns_per_packet=16,
-        prod_line=_str(info, "prod_line", "sensor_info"),
+        prod_line=_opt_str(info, "prod_line", "sensor_info") or "",
         prod_sn=_sn(info, "sensor_info"),
         initialization_id=_opt_int(info, "initialization_id", "sensor_info"),
         timestamp_mode=_opt_str(config, "timestamp_mode", "config_params"),
@@ -339,7 +416,7 @@ def _parse_legacy(root: dict[str, Any]) -> OusterMetadata:
         fmt=None if fmt is None else _obj(fmt, "data_format"),
         fmt_where="data_format",
         default_columns_per_packet=16,
-        prod_line=_str(root, "prod_line", "<root>"),
+        prod_line=_opt_str(root, "prod_line", "<root>") or "",
         prod_sn=_sn(root, "<root>"),
         initialization_id=_opt_int(root, "initialization_id", "<root>"),
         timestamp_mode=_opt_str(root, "timestamp_mode", "<root>"),
@@ -442,6 +519,25 @@ def ouster_packet_dtype(meta: OusterMetadata) -> np.dtype[np.void]:
     columns = ("columns", _column_dtype(meta), (meta.columns_per_packet,))
     if meta.is_legacy:
         dtype: np.dtype[np.void] = np.dtype([columns])
+    elif meta.udp_profile_lidar in _FUSA_PROFILES:
+        # FuSa header (ouster-sdk packet_format): u8 packet type, u24 init id, u32 frame id,
+        # 3 reserved bytes, u40 serial number, then the same status bytes at 16..19.
+        dtype = np.dtype(
+            [
+                ("packet_type", "u1"),
+                ("init_id", "u1", (3,)),
+                ("frame_id", "<u4"),
+                ("reserved0", "V3"),
+                ("prod_sn", "u1", (5,)),
+                ("countdown_thermal_shutdown", "u1"),
+                ("countdown_shot_limiting", "u1"),
+                ("thermal_shutdown", "u1"),
+                ("shot_limiting", "u1"),
+                ("reserved1", "V12"),
+                columns,
+                ("footer", f"V{_EUDP_FOOTER_BYTES}"),
+            ]
+        )
     else:
         dtype = np.dtype(
             [
@@ -556,6 +652,7 @@ def timing_from_columns(columns: OusterColumns, meta: OusterMetadata) -> PacketT
     sensor_time_ns = columns.timestamp_ns[np.arange(n), first_valid]
     code = UDP_PROFILE_CODES[meta.udp_profile_lidar]
     return PacketTiming(
+        notes=meta.notes,
         vendor="ouster",
         model=meta.prod_line,
         sensor_time_ns=sensor_time_ns.astype(np.int64),
@@ -628,7 +725,8 @@ def encode_ouster(
         cols["status"] = np.where(ok, _LEGACY_VALID, 0).astype(np.uint32)
     else:
         packets["packet_type"] = LIDAR_PACKET_TYPE
-        packets["frame_id"] = (fid & 0xFFFF).astype(np.uint16)
+        wide = meta.udp_profile_lidar in _FUSA_PROFILES
+        packets["frame_id"] = fid & (0xFFFFFFFF if wide else 0xFFFF)
         init_id = meta.initialization_id or 0
         serial = int(meta.prod_sn) if meta.prod_sn.isdigit() else 0
         packets["init_id"] = np.frombuffer((init_id & 0xFFFFFF).to_bytes(3, "little"), np.uint8)

@@ -38,6 +38,14 @@ class PacketTiming:
     """(n,) the rotation rate the sensor declares for each packet, RPM (Hesai: the tail's
     Motor Speed field; Ouster: the metadata's lidar_mode); None where the vendor's packets
     carry none (Velodyne)."""
+    wrap_blocks: int = 0
+    """Blocks whose azimuth field read 36000 (the wrap, as real Velodyne sensors write it),
+    taken modulo 36000 as ros-drivers/velodyne does."""
+    product_id_model: str = ""
+    """The model the packets' product byte names where `model` differs from it (early
+    VLP-16 firmware writes the HDL-32E's id; the packet cadence or the rig told them apart)."""
+    notes: tuple[str, ...] = ()
+    """What the decoder derived rather than read (e.g. fields older Ouster metadata lacks)."""
 
     @property
     def n_packets(self) -> int:

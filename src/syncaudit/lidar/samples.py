@@ -54,6 +54,12 @@ class PacketSamples:
     """Sum of the packets' own motor-speed fields (RPM), over `declared_rpm_count` packets."""
     declared_rpm_count: int = 0
     """Packets that declare a motor speed (0 for vendors whose packets carry none)."""
+    wrap_blocks: int = 0
+    """Blocks whose azimuth read 36000 (the wrap), taken as 0."""
+    product_id_model: str = ""
+    """The model the product byte names where the decoder timed another (PacketTiming)."""
+    notes: tuple[str, ...] = ()
+    """The decoder's notes (PacketTiming.notes)."""
 
     @property
     def n_packets(self) -> int:
@@ -144,6 +150,9 @@ def packet_samples(timing: PacketTiming, driver_stamp_ns: NDArray[np.int64]) -> 
         outlier_blocks=outliers,
         declared_rpm_sum=rpm_sum,
         declared_rpm_count=rpm_count,
+        wrap_blocks=timing.wrap_blocks,
+        product_id_model=timing.product_id_model,
+        notes=timing.notes,
     )
 
 
@@ -233,4 +242,7 @@ def concat_samples(parts: list[PacketSamples]) -> PacketSamples:
         outlier_blocks=sum(p.outlier_blocks for p in parts),
         declared_rpm_sum=sum(p.declared_rpm_sum for p in parts),
         declared_rpm_count=sum(p.declared_rpm_count for p in parts),
+        wrap_blocks=sum(p.wrap_blocks for p in parts),
+        product_id_model=next((p.product_id_model for p in parts if p.product_id_model), ""),
+        notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
     )

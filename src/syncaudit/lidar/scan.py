@@ -41,6 +41,9 @@ class LidarScanner:
     dual: bool = False
     declared_rpm_sum: float = 0.0
     declared_rpm_count: int = 0
+    wrap_blocks: int = 0
+    product_id_model: str = ""
+    notes: dict[str, None] = field(default_factory=dict)
     _pending: list[PacketSamples] = field(default_factory=list)
     _pending_packets: int = 0
 
@@ -71,6 +74,10 @@ class LidarScanner:
         self.dual = self.dual or samples.dual_return
         self.declared_rpm_sum += samples.declared_rpm_sum
         self.declared_rpm_count += samples.declared_rpm_count
+        self.wrap_blocks += samples.wrap_blocks
+        self.product_id_model = self.product_id_model or samples.product_id_model
+        for note in samples.notes:
+            self.notes.setdefault(note)
         self._pending.append(samples)
         self._pending_packets += samples.n_packets
         if self._pending_packets >= FEED_PACKETS:
@@ -104,19 +111,25 @@ class LidarScanner:
             declared_rpm=self.declared_rpm_sum / self.declared_rpm_count
             if self.declared_rpm_count
             else float("nan"),
+            wrap_blocks=self.wrap_blocks,
+            product_id_model=self.product_id_model,
+            decoder_notes=tuple(self.notes),
         )
 
 
 def packet_samples_of(
-    msg: RawMessage, family: str, ouster_meta: ouster.OusterMetadata | None
+    msg: RawMessage,
+    family: str,
+    ouster_meta: ouster.OusterMetadata | None,
+    model: str | None = None,
 ) -> PacketSamples | None:
     """The timing samples of one packet message of `family` (None: no packet in it, e.g.
-    an IMU-sized Ouster message); Ouster needs the sensor metadata."""
+    an IMU-sized Ouster message); Ouster needs the sensor metadata, `model` is the rig's."""
     if family == "ouster":
         assert ouster_meta is not None
         chunk = decode_ouster_message(msg, ouster_meta)
     else:
-        chunk = decode_scan(family, msg, 0)
+        chunk = decode_scan(family, msg, 0, model)
     if chunk is None:
         return None
     return packet_samples(chunk.timing, chunk.driver_stamp_ns)
@@ -130,6 +143,8 @@ class PacketExtractor:
     topic: str
     family: str
     ouster_meta: ouster.OusterMetadata | None = None
+    model: str | None = None
+    """The model the rig states (`lidar.model`), else None: the packets tell."""
 
     @property
     def topics(self) -> list[str]:
@@ -146,7 +161,7 @@ class PacketExtractor:
 
     def extract(self, msg: RawMessage, log: LogReader) -> PacketSamples | None:
         """The samples of one packet message."""
-        return packet_samples_of(msg, self.family, self.ouster_meta)
+        return packet_samples_of(msg, self.family, self.ouster_meta, self.model)
 
 
 def scan_lidar(
@@ -159,6 +174,7 @@ def scan_lidar(
     clock_tolerance_ns: int = 50_000_000,
     ouster_metadata_topic: str | None = None,
     jobs: int = 1,
+    model: str | None = None,
 ) -> LidarScan:
     """Read the topic once, as the audit reads it (`logs.parallel.iter_items`: `jobs`
     worker processes where the log allows, one scan message at a time), and reduce it to
@@ -171,6 +187,6 @@ def scan_lidar(
         target_azimuth_deg=target_azimuth_deg,
         clock_tolerance_ns=clock_tolerance_ns,
     )
-    for samples in iter_items(log, PacketExtractor(topic, family, meta), jobs):
+    for samples in iter_items(log, PacketExtractor(topic, family, meta, model), jobs):
         scanner.feed(samples)
     return scanner.finish()

@@ -111,8 +111,11 @@ def packet_family(
     return family, read_ouster_metadata(log, meta_topic)
 
 
-def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
-    """Decode one multi-packet scan message (None when it holds no packet).
+def decode_scan(
+    family: str, msg: RawMessage, index: int, model: str | None = None
+) -> PacketChunk | None:
+    """Decode one multi-packet scan message (None when it holds no packet); `model` is
+    the rig's statement of a Velodyne model (else the packets tell).
 
     Raises UnknownTypeError where the message encoding is not cdr/ros1.
     """
@@ -121,7 +124,7 @@ def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
         stamps, data = velodyne.velodyne_scan_packets(msg.data, msg.encoding)
         if stamps.size == 0:
             return None
-        timing = velodyne.decode_velodyne(data, stamps)
+        timing = velodyne.decode_velodyne(data, stamps, model)
     else:
         if family == "hesai":
             stamps, data, sizes = hesai.pandar_scan_packets(msg.data, msg.encoding)
@@ -131,7 +134,7 @@ def decode_scan(family: str, msg: RawMessage, index: int) -> PacketChunk | None:
         if stamps.size == 0:
             return None
         if family == "nebula" and _looks_velodyne(data, sizes):
-            timing = velodyne.decode_velodyne(data[:, :VELODYNE_PACKET_BYTES], stamps)
+            timing = velodyne.decode_velodyne(data[:, :VELODYNE_PACKET_BYTES], stamps, model)
         else:
             timing = hesai.decode_hesai(data, sizes, stamps)
     log_time = np.full(stamps.size, msg.log_time_ns, dtype=np.int64)
@@ -157,7 +160,9 @@ def _looks_velodyne(data: NDArray[np.uint8], sizes: NDArray[np.integer[Any]]) ->
 def _ouster_chunks(
     messages: Iterator[RawMessage], meta: ouster.OusterMetadata
 ) -> Iterator[PacketChunk]:
-    """Batch single-packet Ouster messages; packets of another size (IMU) are skipped."""
+    """Batch single-packet Ouster messages; packets of another size (IMU) are skipped, but
+    where the metadata did not state the packet shape the first lidar-sized packet fits it
+    (`ouster.fit_packet_size`)."""
     size = meta.packet_bytes
     buffers: list[NDArray[np.uint8]] = []
     times: list[int] = []
@@ -166,7 +171,10 @@ def _ouster_chunks(
         _check_encoding(msg)
         buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
         if buf.size != size:
-            continue
+            fitted = None if buffers else ouster.fit_packet_size(meta, int(buf.size))
+            if fitted is None:
+                continue
+            meta, size = fitted, fitted.packet_bytes
         buffers.append(buf)
         times.append(msg.log_time_ns)
         if len(buffers) == OUSTER_BATCH:
@@ -180,9 +188,10 @@ def decode_ouster_message(msg: RawMessage, meta: ouster.OusterMetadata) -> Packe
     """Decode one single-packet Ouster message (None for other packet sizes, e.g. IMU)."""
     _check_encoding(msg)
     buf = ouster.ouster_packet_bytes(msg.data, cast(Literal["ros1", "cdr"], msg.encoding))
-    if buf.size != meta.packet_bytes:
+    fitted = ouster.fit_packet_size(meta, int(buf.size))
+    if fitted is None:
         return None
-    return _ouster_batch([buf], [msg.log_time_ns], meta, 0)
+    return _ouster_batch([buf], [msg.log_time_ns], fitted, 0)
 
 
 def _ouster_batch(

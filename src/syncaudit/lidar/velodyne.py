@@ -35,6 +35,7 @@ span; the last block of a packet reuses the previous gap.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cache
 from typing import Final, TypeVar
@@ -76,6 +77,10 @@ PRODUCT_IDS: Final[dict[int, str]] = {
 
 MODEL_PRODUCT_ID: Final[dict[str, int]] = {v: k for k, v in PRODUCT_IDS.items()}
 ENCODABLE_MODELS: Final = ("VLP-16", "Puck Hi-Res", "VLP-32C", "HDL-32E", "VLS-128")
+WRAP_AZIMUTH_RAW: Final = 36000
+"""The azimuth field at the wrap: real sensors write it for 0 (hundredths of a degree)."""
+SHARED_ID_MODELS: Final = ("HDL-32E", "VLP-16")
+"""Models that product id 0x21 may name: early VLP-16 firmware wrote the HDL-32E's id."""
 MAX_RPM: Final = 1500.0
 """Gaps between azimuth samples beyond this rotation speed are not rotation (FOV cut)."""
 
@@ -543,7 +548,8 @@ def resolve_hour_ns(toh_us: ArrayLike, host_stamp_ns: ArrayLike) -> NDArray[np.i
 
 
 def _return_modes(fields: NDArray[np.void], model: str) -> NDArray[np.uint8]:
-    """(n,) return-mode bytes, checked together with the product byte (HDL-64E: zeros)."""
+    """(n,) return-mode bytes, checked together with the product byte (HDL-64E: zeros):
+    every packet must carry the first packet's product byte."""
     n = fields.shape[0]
     if model == "HDL-64E":
         return np.zeros(n, dtype=np.uint8)
@@ -553,11 +559,50 @@ def _return_modes(fields: NDArray[np.void], model: str) -> NDArray[np.uint8]:
         i = int(np.argmin(known))
         raise DecodeError(f"packet {i}: return-mode byte 0x{int(rmode[i]):02X} is unknown")
     pid = fields["product_id"]
-    mixed = pid != MODEL_PRODUCT_ID[model]
+    mixed = pid != pid[0]
     if mixed.any():
         i = int(np.argmax(mixed))
         raise DecodeError(f"packet {i}: product id 0x{int(pid[i]):02X} differs from {model}")
     return rmode
+
+
+def packet_gap_us(toh_us: NDArray[np.int64]) -> float:
+    """Median gap between consecutive packet stamps (us, across the hour), NaN below two
+    packets or when no gap is positive."""
+    if toh_us.size < 2:
+        return float("nan")
+    gaps = np.diff(toh_us) % HOUR_US
+    gaps = gaps[(gaps > 0) & (gaps < HOUR_US // 2)]
+    return float(np.median(gaps)) if gaps.size else float("nan")
+
+
+def model_by_cadence(id_model: str, gap_us: float, dual: bool) -> str:
+    """The model of SHARED_ID_MODELS whose packet period (for the return mode) is nearest
+    the measured packet gap, in ratio: a VLP-16 sends a packet every 1327 us single-return,
+    an HDL-32E every 553 us, whatever the RPM. `id_model` where the gap is unknown."""
+    if id_model not in SHARED_ID_MODELS or not gap_us > 0:
+        return id_model
+    return min(
+        SHARED_ID_MODELS, key=lambda m: abs(math.log(gap_us * 1000.0 / _layout(m, dual).packet_ns))
+    )
+
+
+def _resolve_model(
+    fields: NDArray[np.void], rmode: NDArray[np.uint8], id_model: str, stated: str | None
+) -> str:
+    """The model to time the packets as: the rig's where it states one (it must be a model
+    the product byte can name), else the product byte's, told apart by cadence where the
+    byte is ambiguous (0x21: HDL-32E or early VLP-16)."""
+    if stated:
+        if stated not in PRODUCT_IDS.values() and stated != "HDL-64E":
+            raise DecodeError(f"Velodyne model {stated!r} (from the rig) is not a known model")
+        compatible = stated == id_model or {stated, id_model} <= set(SHARED_ID_MODELS)
+        if not compatible:
+            raise DecodeError(
+                f"the rig states {stated} but the packets' product byte says {id_model}"
+            )
+        return stated
+    return model_by_cadence(id_model, packet_gap_us(_toh_us(fields)), bool(rmode[0] == RETURN_DUAL))
 
 
 def _check_flags(
@@ -580,25 +625,36 @@ def _check_flags(
 
 def _azimuth_raw(
     fields: NDArray[np.void], tables: _ModeTables, dual: NDArray[np.bool_]
-) -> NDArray[np.int64]:
-    """(n, 12) block azimuths in hundredths of a degree, checked; padding blocks repeat the
-    last real block of their packet."""
+) -> tuple[NDArray[np.int64], int]:
+    """(n, 12) block azimuths in hundredths of a degree, checked, and the number of real
+    blocks that read 36000; padding blocks repeat the last real block of their packet.
+
+    Real sensors write 36000 at the wrap (between 35979 and 18, say): it is 0, as
+    ros-drivers/velodyne takes azimuths modulo 36000. Larger values are no azimuth.
+    """
     az_raw: NDArray[np.int64] = fields["block"]["azimuth"].astype(np.int64)
-    too_big = az_raw >= 36000
+    too_big = az_raw > WRAP_AZIMUTH_RAW
+    wrap = az_raw == WRAP_AZIMUTH_RAW
     real = _per_packet(tables.real, dual)
     padded = not real.all()
     if padded:
         too_big &= real
+        wrap &= real
     if too_big.any():
         i, blk = (int(v) for v in np.argwhere(too_big)[0])
-        raise DecodeError(f"packet {i} block {blk}: azimuth {int(az_raw[i, blk])} >= 36000")
+        raise DecodeError(f"packet {i} block {blk}: azimuth {int(az_raw[i, blk])} > 36000")
+    wraps = int(np.count_nonzero(wrap))
+    if wraps:
+        az_raw = az_raw % WRAP_AZIMUTH_RAW
     if padded:
         rows = np.arange(az_raw.shape[0])[:, None]
         az_raw = az_raw[rows, _per_packet(tables.fill, dual)]
-    return az_raw
+    return az_raw, wraps
 
 
-def _decode(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> _Decoded:
+def _decode(
+    data: NDArray[np.uint8], host_stamp_ns: ArrayLike, model_hint: str | None = None
+) -> _Decoded:
     arr = _check_packets(data)
     n = arr.shape[0]
     host = np.asarray(host_stamp_ns, dtype=np.int64).reshape(-1)
@@ -607,12 +663,13 @@ def _decode(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> _Decoded:
     if n == 0:
         raise DecodeError("no Velodyne packets to detect a model from")
     fields = _fields(arr)
-    model = _first_packet_model(fields)
-    rmode = _return_modes(fields, model)
+    id_model = _first_packet_model(fields)
+    rmode = _return_modes(fields, id_model)
+    model = _resolve_model(fields, rmode, id_model, model_hint)
     dual = rmode == RETURN_DUAL
     tables = _mode_tables(model)
     _check_flags(fields, model, tables, dual)
-    az_raw = _azimuth_raw(fields, tables, dual)
+    az_raw, wraps = _azimuth_raw(fields, tables, dual)
     toh = _toh_us(fields)
     if toh.max() >= HOUR_US:
         i = int(np.argmax(toh >= HOUR_US))
@@ -626,17 +683,23 @@ def _decode(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> _Decoded:
         block_time_ns=sensor_ns[:, None] + _per_packet(tables.block_offset_ns, dual),
         return_mode=rmode,
         dual_return=dual,
+        wrap_blocks=wraps,
+        product_id_model="" if model == id_model else id_model,
     )
     return _Decoded(timing, az_raw, dual.astype(np.intp))
 
 
-def decode_velodyne(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> PacketTiming:
+def decode_velodyne(
+    data: NDArray[np.uint8], host_stamp_ns: ArrayLike, model: str | None = None
+) -> PacketTiming:
     """Decode n Velodyne packets (n, 1206) into per-packet and per-block timing.
 
     `host_stamp_ns` (n,) resolves the hour of the microseconds-past-the-hour stamp (see
-    `resolve_hour_ns`). Raises DecodeError on bytes that do not match the detected model.
+    `resolve_hour_ns`). `model` is the rig's statement, else the product byte decides (and
+    the packet cadence where the byte is 0x21, which early VLP-16s also wrote). Raises
+    DecodeError on bytes that do not match the model.
     """
-    return _decode(data, host_stamp_ns).timing
+    return _decode(data, host_stamp_ns, model).timing
 
 
 def velodyne_fov_gaps(timing: PacketTiming) -> NDArray[np.bool_]:
@@ -720,7 +783,9 @@ def _gap_raw(
     return gap.astype(np.float64)
 
 
-def velodyne_firing_times(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> VelodyneFirings:
+def velodyne_firing_times(
+    data: NDArray[np.uint8], host_stamp_ns: ArrayLike, model: str | None = None
+) -> VelodyneFirings:
     """Per record (packet, block, record): laser id, precision azimuth and exact firing time.
 
     Azimuth: block azimuth + gap * (time since the block's azimuth sample) / span, the
@@ -728,7 +793,7 @@ def velodyne_firing_times(data: NDArray[np.uint8], host_stamp_ns: ArrayLike) -> 
     last block reuses the previous gap). Time: stamp + the manual's timing offset.
     """
     arr = _check_packets(data)
-    dec = _decode(arr, host_stamp_ns)
+    dec = _decode(arr, host_stamp_ns, model)
     timing = dec.timing
     layouts = (_layout(timing.model, False), _layout(timing.model, True))
     di = dec.dual_index

@@ -10,3 +10,7 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 """An SQLite 3 database (a ROS 2 `.db3` bag)."""
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 """A zstd frame (a rosbag2 file- or message-compressed payload)."""
+PCAP_MAGICS = (b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\xc3\xd4", b"\x4d\x3c\xb2\xa1", b"\xa1\xb2\x3c\x4d")
+"""A classic pcap capture: micro- or nanosecond time stamps, either byte order."""
+PCAPNG_MAGIC = b"\x0a\x0d\x0d\x0a"
+"""A pcapng capture (its section header block type)."""

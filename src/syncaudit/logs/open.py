@@ -7,7 +7,14 @@ from urllib.parse import urlsplit
 
 from syncaudit.errors import LogOpenError
 from syncaudit.logs.base import LogReader
-from syncaudit.logs.magic import MCAP_MAGIC, ROSBAG1_MAGIC, ROSBAG_ANY_MAGIC, SQLITE_MAGIC
+from syncaudit.logs.magic import (
+    MCAP_MAGIC,
+    PCAP_MAGICS,
+    PCAPNG_MAGIC,
+    ROSBAG1_MAGIC,
+    ROSBAG_ANY_MAGIC,
+    SQLITE_MAGIC,
+)
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.urls import public_url
 
@@ -72,13 +79,32 @@ def _remote_log(url: str) -> LogReader:
     return open_remote_bag(url)
 
 
-def open_log(path: str | Path) -> LogReader:
-    """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`) or a ROS 1 `.bag`.
+def open_log(
+    path: str | Path,
+    *,
+    lidar_metadata: str | Path | None = None,
+    lidar_capture: str | Path | None = None,
+) -> LogReader:
+    """Open an MCAP file, a ROS 2 bag (directory, `.db3`, `.mcap`), a ROS 1 `.bag`, or a
+    `.pcap` / `.pcapng` capture of LiDAR traffic (`lidar_metadata`: the Ouster sensor
+    metadata JSON for it, by default the `.json` of the same stem beside it).
+
+    `lidar_capture`: a capture recorded beside the log on the same host, whose LiDAR
+    streams join the log's topics (`logs.combined`).
 
     Files are opened read-only. Every failure is a LogOpenError (exit 2) or, for a file
     damaged past reading, a LogReadError (exit 3), with a one-line message naming the path.
     An indexed MCAP or ROS 1 bag may also be a URL (http(s)://, or s3:// etc. via fsspec).
     """
+    if lidar_capture is not None:
+        from syncaudit.logs.combined import CombinedLog
+
+        main = open_log(path)
+        try:
+            return CombinedLog(main, open_log(lidar_capture, lidar_metadata=lidar_metadata))
+        except BaseException:
+            main.close()
+            raise
     if isinstance(path, str) and "://" in path:
         return _remote_log(path)
     path = Path(path)
@@ -111,10 +137,15 @@ def open_log(path: str | Path) -> LogReader:
     if head.startswith(ROSBAG_ANY_MAGIC):
         version = head[len(ROSBAG_ANY_MAGIC) :].split(b"\n")[0].decode("ascii", "replace")
         raise LogOpenError(f"{path}: ROS 1 bag format version {version} is not supported (2.0 is)")
+    if head[:4] in PCAP_MAGICS or head.startswith(PCAPNG_MAGIC):
+        from syncaudit.logs.pcap.reader import PcapLog
+
+        return PcapLog(path, None if lidar_metadata is None else Path(lidar_metadata))
     if head.startswith(SQLITE_MAGIC):
         from syncaudit.logs.ros2.sqlite_reader import open_sqlite_log
 
         return open_sqlite_log(path)
     raise LogOpenError(
-        f"{path}: unknown log format (expected MCAP, ROS 2 .db3/.mcap, or ROS 1 .bag)"
+        f"{path}: unknown log format (expected MCAP, ROS 2 .db3/.mcap, ROS 1 .bag, or a "
+        ".pcap/.pcapng capture)"
     )

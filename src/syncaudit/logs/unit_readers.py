@@ -28,6 +28,7 @@ UNIT_READERS: dict[str, str] = {
     "rosbag1-chunk": "syncaudit.logs.ros1.format:Rosbag1ChunkReader",
     "rosbag1-remote-chunk": "syncaudit.logs.ros1.remote:RemoteRosbag1ChunkReader",
     "sqlite-rows": "syncaudit.logs.ros2.sqlite_rows:SqliteRowsReader",
+    "pcap-range": "syncaudit.logs.pcap.reader:PcapRangeReader",
 }
 """Unit kind -> "module:Class" of its per-worker reader."""
 

@@ -54,7 +54,7 @@ from syncaudit.lidar.velodyne_encode import (
     encode_velodyne,
     velodyne_revolution_schedule,
 )
-from syncaudit.simulate import LidarModel
+from syncaudit.simulate import LidarModel, ouster_packets
 from syncaudit.simulate.cloud_writer import CloudConvention, cloud_message, cloud_points
 from syncaudit.simulate.delays import (
     CONSTANT_WINDOW_FRAMES,
@@ -62,6 +62,7 @@ from syncaudit.simulate.delays import (
     FrameTiming,
     LiveDelays,
 )
+from syncaudit.simulate.ouster_packets import OusterProfile
 from syncaudit.simulate.trigger_designs import (
     DesignTimes,
     SlippingRotation,
@@ -113,6 +114,7 @@ _VENDOR_OF: dict[str, str] = {
     "PandarXT32": "hesai",
     "PandarXT32M": "hesai",
     "Pandar128E4X": "hesai",
+    "OS-1-64": "ouster",
 }
 _HESAI_RETURN_MODE: dict[str, int] = {"PandarXT32M": 0x3C}
 """Tail return mode written per Hesai model (else strongest): the XT32M in the dual
@@ -123,7 +125,7 @@ _VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-
 JPEG_FORMAT = "jpeg"
 """`CompressedImage.format` of the JPEG-like payloads written when `image_bytes` is set."""
 CLOUD_TOPIC = "/points"
-_X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0}
+_X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0, "ouster": 0.0}
 """Packet azimuth of the LiDAR frame's +X axis in the vendors' ROS drivers: Velodyne
 x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise."""
 
@@ -241,6 +243,8 @@ class SyncSimConfig(_Strict):
     points per revolution at 600 rpm."""
     lidar_packets: bool = True
     """Write the packet topic (False with a cloud_convention: a cloud-only log)."""
+    ouster_profile: OusterProfile = "RNG19_RFL8_SIG16_NIR16"
+    """Ouster models: the UDP profile of the packets (and of the metadata written)."""
 
     t1: LatencyDist = LatencyDist(mean_us=300.0, std_us=40.0, min_us=150.0)
     """240 -> 242 per packet: network to the LiDAR driver."""
@@ -298,6 +302,8 @@ class SyncSimConfig(_Strict):
             raise ValueError("shared_topics has duplicates")
         if self.image_bytes is not None and self.image_kind != "compressed":
             raise ValueError("image_bytes needs image_kind 'compressed'")
+        if self.vendor == "ouster":
+            ouster_packets.columns_per_frame(self.rpm)  # 600 or 1200 RPM (lidar_mode)
         return self
 
     @property
@@ -360,6 +366,12 @@ class _PacketClock:
 
 def _packet_clock(model: str, rpm: float) -> _PacketClock:
     """The model's packet period and block sample offsets from the vendor modules."""
+    if _VENDOR_OF[model] == "ouster":
+        cols = ouster_packets.columns_per_frame(rpm)
+        column_ns = 60 * NS_PER_S // (round(rpm) * cols)
+        offsets = np.arange(ouster_packets.COLUMNS_PER_PACKET, dtype=np.int64) * column_ns
+        # Azimuth units: `cols` per degree, so a column is 360 units exactly.
+        return _PacketClock(int(offsets[-1] + column_ns), 1, offsets, cols)
     if _VENDOR_OF[model] == "velodyne":
         sched = velodyne_revolution_schedule(model, rpm, 0, n_packets=2)
         period = int(sched.packet_stamp_ns[1] - sched.packet_stamp_ns[0])
@@ -652,12 +664,16 @@ class _Simulation:
         )
         self.rotation: Rotation | SlippingRotation = self._rotation(config)
         self.clock = _packet_clock(config.lidar_model, config.rpm)
-        self.topic = "/velodyne_packets" if self.vendor == "velodyne" else "/pandar_packets"
-        self.msgtype = (
-            "velodyne_msgs/msg/VelodyneScan"
-            if self.vendor == "velodyne"
-            else "pandar_msgs/msg/PandarScan"
-        )
+        self.topic = {
+            "velodyne": "/velodyne_packets",
+            "hesai": "/pandar_packets",
+            "ouster": "/ouster/lidar_packets",
+        }[self.vendor]
+        self.msgtype = {
+            "velodyne": "velodyne_msgs/msg/VelodyneScan",
+            "hesai": "pandar_msgs/msg/PandarScan",
+            "ouster": "ouster_sensor_msgs/msg/PacketMsg",
+        }[self.vendor]
 
     @staticmethod
     def _rotation(config: SyncSimConfig) -> Rotation | SlippingRotation:
@@ -688,6 +704,8 @@ class _Simulation:
 
     def packets(self) -> _Packets:
         """All packets of the span: firing clock, azimuths, drops, t1."""
+        if self.vendor == "ouster":
+            return self._ouster_packets()
         cfg, clk = self.cfg, self.clock
         span_ns = int(cfg.duration_s * NS_PER_S)
         n = span_ns * clk.period_den // clk.period_num_ns
@@ -706,6 +724,30 @@ class _Simulation:
         delivered = self.rng_drop.random(n) >= cfg.packet_drop_fraction
         t1 = cfg.t1.draw_ns(self.rng_t1, n)
         return _Packets(stamp, capture, block_true, azimuth_q, delivered, t1, capture + t1)
+
+    def _ouster_packets(self) -> _Packets:
+        """Ouster packets: each column fires when the encoder reaches its angle (360 deg x
+        measurement id / columns), its time from the rotation; packets start at column
+        ids divisible by 16; column stamps are the sensor clock in ns (PTP: epoch)."""
+        cfg, clk = self.cfg, self.clock
+        cols = clk.azimuth_units_per_deg
+        per = ouster_packets.COLUMNS_PER_PACKET
+        rot = self.rotation
+        end_deg = float(rot.angle_deg(np.array([cfg.duration_s * NS_PER_S]))[0])
+        start_deg = float(rot.angle_deg(np.array([0.0]))[0])
+        first = math.ceil(start_deg * cols / 360.0 / per) * per
+        last = math.floor(end_deg * cols / 360.0 / per) * per
+        column = np.arange(first, last, dtype=np.int64).reshape(-1, per)
+        t_rel = rot.time_at_ns(column.astype(np.float64) * 360.0 / cols)
+        block_true = cfg.start_time_ns + np.rint(t_rel).astype(np.int64)
+        capture = block_true[:, 0].copy()
+        n = capture.size
+        delivered = self.rng_drop.random(n) >= cfg.packet_drop_fraction
+        t1 = cfg.t1.draw_ns(self.rng_t1, n)
+        return _Packets(
+            capture + cfg.clock_offset_ns, capture, block_true, column * 360, delivered, t1,
+            capture + t1,
+        )  # fmt: skip
 
     def crossings(self, pk: _Packets) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Zero crossings seen in the delivered packets: (turn numbers m, zero packet index).
@@ -1089,6 +1131,9 @@ class _Simulation:
     ) -> Iterator[tuple[int, int, str, bytes | Callable[[], bytes]]]:
         """One scan per zero crossing: delivered packets after the previous zero packet up
         to and including this one; header stamp and log time = last packet's driver stamp."""
+        if self.vendor == "ouster":
+            yield from self._ouster_messages(writer, pk, zero_packet)
+            return
         units = self.clock.azimuth_units_per_deg
         full = 360 * units
         begin = 0
@@ -1147,6 +1192,34 @@ class _Simulation:
                 stamp="last" if convention == "velodyne" else "first",
             )
             yield (log_ns, -1, CLOUD_TOPIC, writer.serialize(msg))
+
+    def _ouster_messages(
+        self, writer: LogWriter, pk: _Packets, zero_packet: NDArray[np.int64]
+    ) -> Iterator[tuple[int, int, str, bytes | Callable[[], bytes]]]:
+        """The metadata first, then one PacketMsg per delivered packet up to the last zero
+        packet, logged at its driver stamp (as ouster-ros publishes them)."""
+        cfg = self.cfg
+        cols = self.clock.azimuth_units_per_deg
+        text = ouster_packets.metadata_json(cfg.ouster_profile, cfg.rpm)
+        meta = writer.serialize(writer.new_msg("std_msgs/msg/String", data=text))
+        yield (int(pk.driver_ns[0]) - 1, -2, self.metadata_topic, meta)
+        end = int(zero_packet[-1]) + 1
+        for lo in range(0, end, 4096):
+            rows = np.arange(lo, min(end, lo + 4096))
+            column = pk.azimuth_q[rows] // 360
+            stamps = pk.block_true_ns[rows] + cfg.clock_offset_ns
+            data = ouster_packets.encode_packets(
+                cfg.ouster_profile, column % cols, stamps, column[:, 0] // cols, cols
+            )
+            for k, p in enumerate(rows.tolist()):
+                if pk.delivered[p]:
+                    payload = ouster_packets.packet_msg(data[k].tobytes(), writer.encoding)
+                    yield (int(pk.driver_ns[p]), -1, self.topic, payload)
+
+    @property
+    def metadata_topic(self) -> str:
+        """Ouster: the sensor metadata topic beside the packets (ouster-ros' name)."""
+        return self.topic.rsplit("/", 1)[0] + "/metadata"
 
     def _encode(
         self, azimuth_deg: NDArray[np.float64], stamp_ns: NDArray[np.int64], first_index: int
@@ -1349,6 +1422,8 @@ class _Simulation:
             writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
             if cfg.lidar_packets:
                 writer.add_topic(self.topic, self.msgtype)
+                if self.vendor == "ouster":
+                    writer.add_topic(self.metadata_topic, "std_msgs/msg/String")
             if cfg.cloud_convention is not None:
                 writer.add_topic(CLOUD_TOPIC, "sensor_msgs/msg/PointCloud2")
             image_type = (
@@ -1460,6 +1535,7 @@ _LIDAR_ALIASES: dict[str, LidarModel] = {
         model.lower().removeprefix("pandar"),
     )
 }
+_LIDAR_ALIASES["ouster"] = "OS-1-64"
 
 
 def lidar_model(name: str) -> LidarModel:

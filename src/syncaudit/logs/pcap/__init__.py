@@ -1,0 +1,1 @@
+"""pcap / pcapng network captures of LiDAR traffic, read as logs of sensor streams."""
