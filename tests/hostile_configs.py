@@ -2,7 +2,7 @@
 
 Each maker returns a file's bytes for one config format: an alias bomb (nine levels of nine
 aliases: 9**9 values once expanded), deep nesting, a huge scalar, a key given twice, a
-mapping of too many keys, bytes that are not UTF-8, and a file past the size cap.
+mapping of too many keys, a list of 400,000 values, bytes that are not UTF-8, and a file past the size cap.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ HOSTILE_KINDS = (
     "huge_scalar",
     "duplicate_key",
     "many_keys",
+    "wide",
     "not_utf8",
     "oversized",
 )
@@ -42,6 +43,7 @@ def yaml_file(kind: str) -> bytes:
         "huge_scalar": lambda: b"a: " + b"x" * 200_000 + b"\n",
         "duplicate_key": lambda: b"a: 1\nb: 2\na: 3\n",
         "many_keys": lambda: "".join(f"k{n}: {n}\n" for n in range(20_000)).encode(),
+        "wide": lambda: b"a: [" + b",".join([b"1"] * 400_000) + b"]\n",
         "not_utf8": lambda: b"a: caf\xe9\n",
         "oversized": lambda: b"# padding\n" * 120_000,
     }
@@ -60,6 +62,7 @@ def json_text(kind: str) -> bytes:
         "many_keys": lambda: (
             "{" + ",".join(f'"k{n}": {n}' for n in range(20_000)) + ', "path": "a"}'
         ).encode(),
+        "wide": lambda: b'{"path": "a", "x": [' + b",".join([b"0"] * 400_000) + b"]}",
         "not_utf8": lambda: b'{"path": "caf\xe9"}',
         "oversized": lambda: b'{"path": "a"}\n' * 1_300_000,
     }

@@ -21,7 +21,7 @@ from typing import Any, Self, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from syncaudit.errors import ConfigError
+from syncaudit.errors import ConfigError, InputOpenError
 
 MAX_CONFIG_BYTES = 1 << 20
 """Largest config file read (1 MiB): a rig of a thousand cameras is about 200 KB."""
@@ -33,14 +33,15 @@ MAX_ALIASES = 1_000
 """Most YAML alias uses (`*name`) in one document: a rig sharing one intrinsics block
 between cameras uses one per camera; the billion-laughs bomb needs 72 for 9**9 values."""
 
-MAX_VALUES = 40_000
+MAX_VALUES = 30_000
 """Most values (mappings, lists, scalars) in one document, as written and after alias
-expansion: a 2,000-camera rig (bench_many_cameras' largest) holds about 28,000, the alias
-bomb 435 million. Composing a 50,000-value list took 0.61 s with the 2-core machine at load
-average 5: 40,000 keeps the refusal within the 1 s bound."""
+expansion: bench_many_cameras' 2,000-camera rig holds 22,011, the alias bomb 435 million.
+Composing YAML costs 8-25 us a value on this 2-core machine (40,000 took 0.8-1.1 s at load
+average 11), so 30,000 keeps a refusal within the 1 s bound."""
 
-MAX_KEYS = 10_000
-"""Most keys in one mapping (a rig's thousand cameras are list items, not keys)."""
+MAX_KEYS = 5_000
+"""Most keys in one mapping (a rig's thousand cameras are list items, not keys; a policy's
+per-vehicle rigs a few hundred)."""
 
 MAX_SCALAR_CHARS = 65_536
 """Longest single string or number in a config (a path is at most 4,096 bytes)."""
@@ -91,26 +92,30 @@ class _BoundedLoader(
     def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
         """Compose one node, refusing the document once it passes a bound."""
         self.nodes += 1
-        event = self.peek_event()
-        mark = getattr(event, "start_mark", None)
-        where = f"line {mark.line + 1} column {mark.column + 1}: " if mark is not None else ""
         if self.nodes > self.max_values:
-            raise ConfigError(f"{where}more than {self.max_values} values")
-        if isinstance(parent, yaml.MappingNode) and index is None and len(parent.value) >= MAX_KEYS:
-            raise ConfigError(f"{where}a mapping of more than {MAX_KEYS} keys")
-        if isinstance(event, yaml.AliasEvent):
+            raise self._refused(f"more than {self.max_values} values")
+        if index is None and isinstance(parent, yaml.MappingNode):
+            if len(parent.value) >= MAX_KEYS:
+                raise self._refused(f"a mapping of more than {MAX_KEYS} keys")
+        elif self.check_event(yaml.AliasEvent):
             self.aliases += 1
             if self.aliases > MAX_ALIASES:
-                raise ConfigError(f"{where}more than {MAX_ALIASES} aliases")
+                raise self._refused(f"more than {MAX_ALIASES} aliases")
         self.level += 1
         try:
             if self.level > MAX_NESTING:
-                raise ConfigError(f"{where}nested deeper than {MAX_NESTING} levels")
+                raise self._refused(f"nested deeper than {MAX_NESTING} levels")
             node = super().compose_node(parent, index)
             assert node is not None  # the composer returns None only at the stream's end
             return node
         finally:
             self.level -= 1
+
+    def _refused(self, why: str) -> ConfigError:
+        """`line L column C: why` at the next event."""
+        mark = getattr(self.peek_event(), "start_mark", None)
+        where = f"line {mark.line + 1} column {mark.column + 1}: " if mark is not None else ""
+        return ConfigError(where + why)
 
 
 _DEPTH: contextvars.ContextVar[int] = contextvars.ContextVar("config_depth", default=0)
@@ -225,7 +230,8 @@ def read_text(path: Path, *, what: str = "config file", max_bytes: int = MAX_CON
     """A config file's text: size-capped, UTF-8 or UTF-16/32 with a byte-order mark.
 
     Raises:
-        ConfigError: unreadable, larger than `max_bytes`, or not text.
+        InputOpenError: the file cannot be opened (exit 2).
+        ConfigError: larger than `max_bytes`, or not text.
     """
     try:
         with path.open("rb") as handle:
@@ -236,8 +242,8 @@ def read_text(path: Path, *, what: str = "config file", max_bytes: int = MAX_CON
                 parts.append(part)
                 held += len(part)
             data = b"".join(parts)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    except OSError as exc:  # missing, a directory, no permission: cannot be opened (exit 2)
+        raise InputOpenError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
     if len(data) > max_bytes:
         raise ConfigError(
             f"{path}: {what} larger than {max_bytes // 1024} KiB; refusing to read it"
