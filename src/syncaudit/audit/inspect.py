@@ -131,6 +131,8 @@ class InfoReport:
     """Why the audit's LiDAR topic cannot be read (None where it can)."""
     exit_code: int = 0
     """The exit code `audit` gives on this log for that error (0 where none)."""
+    health: dict[str, Any] | None = None
+    """What was seen wrong with the log's bytes (`audit.log_health.LogHealth.to_dict`)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form; NaN becomes None."""
@@ -178,17 +180,25 @@ def lidar_warnings(row: LidarRow) -> list[str]:
 
 
 def inspect_log(
-    path: str | Path, rig: Rig | None = None, *, partial: bool = False, jobs: int | None = None
+    path: str | Path,
+    rig: Rig | None = None,
+    *,
+    partial: bool = False,
+    jobs: int | None = None,
+    check_crc: bool = False,
 ) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
     Raises the error that makes `audit` fail on the LiDAR topic, unless `partial`: then
     the report is returned with `error` and `exit_code` set. `jobs` worker processes read
     the LiDAR and shared camera topics where the log allows, as `audit` does (default:
-    one per core).
+    one per core). `check_crc` verifies every MCAP chunk's CRC for the report's `health`.
     """
+    from syncaudit.audit.log_health import log_health
+
     with open_log(path) as log:
         report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
+        report.health = log_health(log, check_crc=check_crc, failure=failure).to_dict()
     if failure is not None and not partial:
         raise failure
     return report
