@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from syncaudit.audit.log_health import log_health, no_packets_error
 from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_cameras
@@ -194,8 +195,6 @@ def inspect_log(
     the LiDAR and shared camera topics where the log allows, as `audit` does (default:
     one per core). `check_crc` verifies every MCAP chunk's CRC for the report's `health`.
     """
-    from syncaudit.audit.log_health import log_health
-
     with open_log(path) as log:
         report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
         report.health = log_health(log, check_crc=check_crc, failure=failure).to_dict()
@@ -253,7 +252,7 @@ def _inspect(
                 jobs=jobs,
             )
             if scan.packets == 0:
-                raise NoDataError(f"LiDAR topic {topic} holds no packets")
+                raise no_packets_error(log, topic)
         except SyncauditError as exc:
             if topic == audited:
                 failure = exc

@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from syncaudit.errors import LogReadError
+from syncaudit.errors import LogReadError, NoDataError, SyncauditError
 from syncaudit.logs.base import LogReader
 
 TRUNCATED_CODES = frozenset({"mcap-truncated", "rosbag1-truncated"})
@@ -103,3 +103,17 @@ def _check_crcs(log: LogReader, health: LogHealth) -> None:
         health.crc_checked_chunks = checked
     finally:
         reader.close()
+
+
+def no_packets_error(log: LogReader, topic: str) -> SyncauditError:
+    """The error for a LiDAR topic that gave no packets, saying why where the log knows.
+
+    A log cut off or damaged before the topic's first packet is a damaged log (exit 3),
+    named with where it was cut (`... cut off at byte 50000`); otherwise the topic is
+    simply empty (NoDataError, exit 7).
+    """
+    for warning in log.warnings:
+        if warning.code in TRUNCATED_CODES or warning.code in DAMAGED_CODES:
+            why = warning.message.split("; reading")[0]
+            return LogReadError(f"{why}: LiDAR topic {topic} holds no packets before it")
+    return NoDataError(f"LiDAR topic {topic} holds no packets")

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
+from syncaudit.audit.log_health import no_packets_error
 from syncaudit.audit.plan import read_plan
 from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
@@ -269,7 +270,7 @@ def _read(
             router.feed(kind, topic, payload)
     scan = scanner.finish()
     if scan.packets == 0:
-        raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
+        raise no_packets_error(probe.log, lidar_cfg.topic)  # names a cut or damage it saw
     warnings.extend(router.finish())
     tables = [router.builders[c.name].build() for c, _, _ in located]
     return scan, tables
