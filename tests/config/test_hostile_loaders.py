@@ -31,7 +31,7 @@ the test machine is shared (load average 21 on 2 cores seen), and a refusal's co
 bounds it; wall time is checked end to end, with a margin, by the CLI test below."""
 
 METADATA_BUDGET_S = 3.0
-"""A bag's metadata.yaml may hold up to MAX_METADATA_VALUES (100,000) values, not 30,000."""
+"""A bag's metadata.yaml may hold up to MAX_METADATA_VALUES (50,000) values, not 30,000."""
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
 
@@ -119,3 +119,17 @@ def test_cli_refuses_alias_bomb_rig_in_one_line_exit_6(tmp_path: Path, command: 
     assert len(lines) == 1 and "bomb.yaml" in lines[0] and "alias bomb" in lines[0]
     assert elapsed_s < 10, elapsed_s  # interpreter start included; the parse is < 1 s above
     assert issubclass(ConfigError, SyncauditError)
+
+
+@pytest.mark.parametrize(
+    ("name", "row"), [("logs.jsonl", b'{"path": "a"}\n'), ("logs.csv", b"a\n")]
+)
+def test_manifest_of_too_many_rows_is_refused_before_parsing(
+    tmp_path: Path, name: str, row: bytes
+) -> None:
+    path = tmp_path / name
+    path.write_bytes((b"path\n" if name.endswith(".csv") else b"") + row * 900_000)
+    start = time.process_time()
+    with pytest.raises(ConfigError, match=r"more than 50000 rows; split it"):
+        read_manifest(path)
+    assert time.process_time() - start < BUDGET_S
