@@ -2,6 +2,7 @@
 
     python benchmarks/fuzz_campaign.py --mutants 2000            # the long mode
     python benchmarks/fuzz_campaign.py --replay vlp16_bag-flip_bits-123456
+    python benchmarks/fuzz_campaign.py --loaders 2000 --mutants 0   # the loaders class only
 
 Prints the counts by exit code, the problems by cause (known open items of issue 10
 listed apart from new ones), the slowest and largest runs; failing mutants are saved as
@@ -20,6 +21,7 @@ from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "fuzz"))
+sys.path.insert(1, str(Path(__file__).resolve().parents[1] / "tests"))  # hostile_configs
 
 from campaign import (
     CI_SEED,
@@ -44,7 +46,14 @@ def main() -> int:
     parser.add_argument("--failures", type=Path, default=Path("fuzz-failures"))
     parser.add_argument("--replay", help="run one mutant by id and keep its files")
     parser.add_argument("--keep", type=Path, help="work directory to keep (default: a temp dir)")
+    parser.add_argument(
+        "--loaders", type=int, default=0, help="also run this many hostile config mutants"
+    )
     args = parser.parse_args()
+    if args.loaders:
+        status = run_loaders(args.loaders, args.seed, args.jobs, args.failures)
+        if not args.mutants:
+            return status
     mutants = [Mutant.parse(args.replay)] if args.replay else plan(args.mutants, args.seed)
     root = args.keep or Path(tempfile.mkdtemp(prefix="syncaudit-fuzz-"))
     done = [0]
@@ -65,6 +74,46 @@ def main() -> int:
             shutil.rmtree(root, ignore_errors=True)
     wall = time.monotonic() - start
     return report(mutants, outcomes, wall, args.failures, replay=bool(args.replay), root=root)
+
+
+def run_loaders(count: int, seed: int, jobs: int, failures: Path) -> int:
+    """The loaders class: `count` hostile config files through the CLI; 1 on any problem."""
+    import json
+
+    from loader_campaign import loader_plan, run_loader_campaign
+
+    mutants = loader_plan(count, seed)
+    root = Path(tempfile.mkdtemp(prefix="syncaudit-loader-fuzz-"))
+    start = time.monotonic()
+    try:
+        outcomes = run_loader_campaign(mutants, root, jobs=jobs)
+        left = sorted(
+            p.name
+            for p in root.iterdir()
+            if p.name not in outcomes or not outcomes[p.name].problems
+        )
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    wall = time.monotonic() - start
+    runs = [o.run for o in outcomes.values()]
+    by_exit = Counter(f"{o.mutant.split('-')[1]} {o.run.exit_code}" for o in outcomes.values())
+    by_problem = Counter(p for o in outcomes.values() for p, _ in o.problems)
+    failing = [o for o in outcomes.values() if o.problems]
+    for outcome in failing:
+        failures.mkdir(parents=True, exist_ok=True)
+        record = {"description": outcome.description, "problems": outcome.problems}
+        (failures / f"{outcome.mutant}.json").write_text(json.dumps(record, indent=2))
+    slow = max(runs, key=lambda r: r.seconds)
+    big = max(runs, key=lambda r: r.max_rss_mb)
+    print(f"loaders: {len(mutants)} mutants in {wall:.0f} s")
+    print("exit codes: " + ", ".join(f"{k}: {v}" for k, v in sorted(by_exit.items())))
+    print(f"mutants with problems: {len(failing)}; by problem: {dict(by_problem) or 'none'}")
+    print(f"work folders left by passing mutants: {len(left)}")
+    print(
+        f"slowest run {slow.seconds:.1f} s ({' '.join(slow.argv[:1])}); "
+        f"largest {big.max_rss_mb:.0f} MB (bound {MAX_RSS_MB:.0f} MB)"
+    )
+    return 1 if failing else 0
 
 
 def report(

@@ -88,6 +88,19 @@ class UsageError(SyncauditError):
     exit_code = EXIT_USAGE
 
 
+class InputOpenError(SyncauditError):
+    """An input that is not a log (rig, config, policy, manifest, results database) cannot
+    be opened: missing, a directory, no permission. Exit 2, as a log that cannot be opened;
+    a file that opens but holds nonsense is a ConfigError (6)."""
+
+    exit_code = LogOpenError.exit_code
+
+
+class MissingExtraError(UsageError):
+    """An option needs an optional extra that is not installed (`--parquet` without
+    pyarrow, `calib` without small_gicp/gtsam): a usage error, exit 64, naming the extra."""
+
+
 class WorkerDiedError(SyncauditError):
     """A worker process reading the log died under the run (killed, or crashed).
 
@@ -111,7 +124,7 @@ EXIT_CODES: tuple[tuple[int, str], ...] = (
     (EXIT_OK, "done"),
     (
         LogOpenError.exit_code,
-        "the log cannot be opened (missing, empty, unknown format, directory without metadata)",
+        "the log, or another input (rig, config, database), cannot be opened (missing, empty, unknown format, directory without metadata)",
     ),
     (
         LogReadError.exit_code,
@@ -135,7 +148,10 @@ EXIT_CODES: tuple[tuple[int, str], ...] = (
         GateFailedError.exit_code,
         "`--gate`: a threshold or policy check failed, or something required was not judged",
     ),
-    (EXIT_USAGE, "usage error: unknown option, bad option value, conflicting options"),
+    (
+        EXIT_USAGE,
+        "usage error: unknown option, bad option value, conflicting options, an option's extra not installed",
+    ),
     (EXIT_INTERNAL, "internal error (a bug; `SYNCAUDIT_DEBUG=1` shows the traceback)"),
     (EXIT_INTERRUPTED, "interrupted (SIGINT or SIGTERM); no partial output is left"),
 )

@@ -141,7 +141,7 @@ def test_fleet_report_exit_codes(tmp_path: Path, three_cameras_outcome: LogOutco
         app,
         ["fleet", "report", "--db", str(tmp_path / "no.duckdb"), "--csv", str(tmp_path / "x.csv")],
     )
-    assert missing.exit_code == 8 and "no such results database" in missing.output
+    assert missing.exit_code == 2 and "no such results database" in missing.output
     assert (
         runner.invoke(app, ["fleet", "report", "--db", str(tmp_path / "no.duckdb")]).exit_code == 64
     )

@@ -129,7 +129,7 @@ def test_health_reads_every_reader_code() -> None:
         [
             LogWarning("rosbag1-truncated", "x.bag: ROS 1 bag cut off at byte 4096 (...)"),
             LogWarning("rosbag1-no-index", "y.bag: read by scanning"),
-            LogWarning("mcap-unknown-channel", "not a condition of the file"),
+            LogWarning("rosbag1-mixed-types", "not a condition of the file"),
         ],
         [
             "camera front: 3 damaged messages skipped on /a (first at ...)",
@@ -143,6 +143,13 @@ def test_health_reads_every_reader_code() -> None:
     assert health.problems[0] == "cut off at byte 4096"
     assert len(health.notes) == 5 and not health.intact
     assert log_health([], []).intact
+
+
+def test_messages_on_undeclared_channels_are_damage() -> None:
+    """Messages skipped because the file never declared their channel were lost."""
+    health = log_health([LogWarning("mcap-unknown-channel", "x.mcap: ... id 7 skipped")])
+    assert health.status == "damaged" and not health.intact
+    assert health.damaged == ("x.mcap: ... id 7 skipped",)
 
 
 def test_the_gate_report_leads_with_the_policy_verdict(

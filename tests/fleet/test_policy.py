@@ -9,7 +9,7 @@ import jsonschema
 import pytest
 import yaml
 
-from syncaudit.errors import ConfigError
+from syncaudit.errors import ConfigError, InputOpenError
 from syncaudit.fleet.init_policy import init_policy_yaml, policy_from_outcomes
 from syncaudit.fleet.job import LogOutcome
 from syncaudit.fleet.policy import load_policy, parse_policy, policy_json_schema
@@ -122,7 +122,7 @@ def test_unreadable_and_non_mapping_policy_files(tmp_path: Path) -> None:
     bad.write_text("- 1\n")
     with pytest.raises(ConfigError, match="must be a mapping"):
         load_policy(bad)
-    with pytest.raises(ConfigError, match="cannot read policy"):
+    with pytest.raises(InputOpenError, match="cannot read policy"):  # exit 2, as any missing input
         load_policy(tmp_path / "absent.yaml")
 
 

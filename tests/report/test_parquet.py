@@ -103,7 +103,7 @@ def test_without_pyarrow_parquet_stops_before_any_work(
             str(tmp_path / "f.parquet"),
         ],
     )
-    assert result.exit_code == 8, result.output
+    assert result.exit_code == 64, result.output  # a missing extra: usage error (issue 24)
     assert "pip install 'syncaudit[parquet]'" in result.output
     assert list(tmp_path.iterdir()) == []
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from syncaudit.audit.cloud_info import cloud_agreement, info_cloud_scan
-from syncaudit.audit.health import log_health
+from syncaudit.audit.health import check_chunk_crcs, log_health, no_packets_error
 from syncaudit.audit.probe import LogProbe
 from syncaudit.audit.rig_check import check_rig_against_log
 from syncaudit.audit.rig_guess import guess_cameras
@@ -204,6 +204,7 @@ def inspect_log(
     jobs: int | None = None,
     lidar_metadata: str | Path | None = None,
     lidar_capture: str | Path | None = None,
+    check_crc: bool = False,
 ) -> InfoReport:
     """Summarise a log: container, topics, LiDARs (measured), cameras and trigger records.
 
@@ -211,9 +212,14 @@ def inspect_log(
     the report is returned with `error` and `exit_code` set. `jobs` worker processes read
     the LiDAR and shared camera topics where the log allows, as `audit` does (default:
     one per core). `lidar_metadata` / `lidar_capture`: as `logs.open_log`.
+    one per core). `check_crc` verifies every MCAP chunk's CRC for the report's `health`.
     """
     with open_log(path, lidar_metadata=lidar_metadata, lidar_capture=lidar_capture) as log:
         report, failure = _inspect(log, rig, default_jobs() if jobs is None else max(1, jobs))
+        crc_check = check_chunk_crcs(log) if check_crc else None
+        report.health = log_health(
+            log.warnings, report.warnings, failure=failure, crc_check=crc_check
+        ).to_dict()
     if failure is not None and not partial:
         raise failure
     return report
@@ -279,7 +285,7 @@ def _inspect(
                 model=rig.lidar.model if rig else None,
             )
             if scan.packets == 0:
-                raise NoDataError(f"LiDAR topic {topic} holds no packets")
+                raise no_packets_error(log, topic)
         except SyncauditError as exc:
             if topic == audited:
                 failure = exc
@@ -314,7 +320,6 @@ def _inspect(
         cam_row = _camera_row(log, cam, duration, census.topics)
         report.cameras.append(replace(cam_row, trigger_design=design, trigger_design_why=why))
     report.warnings.extend(w.message for w in log.warnings)
-    report.health = log_health(log.warnings, report.warnings).to_dict()
     if failure is not None:
         report.error = str(failure)
         report.exit_code = failure.exit_code

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from syncaudit.audit.health import LogHealth, log_health
+from syncaudit.audit.health import LogHealth, log_health, no_packets_error
 from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
 from syncaudit.audit.plan import read_plan
 from syncaudit.audit.probe import LogProbe
@@ -290,7 +290,7 @@ def _read(
     scan = scanner.finish() if clouds is None else clouds.finish()
     warnings.extend([] if clouds is None else clouds.notes)
     if scan.packets == 0:
-        raise NoDataError(f"LiDAR topic {lidar_cfg.topic} holds no packets")
+        raise no_packets_error(probe.log, lidar_cfg.topic)  # names a cut or damage it saw
     warnings.extend(router.finish())
     tables = [router.builders[c.name].build() for c, _, _ in located]
     return scan, tables

@@ -21,17 +21,17 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import se3
 from syncaudit.calib.settings import PoseGraphConfig
-from syncaudit.errors import ConfigError
+from syncaudit.errors import MissingExtraError
 
 F64 = NDArray[np.float64]
 
 
 def backend() -> ModuleType:
-    """The gtsam module, or a one-line ConfigError naming the extra to install."""
+    """The gtsam module, or a one-line MissingExtraError (exit 64) naming the extra to install."""
     try:
         import gtsam
     except ImportError:
-        raise ConfigError(
+        raise MissingExtraError(
             "LiDAR calibration needs the optional extra: pip install 'syncaudit[calib]' "
             "(gtsam is missing)"
         ) from None

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import se3
 from syncaudit.calib.settings import AlignmentLimits
-from syncaudit.errors import ConfigError
+from syncaudit.errors import MissingExtraError
 
 F64 = NDArray[np.float64]
 _ROTATION_EPS_RAD = 1e-4
@@ -28,7 +28,7 @@ it oscillate between correspondence sets without changing the result measurably.
 
 
 def backend() -> Any:
-    """The small_gicp module, or a one-line ConfigError naming the extra to install.
+    """The small_gicp module, or a one-line MissingExtraError (exit 64) naming the extra to install.
 
     Before the first import, OpenMP threads are told to sleep rather than spin while
     waiting (unless OMP_WAIT_POLICY is set already): on a busy 2-core machine spinning
@@ -38,7 +38,7 @@ def backend() -> Any:
     try:
         import small_gicp
     except ImportError:
-        raise ConfigError(
+        raise MissingExtraError(
             "LiDAR calibration needs the optional extra: pip install 'syncaudit[calib]' "
             "(small_gicp is missing)"
         ) from None

@@ -240,10 +240,11 @@ def _import_tables() -> None:
 
 
 def _parquet_targets(path: Path) -> tuple[Path, Path]:
-    """`--parquet F`: F and its per-camera summary; exit 8 now when pyarrow is missing."""
-    from syncaudit.writers.parquet import cameras_path, require_pyarrow
+    """`--parquet F`: F and its per-camera summary; exit 64 now when pyarrow is missing."""
+    from syncaudit.cli.common import require_extra
+    from syncaudit.writers.parquet import cameras_path
 
-    require_pyarrow()
+    require_extra("pyarrow.parquet", extra="parquet", option="--parquet")
     return path, cameras_path(path)
 
 
@@ -252,12 +253,12 @@ def _load_calibration(path: Path) -> CalibrationResult:
     from pydantic import ValidationError
 
     from syncaudit.calib.result import CalibrationResult
-    from syncaudit.errors import ConfigError
+    from syncaudit.errors import ConfigError, InputOpenError
 
     try:
         return CalibrationResult.model_validate_json(path.read_bytes())
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except OSError as exc:  # cannot be opened: exit 2, as any missing input
+        raise InputOpenError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "document"

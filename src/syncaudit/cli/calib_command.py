@@ -97,14 +97,13 @@ def _calibrate(
     log: Path, config_file: Path | None, extrinsics: Path | None, topics: list[str] | None
 ) -> Any:
     """Load the config, apply the command-line overrides and run the calibration."""
+    from syncaudit.cli.common import require_extra
     from syncaudit.errors import ConfigError
 
-    try:
-        from syncaudit.calib import CalibConfig, calibrate_log, load_config
-    except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ConfigError(
-            f"the calibration needs the optional extra: pip install 'syncaudit[calib]' ({exc})"
-        ) from exc
+    for module in ("small_gicp", "gtsam"):  # before any work: exit 64 naming the extra
+        require_extra(module, extra="calib", option="LiDAR calibration")
+    from syncaudit.calib import CalibConfig, calibrate_log, load_config
+
     config: CalibConfig = load_config(config_file, CalibConfig) if config_file else CalibConfig()
     updates: dict[str, object] = {}
     if extrinsics is not None:

@@ -10,6 +10,7 @@ import contextlib
 import copy
 import difflib
 import functools
+import importlib
 import json
 import os
 import signal
@@ -41,6 +42,7 @@ from syncaudit.errors import (
     EXIT_USAGE,
     ConfigError,
     Interrupted,
+    MissingExtraError,
     OutputError,
     SyncauditError,
     UsageError,
@@ -207,6 +209,9 @@ class SyncauditGroup(TyperGroup):
         except click_errors.ClickException as exc:
             say(f"error: {' '.join(exc.format_message().split())}")
             code = EXIT_USAGE
+        except OSError as exc:  # click's own printing (help, version) on a full disk
+            say(f"error: stdout: {exc.strerror or exc} (the help was not written)")
+            code = OutputError.exit_code
         except SystemExit as exc:
             # click exits 1 when its own printing (a help text) meets a closed pipe, after
             # wrapping the streams; the command bodies print through `emit` and `say`.
@@ -312,16 +317,23 @@ def local_paths(*items: str | Path | None) -> tuple[Path | None, ...]:
 # -- running a command ---------------------------------------------------------------------
 
 
+_STDOUT_LOST: list[str] = []
+"""Why the result could not be written on stdout (disk full, I/O error): `run` then exits 8,
+unless the command already ended with its own code (a failed gate stays 10)."""
+
+
 def say(line: str) -> None:
     """One line on stderr; a reader that went away (`2>&1 | head`) is not an error.
 
-    The exit code is decided by the caller, never by the pipe.
+    The exit code is decided by the caller, never by the pipe nor by a full disk.
     """
     try:
         sys.stderr.write(line + "\n")
         sys.stderr.flush()
     except (BrokenPipeError, ValueError):  # ValueError: the stream is closed
         reader_gone()
+    except OSError:  # stderr on a full disk: nowhere left to say anything
+        _silence(sys.stderr)
 
 
 def fail(message: str, code: int) -> NoReturn:
@@ -343,7 +355,10 @@ def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) ->
         if imports is not None:
             imports()
         resume_gc()
-        return job()
+        result = job()
+        if _STDOUT_LOST:
+            fail(f"stdout: {_STDOUT_LOST[0]} (the result was not written)", OutputError.exit_code)
+        return result
     except typer.Exit:  # a job that already said why (`fail`) and chose its code
         raise
     except SyncauditError as exc:
@@ -366,27 +381,46 @@ def run(job: Callable[[], T], *, imports: Callable[[], object] | None = None) ->
         )
 
 
+def require_extra(module: str, *, extra: str, option: str) -> None:
+    """Refuse before any work when `option` needs an extra that is not installed (exit 64)."""
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        raise MissingExtraError(
+            f"{option} needs {module.split('.')[0]}: pip install 'syncaudit[{extra}]'"
+        ) from None
+
+
 def reader_gone() -> None:
     """Point stdout and stderr at /dev/null once a reader went away (`| head`, `2>&1 | head`).
 
     Both: with `2>&1` they are one pipe, and the next line on either would fail again.
     """
     for stream in (sys.stdout, sys.stderr):
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, stream.fileno())
-            os.close(devnull)
-        except (OSError, ValueError, AttributeError):
-            pass  # not a real file (a test runner's buffer): nothing to silence
+        _silence(stream)
+
+
+def _silence(stream: Any) -> None:
+    """Point one stream's file descriptor at /dev/null (a reader gone, a full disk)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stream.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass  # not a real file (a test runner's buffer): nothing to silence
 
 
 def emit(show: Callable[[], None]) -> None:
-    """Print a result on stdout; a reader that went away (`| head`) is not an error."""
+    """Print a result on stdout; a reader that went away (`| head`) is not an error, a full
+    disk is (exit 8 at the end of `run`, unless the command failed on its own)."""
     try:
         show()
         sys.stdout.flush()
     except BrokenPipeError:
         reader_gone()
+    except OSError as exc:
+        _STDOUT_LOST.append(exc.strerror or str(exc))
+        _silence(sys.stdout)
 
 
 def _console_class() -> type[Console]:
@@ -422,6 +456,8 @@ def note(markup: str) -> None:
         stderr_console().print(markup, highlight=False)
     except BrokenPipeError:
         reader_gone()
+    except OSError:  # stderr on a full disk
+        _silence(sys.stderr)
 
 
 def print_json(data: Any) -> None:
@@ -483,6 +519,26 @@ def _command_name(command: CommandInfo) -> str | None:
     return get_command_name(command.callback.__name__) if command.callback else None
 
 
+def _open_closed_streams() -> None:
+    """Give a closed stdin/stdout/stderr (`>&-`) /dev/null, as a reader that went away.
+
+    Else the first file the command opens takes descriptor 1 or 2, and a line meant for the
+    terminal would be written into an output file.
+    """
+    for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        opened = os.open(os.devnull, os.O_RDWR)
+        if opened != fd:  # pragma: no cover - lower descriptors are open by now
+            os.dup2(opened, fd)
+            os.close(opened)
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, "r" if fd == 0 else "w", closefd=False))  # noqa: SIM115
+
+
 def main() -> None:
     """Console-script entry point.
 
@@ -491,6 +547,7 @@ def main() -> None:
     The garbage collector is paused until the command's imports are done (`cli.startup`).
     """
     pause_gc()
+    _open_closed_streams()
     try:
         only_command(sys.argv[1:])()
         code = 0

@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from syncaudit.errors import OutputError
+from syncaudit.errors import InputOpenError, OutputError
 from syncaudit.fleet.database import ResultsDB
 from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
 from syncaudit.writers.outputs import OutputSet
@@ -323,7 +323,7 @@ def write_report(
                 folder.mkdir()
                 index = folder / "index.html"
         if not db_path.is_file():
-            raise OutputError(
+            raise InputOpenError(
                 f"{db_path}: no such results database (run syncaudit gate --db first)"
             )
         with ResultsDB(db_path).connect() as con:

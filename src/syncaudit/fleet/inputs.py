@@ -14,14 +14,12 @@ from __future__ import annotations
 import csv
 import glob
 import hashlib
-import json
 import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
+from syncaudit.config import parse_text, read_text
 from syncaudit.errors import ConfigError, LogOpenError
 from syncaudit.fleet.policy import Policy
 from syncaudit.remote.listing import list_logs, remote_fingerprint
@@ -106,31 +104,51 @@ def _expand(item: str) -> list[Path] | None:
     return [path]  # missing: becomes that log's error row
 
 
+MAX_MANIFEST_BYTES = 16 << 20
+"""Largest manifest read (16 MiB)."""
+
+MAX_MANIFEST_ROWS = 50_000
+"""Most rows in one manifest (split a larger fleet): the fuzz campaign's 936,583-line
+JSONL manifest took 25 s to refuse at its last line, a 2.5-million-row CSV over 30 s."""
+
+
+def _csv_rows(path: Path, text: str) -> list[dict[str, object]]:
+    """A CSV manifest's rows; a header naming a column twice is refused (one would win)."""
+    try:
+        reader = csv.DictReader(text.splitlines())
+        names = reader.fieldnames
+        if names is None or "path" not in names:
+            raise ConfigError(f"{path}: a CSV manifest needs a header with a 'path' column")
+        unknown = set(names) - {"path", "vehicle", "rig", "tags"}
+        if unknown:
+            raise ConfigError(f"{path}: unknown manifest column(s) {sorted(unknown)}")
+        twice = sorted({name for name in names if list(names).count(name) > 1})
+        if twice:
+            raise ConfigError(f"{path}: manifest column(s) {twice} given twice")
+        return [dict(r) for r in reader]
+    except csv.Error as exc:
+        raise ConfigError(f"{path}:{reader.line_num}: not CSV ({exc})") from None
+
+
 def read_manifest(path: Path) -> list[LogJob]:
     """A CSV (header: path, vehicle, rig, tags) or JSONL manifest; relative paths are
     relative to the manifest. Tags are `;`-separated in CSV, a list in JSONL."""
     base = path.resolve().parent
     rows: list[dict[str, object]] = []
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read manifest ({exc.strerror or exc})") from exc
+    text = read_text(path, what="manifest", max_bytes=MAX_MANIFEST_BYTES)
+    if text.count("\n") > MAX_MANIFEST_ROWS + 1:  # counted before any row is parsed
+        raise ConfigError(f"{path}: manifest of more than {MAX_MANIFEST_ROWS} rows; split it")
     if path.suffix == ".csv":
-        reader = csv.DictReader(text.splitlines())
-        if reader.fieldnames is None or "path" not in reader.fieldnames:
-            raise ConfigError(f"{path}: a CSV manifest needs a header with a 'path' column")
-        unknown = set(reader.fieldnames) - {"path", "vehicle", "rig", "tags"}
-        if unknown:
-            raise ConfigError(f"{path}: unknown manifest column(s) {sorted(unknown)}")
-        rows = [dict(r) for r in reader]
+        rows = _csv_rows(path, text)
     else:
         for number, line in enumerate(text.splitlines(), 1):
             if not line.strip():
                 continue
             try:
-                row = json.loads(line)
-            except json.JSONDecodeError as exc:
-                raise ConfigError(f"{path}:{number}: not JSON ({exc.msg})") from exc
+                row = parse_text(line, "JSON")  # bounded like every config, keys unique
+            except ConfigError as exc:
+                reason = str(exc).removeprefix("not valid JSON: ")
+                raise ConfigError(f"{path}:{number}: not JSON ({reason})") from None
             if not isinstance(row, dict) or "path" not in row:
                 raise ConfigError(f"{path}:{number}: each line needs an object with 'path'")
             rows.append(row)
@@ -165,7 +183,7 @@ def log_metadata_vehicle(path: Path) -> str | None:
     """The vehicle id recorded in the log itself, if any (cheap: index/metadata only)."""
     try:
         if path.is_dir():
-            meta = yaml.safe_load((path / "metadata.yaml").read_text(encoding="utf-8"))
+            meta = parse_text(read_text(path / "metadata.yaml"), "YAML")
             info = (meta or {}).get("rosbag2_bagfile_information", {})
             custom = info.get("custom_data") or {}
             return next((str(custom[k]) for k in VEHICLE_KEYS if custom.get(k)), None)

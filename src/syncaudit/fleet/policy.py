@@ -21,6 +21,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from syncaudit.config import kind_of, parse_text, read_text
 from syncaudit.errors import ConfigError
 
 Severity = Literal["fail", "warn"]
@@ -329,15 +330,13 @@ def parse_policy(raw: object, source: str) -> Policy:
 def load_policy(path: str | Path) -> Policy:
     """Read and validate a policy YAML/JSON file; rig paths become relative to its folder."""
     path = Path(path)
+    text = read_text(path, what="policy file")
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read policy file ({exc.strerror or exc})") from exc
-    try:
-        raw = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
-    except (yaml.YAMLError, json.JSONDecodeError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ConfigError(f"{path}: not valid YAML: {first}") from exc
+        raw = parse_text(text, kind_of(path))  # bounded: aliases, size, depth, duplicate keys
+    except ConfigError as exc:
+        message = str(exc)
+        prefix = "" if message.startswith("not valid") else "policy file refused: "
+        raise ConfigError(f"{path}: {prefix}{message}") from None
     policy = parse_policy(raw, str(path))
     base = path.resolve().parent
     rigs = {vid: str(base / rig) for vid, rig in policy.rigs.items()}

@@ -95,8 +95,24 @@ def render_info(report: InfoReport, console: Console) -> None:
         console.print(_shared_topics_table(report))
     for guess in report.guessed:
         console.print(f"[cyan]guessed[/] {guess} (pass --rig to set them)")
+    if report.health:
+        console.print(f"[bold]health[/] {_health_line(report.health)}", markup=True)
     for warning in report.warnings:
         console.print(f"[yellow]warning[/] {warning}")
+
+
+def _health_line(health: dict[str, object]) -> str:
+    """`info`'s health line: the status, then what was checked (see audit.health)."""
+    parts = [str(health["status"])]
+    checked = health.get("crc_checked_chunks")
+    bad = health.get("bad_crc_chunks") or []
+    if checked is not None:
+        parts.append(f"{checked} chunk CRCs checked, {len(bad)} bad")  # type: ignore[arg-type]
+    elif health.get("crc_note"):
+        parts.append(str(health["crc_note"]))
+    else:
+        parts.append("chunk CRCs not checked (--check-crc)")
+    return "; ".join(parts)
 
 
 def _shared_topics_table(report: InfoReport) -> Table:

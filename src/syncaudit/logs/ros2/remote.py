@@ -20,13 +20,13 @@ from __future__ import annotations
 from pathlib import PurePosixPath
 from urllib.parse import urlsplit, urlunsplit
 
-import yaml
-
-from syncaudit.errors import LogOpenError, SyncauditError
+from syncaudit.config import parse_text
+from syncaudit.errors import ConfigError, LogOpenError, SyncauditError
 from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.mcap.remote import RemoteMcapLog
 from syncaudit.logs.model import LogWarning
 from syncaudit.logs.ros2.mcap_storage import McapBag
+from syncaudit.logs.ros2.metadata import MAX_METADATA_VALUES
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.file import RemoteFile, RemoteUnindexedError
 from syncaudit.remote.ranges import FetchStats
@@ -96,12 +96,14 @@ class RemoteMcapBag(McapBag):
         file.hold(head, size)  # the rest of a long one, in one request
         data = b"".join(bytes(file.held(*span) or b"") for span in ((0, head), (head, size)))
         try:
-            doc = yaml.load(data, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+            doc = parse_text(
+                data.decode("utf-8"), "YAML", max_values=MAX_METADATA_VALUES
+            )  # bounded like every config
             info = doc["rosbag2_bagfile_information"]
             names = [PurePosixPath(str(x)).name for x in info["relative_file_paths"]]
             storage = str(info.get("storage_identifier") or "")
             mode = str(info.get("compression_mode") or "").lower()
-        except (yaml.YAMLError, RecursionError, KeyError, TypeError, AttributeError) as exc:
+        except (ConfigError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise LogOpenError(f"{where}: not a rosbag2 metadata file: {one_line(exc)}") from None
         if not names:
             raise LogOpenError(f"{where}: metadata.yaml lists no storage files")
