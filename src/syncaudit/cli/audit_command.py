@@ -146,7 +146,7 @@ class _Targets:
     def claim_pairings(self, outputs: OutputSet) -> None:
         """Add the pairings log to the output set (a folder for a ROS 2 bag)."""
         if self.pairings is not None:
-            outputs.add(self.pairings, kind="dir" if self.pairings.suffix == "" else "file")
+            outputs.claim(self.pairings, kind="dir" if self.pairings.suffix == "" else "file")
 
     def write(
         self,

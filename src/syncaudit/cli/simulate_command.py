@@ -242,12 +242,13 @@ def simulate_sync(
 
         from syncaudit.simulate.rig_file import rig_from_truth, rig_path
         from syncaudit.simulate.sync_log import simulate_sync_log, truth_path
+        from syncaudit.writers.provenance import COMMENT_MARK
 
         rig_file = rig_path(target)
         with output_set(overwrite=overwrite, targets=(rig_file,)) as outputs:
             truth = simulate_sync_log(target, config, outputs=outputs)
             rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
-            outputs.write_text(rig_file, yaml.safe_dump(rig, sort_keys=False))
+            outputs.write_text(rig_file, COMMENT_MARK + yaml.safe_dump(rig, sort_keys=False))
         lidar_truth = truth["lidar"]
         lines = [
             f"wrote {target} ({lidar_truth['model']}, {lidar_truth['revolutions']} revolutions, "

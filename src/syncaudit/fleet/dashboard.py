@@ -22,6 +22,7 @@ from syncaudit.errors import OutputError
 from syncaudit.fleet.database import ResultsDB
 from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import HTML_MARK
 
 EXPORT_QUERY = """
 SELECT l.vehicle, c.camera, coalesce(l.start_time, l.judged_at) AS time, l.path, l.verdict,
@@ -264,7 +265,8 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
     body = "".join(sections) or "<p>No audited camera in the database yet.</p>"
     return (
         "<!doctype html><html lang=en><head><meta charset=utf-8>"
-        f"<title>syncaudit fleet dashboard</title><style>{_STYLE}</style></head><body>"
+        + HTML_MARK
+        + f"<title>syncaudit fleet dashboard</title><style>{_STYLE}</style></head><body>"
         f"<h1>syncaudit fleet dashboard</h1><p>{len(seen)} judged log(s) with cameras: {counts}</p>"
         f'<label>vehicle <select id="vehicle"><option value="">all</option>{options}</select></label>'
         f"{body}<script>{_SCRIPT}</script></body></html>\n"
@@ -297,7 +299,7 @@ def write_report(
     with outputs:
         for export in (parquet, csv):
             if export is not None:
-                outputs.add(export)
+                outputs.claim(export)
         index: Path | None = None
         if html_dir is not None:
             if html_dir.exists() and not html_dir.is_dir():
