@@ -205,7 +205,7 @@ def test_cli_exit_codes_for_policy_usage_and_outputs(
 
 
 def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
-    """README's and docs/fleet.md's fleet command, on a copy of sample_logs (pip step aside)."""
+    """README's and docs/fleet.md's fleet command, on a copy of sample_logs: all under one folder."""
     import subprocess
     import sys
 
@@ -213,19 +213,34 @@ def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
     readme = (repo / "README.md").read_text()
     command = readme.split("## Fleet gate", 1)[1].split("```sh\n", 1)[1].split("\n```", 1)[0]
     assert command in (repo / "docs" / "fleet.md").read_text()
-    install, rest = command.split(" && ", 1)
-    assert install == "pip install '.[fleet]'"
+    assert "pip install" not in command  # it must not replace an editable install
     (tmp_path / "sample_logs").symlink_to(SAMPLES)
     bindir = Path(sys.executable).parent
     env = {"PATH": f"{bindir}:/usr/bin:/bin", "HOME": str(tmp_path)}
     done = subprocess.run(
-        ["bash", "-c", rest], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+        ["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0, done.stderr
-    summary = json.loads((tmp_path / "gate.json").read_text())
+    demo = tmp_path / "fleet-demo"
+    summary = json.loads((demo / "gate.json").read_text())
     assert summary["counts"]["pass"] == 4
-    assert (tmp_path / "fleet-dashboard" / "index.html").is_file()
-    assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
+    assert (demo / "dashboard" / "index.html").is_file()
+    assert len((demo / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
+    # Nothing outside fleet-demo/, no lock or temporary left inside it.
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".cache", "fleet-demo", "sample_logs"] or (
+        sorted(p.name for p in tmp_path.iterdir()) == ["fleet-demo", "sample_logs"]
+    )
+    assert sorted(p.name for p in demo.iterdir()) == [
+        ".fleet.csv.syncaudit",
+        "dashboard",
+        "fleet.csv",
+        "fleet.duckdb",
+        "gate-html",
+        "gate.json",
+        "gate.md",
+        "gate.xml",
+        "policy.yaml",
+    ]
 
 
 def test_executor_sizing_shares_cores_only_between_few_logs() -> None:

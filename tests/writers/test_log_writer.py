@@ -151,7 +151,7 @@ def test_target_appearing_while_writing_is_kept(tmp_path: Path) -> None:
 def test_overwrite_refuses_a_file_the_tool_did_not_write(tmp_path: Path) -> None:
     path = tmp_path / "out"
     path.write_text("a file where the bag directory goes")
-    with pytest.raises(OutputError, match="did not write.*not replacing it"):
+    with pytest.raises(OutputError, match=r"did not write.*not replacing it"):
         open_writer(path, "db3", overwrite=True)
     assert path.read_text() == "a file where the bag directory goes"
     assert [p.name for p in tmp_path.iterdir()] == ["out"]

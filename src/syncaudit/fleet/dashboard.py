@@ -302,6 +302,7 @@ def write_report(
                 outputs.claim(export)
         index: Path | None = None
         if html_dir is not None:
+            outputs.refuse_input(html_dir)
             if html_dir.exists() and not html_dir.is_dir():
                 raise OutputError(f"{html_dir}: exists and is not a directory (--html needs one)")
             if html_dir.exists():

@@ -88,6 +88,7 @@ class GateOutputs:
             raise
 
     def _plan_html(self, html: Path, overwrite: bool) -> None:
+        self.outputs.refuse_input(html)
         if html.exists() and not html.is_dir():
             raise OutputError(f"{html}: exists and is not a directory (--html needs one)")
         if not html.exists():

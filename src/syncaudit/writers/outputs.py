@@ -118,6 +118,11 @@ class OutputSet:
         self._resolved.add(resolved)
         return tmp
 
+    def refuse_input(self, target: str | Path) -> None:
+        """Raise UsageError (exit 64) when `target` names an input of the run (any name)."""
+        if Path(target).resolve() in self._inputs:
+            raise UsageError(f"{target}: is an input of this run; refusing to write over it")
+
     def claim(self, target: str | Path, *, kind: OutputKind = "file") -> Path:
         """`add` a target a user named on the command line: naming one path twice is refused.
 
