@@ -20,7 +20,7 @@ def write_ours(path: Path, text: str = "previous") -> str:
     if suffix == ".json" or suffix == "":
         content = f'{{"written_by": "{WRITTEN_BY}", "text": "{text}"}}\n'
     elif suffix == ".html":
-        content = f"<!doctype html><head>{HTML_MARK}</head><p>{text}</p>\n"
+        content = f"<!doctype html><html><head>{HTML_MARK}</head><p>{text}</p>\n"
     elif suffix in (".yaml", ".yml", ".toml"):
         content = f"{COMMENT_MARK}# {text}\n"
     elif suffix in (".md", ".xml"):

@@ -103,3 +103,14 @@ def test_a_symbolic_link_is_never_replaced_even_to_the_tools_output(tmp_path: Pa
     with pytest.raises(OutputError, match="symbolic link"):
         OutputSet(overwrite=True).add(link)
     assert link.is_symlink()
+
+
+def test_a_document_that_only_mentions_the_mark_is_not_the_tools(tmp_path: Path) -> None:
+    doc = tmp_path / "outputs.md"
+    shutil.copyfile(Path(__file__).resolve().parents[2] / "docs" / "outputs.md", doc)
+    assert "written by syncaudit" in doc.read_text()
+    assert refusal(doc) is not None
+    page = tmp_path / "page.html"
+    page.write_text('<!doctype html><body><p>&lt;meta name="generator" content="written by '
+                    'syncaudit 0.1.0"&gt;</p>\n')  # fmt: skip
+    assert refusal(page) is not None

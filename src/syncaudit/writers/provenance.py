@@ -8,8 +8,8 @@ flags. Each format carries the mark where its readers ignore it (docs/outputs.md
   folder holds nothing but the bag's files;
 - ROS 1 bag: the bag header record's padding starts with `syncaudit <version>`;
 - Parquet: the footer's key-value metadata has a `syncaudit` key;
-- HTML, Markdown, XML, YAML, TOML, JSON: `written by syncaudit` within the first 4 KiB (a
-  comment, or a first `written_by` key in JSON);
+- HTML: a `generator` meta tag in the head; JSON: a first `written_by` key; YAML, TOML:
+  a first comment line; Markdown, XML: a first comment (after the XML declaration);
 - CSV (no room for a mark): a sidecar `.NAME.syncaudit` holding the SHA-256 of the bytes
   written; a CSV changed since is no longer the tool's.
 
@@ -32,7 +32,18 @@ BAG2_KEY = "syncaudit.written_by"
 SIDECAR_SUFFIXES = (".csv",)
 """Single files with no room for a mark: their mark is a sidecar."""
 
-_TEXT_MARK = re.compile(rb"written[ _]by[\"':= ]{0,4}syncaudit")
+_TEXT_MARK = re.compile(
+    rb'\A(?:\{\s*"written_by": "syncaudit '
+    rb"|# written by syncaudit "
+    rb"|<!-- written by syncaudit "
+    rb"|<\?xml[^>]{0,200}\?>\s*<!-- written by syncaudit "
+    rb"|<!doctype html>[^>]{0,100}>(?:<[^>]{0,100}>){0,4}"
+    rb'<meta name="generator" content="written by syncaudit )',
+    re.IGNORECASE,
+)
+"""The text marks, where the tool puts them: at the very start (a JSON document's first
+key, a first comment line) or in an HTML page's head; a document that merely mentions
+the phrase (this tool's own docs) is not one of its outputs."""
 _HEAD_BYTES = 4096
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _BAG1_MAGIC = b"#ROSBAG V2.0\n"
