@@ -174,7 +174,10 @@ def test_fleet_report_outputs_are_all_or_nothing(
     site = tmp_path / "site"
     site.mkdir()
     (site / "index.html").write_text("previous")  # the user's own page: never replaced
-    with pytest.raises(OutputError, match=r"index\.html: is a file syncaudit did not write"):
+    with pytest.raises(
+        OutputError,
+        match=r"site: is an existing folder that is not a dashboard folder \(its index\.html is a file syncaudit did not write",
+    ):
         write_report(db, html_dir=site, csv=tmp_path / "fleet.csv", overwrite=True)
     write_ours(site / "index.html")  # an earlier dashboard
     with pytest.raises(OutputError, match=r"index.html: exists \(use --overwrite"):
