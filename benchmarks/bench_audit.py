@@ -460,10 +460,11 @@ def generate(out: Path, duration_s: float) -> None:
     from syncaudit.simulate.rig_file import rig_from_truth
     from syncaudit.simulate.sync_log import SyncSimConfig, simulate_sync_log
     from syncaudit.writers.atomic import write_text_atomic
+    from syncaudit.writers.provenance import COMMENT_MARK
 
     truth = simulate_sync_log(out, SyncSimConfig.model_validate(sim_config(duration_s)))
     rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
-    write_text_atomic(rig_path(out), yaml.safe_dump(rig, sort_keys=False))
+    write_text_atomic(rig_path(out), COMMENT_MARK + yaml.safe_dump(rig, sort_keys=False))
 
 
 def rig_path(log: Path) -> Path:

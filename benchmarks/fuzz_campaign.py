@@ -3,6 +3,7 @@
     python benchmarks/fuzz_campaign.py --mutants 2000            # the long mode
     python benchmarks/fuzz_campaign.py --replay vlp16_bag-flip_bits-123456
     python benchmarks/fuzz_campaign.py --loaders 2000 --mutants 0   # the loaders class only
+    python benchmarks/fuzz_campaign.py --outputs                 # every output flag x target
 
 Prints the counts by exit code, the problems by cause (known open items of issue 10
 listed apart from new ones), the slowest and largest runs; failing mutants are saved as
@@ -49,7 +50,14 @@ def main() -> int:
     parser.add_argument(
         "--loaders", type=int, default=0, help="also run this many hostile config mutants"
     )
+    parser.add_argument(
+        "--outputs",
+        action="store_true",
+        help="run the outputs class instead: every output flag against every kind of target",
+    )
     args = parser.parse_args()
+    if args.outputs:
+        return outputs_matrix(args.jobs, args.keep)
     if args.loaders:
         status = run_loaders(args.loaders, args.seed, args.jobs, args.failures)
         if not args.mutants:
@@ -114,6 +122,37 @@ def run_loaders(count: int, seed: int, jobs: int, failures: Path) -> int:
         f"largest {big.max_rss_mb:.0f} MB (bound {MAX_RSS_MB:.0f} MB)"
     )
     return 1 if failing else 0
+
+
+def outputs_matrix(jobs: int, keep: Path | None) -> int:
+    """Every (output flag, existing target, --overwrite or not): print the counts, the failures."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from outputs_campaign import cases, real_data_present, run_case
+
+    if not real_data_present():
+        print("the real recordings of /work/shared/data are missing", file=sys.stderr)
+        return 2
+    root = keep or Path(tempfile.mkdtemp(prefix="syncaudit-outputs-"))
+    todo = list(cases())
+    start = time.monotonic()
+    try:
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            results = list(pool.map(lambda ic: run_case(ic[1], root / str(ic[0])), enumerate(todo)))
+    finally:
+        if keep is None:
+            shutil.rmtree(root, ignore_errors=True)
+    by_exit = Counter(f"exit {r.code}" for r in results)
+    bad = [r for r in results if not r.ok]
+    print(f"{len(results)} output cases in {time.monotonic() - start:.0f} s")
+    print("exit codes: " + ", ".join(f"{k}: {v}" for k, v in sorted(by_exit.items())))
+    changed = sum(not r.unchanged for r in results)
+    left = sum(bool(r.leftovers) for r in results)
+    print(f"failing: {len(bad)} (bytes changed: {changed}, leftovers: {left})")
+    for r in bad:
+        first = r.stderr.strip().splitlines()[:1]
+        print(f"  {r.case.id}: exit {r.code} (expected {sorted(r.expected)}) {first}")
+    return 1 if bad else 0
 
 
 def report(

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from marks import write_ours
 from slowed_cli import foreground
 from syncaudit.cli import app
 
@@ -237,7 +238,11 @@ def test_exit_codes_from_damaged_logs(tmp_path: Path) -> None:
 
 
 def _no_temporaries(folder: Path) -> None:
-    left = [p.name for p in folder.rglob("*") if p.name.startswith(".") or ".tmp" in p.name]
+    left = [
+        p.name
+        for p in folder.rglob("*")
+        if (p.name.startswith(".") and not p.name.endswith(".syncaudit")) or ".tmp" in p.name
+    ]  # a CSV's mark (.NAME.syncaudit) is no temporary
     assert not left, left
 
 
@@ -257,9 +262,15 @@ def test_outputs_all_or_nothing_with_one_overwrite_rule(tmp_path: Path) -> None:
     assert pairings.read_bytes() == before
     for option, name in (("--json-out", "a.json"), ("--csv", "a.csv"), ("--html", "a.html")):
         target = tmp_path / name
-        target.write_text("previous")
+        target.write_text("previous")  # the user's own file: never replaced, whatever the flags
+        message = _one_line_error(
+            runner.invoke(app, [*args, option, str(target), "--overwrite"]), 8
+        )
+        assert "did not write" in message and "--overwrite" not in message
+        assert target.read_text() == "previous"
+        previous = write_ours(target)  # an earlier output of the tool: --overwrite replaces it
         message = _one_line_error(runner.invoke(app, [*args, option, str(target)]), 8)
-        assert "--overwrite" in message and target.read_text() == "previous"
+        assert "--overwrite" in message and target.read_text() == previous
     replaced = runner.invoke(
         app,
         [*args, "--overwrite", "--json-out", str(tmp_path / "a.json"), "--pairings", str(pairings)],
@@ -298,7 +309,7 @@ def test_an_input_is_never_an_output(tmp_path: Path) -> None:
         runner.invoke(
             app, ["audit", str(BAG), "--rig", str(rig), "--json-out", str(rig), "--overwrite"]
         ),
-        8,
+        64,  # a usage error, before any work
     )
     assert "input" in message and rig.read_bytes() == before
 
@@ -448,7 +459,13 @@ def test_a_signal_leaves_no_partial_output(tmp_path: Path, signum: int) -> None:
     import time
 
     out = tmp_path / "long.mcap"
-    out.write_text("previous")
+    # The previous output is one of ours (only those --overwrite may replace).
+    subprocess.run(
+        [sys.executable, "-m", "syncaudit", "simulate", "sync", str(out), "--duration", "1"],
+        check=True,
+        capture_output=True,
+    )
+    previous = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     process = subprocess.Popen(
         foreground(
             [
@@ -482,8 +499,7 @@ def test_a_signal_leaves_no_partial_output(tmp_path: Path, signum: int) -> None:
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
-    assert out.read_text() == "previous"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.mcap"]
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == previous
 
 
 def test_audit_keeps_lidar_warnings_and_the_clock_offset_sign(

@@ -11,6 +11,7 @@ import duckdb
 import pytest
 
 from browser import needs_chromium, render, screenshot
+from marks import write_ours
 from syncaudit.fleet.checks import CheckResult
 from syncaudit.fleet.dashboard import write_report
 from syncaudit.fleet.database import ResultsDB
@@ -146,11 +147,17 @@ def test_fleet_report_exit_codes(tmp_path: Path, three_cameras_outcome: LogOutco
         runner.invoke(app, ["fleet", "report", "--db", str(tmp_path / "no.duckdb")]).exit_code == 64
     )
     db = _fleet_db(tmp_path, three_cameras_outcome)
-    (tmp_path / "x.csv").write_text("keep")
+    (tmp_path / "x.csv").write_text("keep")  # the user's own CSV: never replaced
+    mine = runner.invoke(
+        app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv"), "--overwrite"]
+    )
+    assert mine.exit_code == 8 and "did not write" in mine.output
+    assert (tmp_path / "x.csv").read_text() == "keep"
+    write_ours(tmp_path / "x.csv", "keep")  # an earlier export: --overwrite replaces it
     exists = runner.invoke(
         app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv")]
     )
-    assert exists.exit_code == 8 and (tmp_path / "x.csv").read_text() == "keep"
+    assert exists.exit_code == 8 and (tmp_path / "x.csv").read_text() == "keep\n"
     done = runner.invoke(
         app, ["fleet", "report", "--db", str(db), "--csv", str(tmp_path / "x.csv"), "--overwrite"]
     )
@@ -161,17 +168,23 @@ def test_fleet_report_outputs_are_all_or_nothing(
     tmp_path: Path, three_cameras_outcome: LogOutcome
 ) -> None:
     """Every target checked before the database is read; none written when one is refused."""
-    from syncaudit.errors import OutputError
+    from syncaudit.errors import OutputError, UsageError
 
     db = _fleet_db(tmp_path, three_cameras_outcome)
     site = tmp_path / "site"
     site.mkdir()
-    (site / "index.html").write_text("previous")
+    (site / "index.html").write_text("previous")  # the user's own page: never replaced
+    with pytest.raises(
+        OutputError,
+        match=r"site: is an existing folder that is not a dashboard folder \(its index\.html is a file syncaudit did not write",
+    ):
+        write_report(db, html_dir=site, csv=tmp_path / "fleet.csv", overwrite=True)
+    write_ours(site / "index.html")  # an earlier dashboard
     with pytest.raises(OutputError, match=r"index.html: exists \(use --overwrite"):
         write_report(db, html_dir=site, csv=tmp_path / "fleet.csv")
     assert not (tmp_path / "fleet.csv").exists()
     assert sorted(p.name for p in site.iterdir()) == ["index.html"]
-    with pytest.raises(OutputError, match="is an input of this run"):
+    with pytest.raises(UsageError, match="is an input of this run"):
         write_report(db, csv=db, overwrite=True)
     write_report(db, html_dir=site, csv=tmp_path / "fleet.csv", overwrite=True)
     assert "<svg" in (site / "index.html").read_text() and (tmp_path / "fleet.csv").is_file()

@@ -10,6 +10,7 @@ import junitparser
 import pytest
 from typer.testing import CliRunner
 
+from marks import write_ours
 from syncaudit.cli import app
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
@@ -192,20 +193,20 @@ def test_cli_exit_codes_for_policy_usage_and_outputs(
         {"defaults": {"camera": {"error_mean_us": {"max": 5000}, "error_var_us2": {"max": 1e8}}}},
     )
     existing = tmp_path / "gate.xml"
-    existing.write_text("keep")
+    kept = write_ours(existing, "keep")  # an earlier run's JUnit file
     result = runner.invoke(
         app,
         ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db", "--junit", str(existing)],
     )
     assert result.exit_code == 8 and "--overwrite" in result.output
-    assert existing.read_text() == "keep"
+    assert existing.read_text() == kept
     result = runner.invoke(app, ["gate", str(THREE_CAMERAS), "--policy", str(good), "--no-db"])
     assert result.exit_code == 0, result.output
     assert not (tmp_path / "fleet.duckdb").exists()  # --no-db records nothing
 
 
 def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
-    """README's and docs/fleet.md's fleet command, on a copy of sample_logs (pip step aside)."""
+    """README's and docs/fleet.md's fleet command, on a copy of sample_logs: all under one folder."""
     import subprocess
     import sys
 
@@ -213,19 +214,32 @@ def test_the_documented_set_up_command_runs_as_written(tmp_path: Path) -> None:
     readme = (repo / "README.md").read_text()
     command = readme.split("## Fleet gate", 1)[1].split("```sh\n", 1)[1].split("\n```", 1)[0]
     assert command in (repo / "docs" / "fleet.md").read_text()
-    install, rest = command.split(" && ", 1)
-    assert install == "pip install '.[fleet]'"
+    assert "pip install" not in command  # it must not replace an editable install
     (tmp_path / "sample_logs").symlink_to(SAMPLES)
     bindir = Path(sys.executable).parent
     env = {"PATH": f"{bindir}:/usr/bin:/bin", "HOME": str(tmp_path)}
     done = subprocess.run(
-        ["bash", "-c", rest], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+        ["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0, done.stderr
-    summary = json.loads((tmp_path / "gate.json").read_text())
+    demo = tmp_path / "fleet-demo"
+    summary = json.loads((demo / "gate.json").read_text())
     assert summary["counts"]["pass"] == 4
-    assert (tmp_path / "fleet-dashboard" / "index.html").is_file()
-    assert len((tmp_path / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
+    assert (demo / "dashboard" / "index.html").is_file()
+    assert len((demo / "fleet.csv").read_text().splitlines()) == 1 + 4 * 3
+    # Nothing outside fleet-demo/, no lock or temporary left inside it.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fleet-demo", "sample_logs"]
+    assert sorted(p.name for p in demo.iterdir()) == [
+        ".fleet.csv.syncaudit",
+        "dashboard",
+        "fleet.csv",
+        "fleet.duckdb",
+        "gate-html",
+        "gate.json",
+        "gate.md",
+        "gate.xml",
+        "policy.yaml",
+    ]
 
 
 def test_executor_sizing_shares_cores_only_between_few_logs() -> None:

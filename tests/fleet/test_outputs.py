@@ -14,9 +14,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from marks import write_ours
 from slowed_cli import foreground
 from syncaudit.cli import app
-from syncaudit.errors import OutputError
+from syncaudit.errors import OutputError, UsageError
 from syncaudit.fleet.gate import GateOptions, run_gate
 from syncaudit.fleet.policy import parse_policy
 
@@ -47,11 +48,11 @@ def test_an_existing_target_is_refused_before_any_work(option: str, tmp_path: Pa
     out = tmp_path / "out"
     out.mkdir()
     target = out / "target"
-    if option == "--html":
+    if option == "--html":  # an earlier run's outputs (they carry the tool's mark)
         target.mkdir()
-        (target / "index.html").write_text("previous")
+        write_ours(target / "index.html")
     else:
-        target.write_text("previous")
+        write_ours(target)
     before = _snapshot(out)
     result = CliRunner().invoke(
         app,
@@ -74,17 +75,40 @@ def test_an_existing_target_is_refused_before_any_work(option: str, tmp_path: Pa
     assert _snapshot(out) == before
 
 
+@pytest.mark.parametrize("option", ["--junit", "--summary", "--json-out", "--html"])
+def test_a_target_the_tool_did_not_write_is_refused_whatever_the_flags(
+    option: str, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    target = out / "target"
+    if option == "--html":  # a user's own index.html
+        target.mkdir()
+        (target / "index.html").write_text("previous")
+    else:
+        target.write_text("previous")
+    before = _snapshot(out)
+    result = CliRunner().invoke(
+        app,
+        ["gate", str(THREE_CAMERAS), "--policy", str(_policy_file(tmp_path)), "--no-db",
+         option, str(target), "--overwrite"],
+    )  # fmt: skip
+    assert result.exit_code == 8, result.output
+    assert "did not write" in result.output and "--overwrite" not in result.output
+    assert _snapshot(out) == before
+
+
 def test_init_policy_target_is_checked_first_and_never_an_input(tmp_path: Path) -> None:
     runner = CliRunner()
     policy = tmp_path / "policy.yaml"
-    policy.write_text("previous")
+    previous = write_ours(policy)
     result = runner.invoke(app, ["gate", "--init", str(THREE_CAMERAS), "-o", str(policy)])
     assert result.exit_code == 8 and "--overwrite" in result.output
-    assert policy.read_text() == "previous"
+    assert policy.read_text() == previous
     log = tmp_path / "good.mcap"
     log.write_bytes(THREE_CAMERAS.read_bytes())
     result = runner.invoke(app, ["gate", "--init", str(log), "-o", str(log), "--overwrite"])
-    assert result.exit_code == 8 and "is an input of this run" in result.output
+    assert result.exit_code == 64 and "is an input of this run" in result.output
     assert log.read_bytes() == THREE_CAMERAS.read_bytes()
     result = runner.invoke(  # the sample fails the defaults: refused, nothing written
         app, ["gate", "--init", str(THREE_CAMERAS), "-o", str(policy), "--overwrite"]
@@ -110,7 +134,7 @@ def test_an_html_folder_that_is_not_a_gate_report_is_never_written_into(tmp_path
             GateOptions(html_dir=folder, overwrite=True),
         )
     assert _snapshot(folder) == {"notes.txt": b"mine"}
-    with pytest.raises(OutputError, match="is an input of this run"):
+    with pytest.raises(UsageError, match="is an input of this run"):
         run_gate(
             [str(tmp_path)],
             parse_policy(LOOSE, "p"),

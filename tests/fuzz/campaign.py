@@ -475,7 +475,8 @@ class Outcome:
         return asdict(self)
 
 
-OUTPUTS = ("audit.json", "frames.csv", "report.html", "pairings.mcap")
+OUTPUTS = ("audit.json", "frames.csv", ".frames.csv.syncaudit", "report.html", "pairings.mcap")
+"""What a successful audit writes (the CSV's mark is its sidecar: docs/outputs.md)."""
 
 
 def run_mutant(mutant: Mutant, cache: Path, work: Path, *, with_info: bool = True) -> Outcome:

@@ -194,6 +194,7 @@ def test_cli_html_parquet_and_calibration(tmp_path: Path, calibration: Load) -> 
             str(out),
             "--calibration",
             str(calib),
+            "--calibration-any-log",  # the turntable session is another log
             "--parquet",
             str(tmp_path / "frames.parquet"),
             "--json",

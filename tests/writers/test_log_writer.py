@@ -148,9 +148,19 @@ def test_target_appearing_while_writing_is_kept(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
 
 
-def test_overwrite_replaces_other_kinds(tmp_path: Path) -> None:
+def test_overwrite_refuses_a_file_the_tool_did_not_write(tmp_path: Path) -> None:
     path = tmp_path / "out"
     path.write_text("a file where the bag directory goes")
+    with pytest.raises(OutputError, match=r"did not write.*not replacing it"):
+        open_writer(path, "db3", overwrite=True)
+    assert path.read_text() == "a file where the bag directory goes"
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_overwrite_replaces_own_outputs_of_other_kinds(tmp_path: Path) -> None:
+    path = tmp_path / "out"
+    with open_writer(path, "bag") as writer:
+        writer.add_topic("/a", "std_msgs/msg/String")
     with open_writer(path, "db3", overwrite=True) as writer:
         writer.add_topic("/a", "std_msgs/msg/String")
     assert (path / "metadata.yaml").is_file()

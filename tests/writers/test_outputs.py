@@ -7,8 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from syncaudit.errors import OutputError
+from syncaudit.errors import OutputError, UsageError
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import BAG2_KEY, WRITTEN_BY
+
+
+def _ours(text: str) -> str:
+    """A JSON document this tool wrote (it carries the mark) holding `text`."""
+    return f'{{"written_by": "{WRITTEN_BY}", "text": "{text}"}}'
 
 
 def _names(folder: Path) -> list[str]:
@@ -23,29 +29,29 @@ def test_commit_publishes_every_output_and_leaves_no_temporary(tmp_path: Path) -
         outputs.write_text(tmp_path / "b.csv", "x\n")
         assert _names(tmp_path)[0].startswith(".syncaudit-")  # written aside until the end
         assert not (tmp_path / "a.json").exists()
-    assert _names(tmp_path) == ["a.json", "b.csv"]
+    assert _names(tmp_path) == [".b.csv.syncaudit", "a.json", "b.csv"]  # a CSV's mark beside it
 
 
 def test_failure_before_commit_keeps_previous_files(tmp_path: Path) -> None:
-    (tmp_path / "a.json").write_text("old")
+    (tmp_path / "a.json").write_text(_ours("old"))
     with pytest.raises(RuntimeError), OutputSet(overwrite=True) as outputs:
         outputs.write_text(tmp_path / "a.json", "new")
         raise RuntimeError("boom")
-    assert (tmp_path / "a.json").read_text() == "old"
+    assert (tmp_path / "a.json").read_text() == _ours("old")
     assert _names(tmp_path) == ["a.json"]
 
 
 def test_interrupt_before_commit_keeps_previous_files(tmp_path: Path) -> None:
-    (tmp_path / "a.json").write_text("old")
+    (tmp_path / "a.json").write_text(_ours("old"))
     with pytest.raises(KeyboardInterrupt), OutputSet(overwrite=True) as outputs:
         outputs.write_text(tmp_path / "a.json", "new")
         raise KeyboardInterrupt
-    assert _names(tmp_path) == ["a.json"] and (tmp_path / "a.json").read_text() == "old"
+    assert _names(tmp_path) == ["a.json"] and (tmp_path / "a.json").read_text() == _ours("old")
 
 
 def test_a_failed_rename_restores_what_was_replaced(tmp_path: Path) -> None:
-    (tmp_path / "a.json").write_text("old a")
-    (tmp_path / "b.json").write_text("old b")
+    (tmp_path / "a.json").write_text(_ours("old a"))
+    (tmp_path / "b.json").write_text(_ours("old b"))
     outputs = OutputSet(overwrite=True)
     outputs.write_text(tmp_path / "a.json", "new a")
     outputs.write_text(tmp_path / "b.json", "new b")
@@ -66,23 +72,23 @@ def test_a_failed_rename_restores_what_was_replaced(tmp_path: Path) -> None:
             outputs.commit()
     finally:
         monkey.undo()
-    assert (tmp_path / "a.json").read_text() == "old a"
-    assert (tmp_path / "b.json").read_text() == "old b"
+    assert (tmp_path / "a.json").read_text() == _ours("old a")
+    assert (tmp_path / "b.json").read_text() == _ours("old b")
     assert _names(tmp_path) == ["a.json", "b.json"]
 
 
 def test_targets_are_checked_when_added(tmp_path: Path) -> None:
-    (tmp_path / "there.json").write_text("x")
+    (tmp_path / "there.json").write_text(_ours("x"))
     with pytest.raises(OutputError, match="exists \\(pass --overwrite"):
         OutputSet().add(tmp_path / "there.json")
     with pytest.raises(OutputError, match="does not exist"):
         OutputSet().add(tmp_path / "no" / "x.json")
     outputs = OutputSet(inputs=[tmp_path / "there.json"], overwrite=True)
-    with pytest.raises(OutputError, match="input"):
+    with pytest.raises(UsageError, match="input"):
         outputs.add(tmp_path / "there.json")
     outputs.add(tmp_path / "x.json")
     (tmp_path / "link").symlink_to(tmp_path)
-    with pytest.raises(OutputError, match="given as two different outputs"):
+    with pytest.raises(UsageError, match="given as two different outputs"):
         outputs.add(tmp_path / "link" / "x.json")
     outputs.discard()
     assert _names(tmp_path) == ["link", "there.json"]
@@ -91,7 +97,8 @@ def test_targets_are_checked_when_added(tmp_path: Path) -> None:
 def test_only_the_tools_own_bag_folder_is_replaced(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     bag.mkdir()
-    (bag / "metadata.yaml").write_text("x")
+    info = f"rosbag2_bagfile_information:\n  custom_data:\n    {BAG2_KEY}: {WRITTEN_BY}\n"
+    (bag / "metadata.yaml").write_text(info)
     (bag / "bag.db3").write_text("x")
     with OutputSet(overwrite=True) as outputs:
         (outputs.add(bag, kind="dir")).mkdir()

@@ -69,6 +69,13 @@ def audit(
             help="A `calib --json-out` result of the same log to add to the --html report.",
         ),
     ] = None,
+    calibration_any_log: Annotated[
+        bool,
+        typer.Option(
+            "--calibration-any-log",
+            help="Add the --calibration result even when it is of another log.",
+        ),
+    ] = False,
     gate: GateFlag = False,
     jobs: Annotated[
         int | None,
@@ -94,7 +101,11 @@ def audit(
 
     def job() -> None:
         targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
-        calibration = _load_calibration(calibration_json) if calibration_json else None
+        calibration = (
+            _load_calibration(calibration_json, source, any_log=calibration_any_log)
+            if calibration_json
+            else None
+        )
         with output_set(
             overwrite=overwrite,
             inputs=(*local_paths(source), rig, calibration_json, lidar_metadata, lidar_capture),
@@ -157,7 +168,7 @@ class _Targets:
     def claim_pairings(self, outputs: OutputSet) -> None:
         """Add the pairings log to the output set (a folder for a ROS 2 bag)."""
         if self.pairings is not None:
-            outputs.add(self.pairings, kind="dir" if self.pairings.suffix == "" else "file")
+            outputs.claim(self.pairings, kind="dir" if self.pairings.suffix == "" else "file")
 
     def write(
         self,
@@ -248,21 +259,38 @@ def _parquet_targets(path: Path) -> tuple[Path, Path]:
     return path, cameras_path(path)
 
 
-def _load_calibration(path: Path) -> CalibrationResult:
-    """A saved calibration result (`calib --json-out`), for the combined report."""
+def _load_calibration(path: Path, log: str | Path, *, any_log: bool) -> CalibrationResult:
+    """A saved calibration result (`calib --json-out`) of `log`, for the combined report.
+
+    One of another log is refused (exit 6) unless `any_log` (`report.calibration_log`).
+    """
+    import json
+
     from pydantic import ValidationError
 
     from syncaudit.calib.result import CalibrationResult
-    from syncaudit.errors import ConfigError, InputOpenError
+    from syncaudit.errors import ConfigError, InputOpenError, SyncauditError
+    from syncaudit.fleet.inputs import fingerprint
+    from syncaudit.report.calibration_log import calibration_mismatch
 
     try:
-        return CalibrationResult.model_validate_json(path.read_bytes())
+        raw = path.read_bytes()
+        result = CalibrationResult.model_validate_json(raw)
     except OSError as exc:  # cannot be opened: exit 2, as any missing input
         raise InputOpenError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "document"
         raise ConfigError(f"{path}: not a calibration result ({where}: {first['msg']})") from exc
+    if not any_log:
+        try:
+            log_fp: str | None = fingerprint(log)
+        except (OSError, SyncauditError):
+            log_fp = None
+        why = calibration_mismatch(json.loads(raw), log, log_fp)
+        if why is not None:
+            raise ConfigError(f"{path}: {why}; pass --calibration-any-log to add it anyway")
+    return result
 
 
 def _pairings_target(path: Path) -> Path:

@@ -73,7 +73,7 @@ def calib(
         ) as outputs:
             result = _calibrate(log, config_file, extrinsics, topic_list)
             if json_out:
-                outputs.write_text(json_out, json_text(result.to_json_dict()))
+                outputs.write_text(json_out, json_text(_with_log_identity(result, log)))
             if html_out:
                 from syncaudit.report.report_page import render_calibration_html
 
@@ -91,6 +91,16 @@ def calib(
             raise GateFailedError(f"{log}: calibration check failed: {why}")
 
     run(job)
+
+
+def _with_log_identity(result: Any, log: Path) -> dict[str, Any]:
+    """The result's JSON with its log's size and fingerprint (what `audit --calibration` checks)."""
+    from syncaudit.fleet.inputs import fingerprint
+    from syncaudit.report.calibration_log import IDENTITY_KEY, log_identity
+
+    files = sorted(p for p in log.rglob("*") if p.is_file()) if log.is_dir() else [log]
+    size_bytes = sum(p.stat().st_size for p in files)
+    return {**result.to_json_dict(), IDENTITY_KEY: log_identity(size_bytes, fingerprint(log))}
 
 
 def _calibrate(

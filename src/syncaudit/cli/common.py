@@ -471,8 +471,10 @@ def print_json(data: Any) -> None:
 
 
 def json_text(data: Any) -> str:
-    """The result as an indented JSON document (what `--json-out` writes)."""
-    return json.dumps(data, indent=2, allow_nan=False) + "\n"
+    """The result as an indented JSON document (what `--json-out` writes), marked as ours."""
+    from syncaudit.writers.provenance import marked_json
+
+    return json.dumps(marked_json(data), indent=2, allow_nan=False) + "\n"
 
 
 def output_set(
@@ -485,7 +487,7 @@ def output_set(
     try:
         for target in targets:
             if target is not None:
-                outputs.add(target)
+                outputs.claim(target)
     except BaseException:
         outputs.discard()
         raise

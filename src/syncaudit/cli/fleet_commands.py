@@ -246,10 +246,11 @@ def _init(
     from syncaudit.fleet.job import JobOptions
     from syncaudit.fleet.policy import Policy
     from syncaudit.writers.outputs import OutputSet
+    from syncaudit.writers.provenance import COMMENT_MARK
 
     protected = [i for i in inputs if "://" not in i]
     with OutputSet(overwrite=overwrite, inputs=protected, overwrite_hint=OVERWRITE_HINT) as out:
-        out.add(output)  # checked before any work
+        out.claim(output)  # checked before any work
         found = discover(inputs, Policy())
         if not found.jobs:
             raise ConfigError("--init found no log in " + " ".join(inputs))
@@ -274,7 +275,7 @@ def _init(
             )
         for line in learn_policy(outcomes)[1]:
             note(_escape(f"learnt {line}"))
-        out.write_text(output, init_policy_yaml(outcomes, problems))
+        out.write_text(output, COMMENT_MARK + init_policy_yaml(outcomes, problems))
     note(_escape(f"policy from {len(outcomes) - len(bad)} log(s) written to {output}"))
 
 

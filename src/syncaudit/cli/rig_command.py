@@ -44,7 +44,9 @@ def rig(
 
             text = starter_rig_yaml(source, lidar_metadata)
             if out is not None:
-                outputs.write_text(out, text)
+                from syncaudit.writers.provenance import COMMENT_MARK
+
+                outputs.write_text(out, COMMENT_MARK + text)
         if out is None:
             emit(lambda: _write_stdout(text))
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, get_args
 
@@ -81,8 +82,12 @@ _OPTION_OF_FIELD: dict[str, str] = {
 
 
 def _usage(exc: ConfigError) -> UsageError:
-    """A setting the simulator's config refused, worded with the options the user typed."""
-    return option_error(exc, _OPTION_OF_FIELD)
+    """A setting the simulator's config refused, worded with the options the user typed:
+    the key it names, then any field the model's own sentence names."""
+    detail = str(option_error(exc, _OPTION_OF_FIELD))
+    for field, option in _OPTION_OF_FIELD.items():
+        detail = re.sub(rf"(?<![\w-]){field}\b", option, detail)
+    return UsageError(detail)
 
 
 ConfigOption = Annotated[
@@ -266,6 +271,7 @@ def simulate_sync(
 
         from syncaudit.simulate.rig_file import rig_from_truth, rig_path
         from syncaudit.simulate.sync_log import simulate_sync_log, truth_path
+        from syncaudit.writers.provenance import COMMENT_MARK
 
         delays = (
             ControllerDelays(controller_file) if controller or controller_file is not None else None
@@ -274,7 +280,7 @@ def simulate_sync(
         with output_set(overwrite=overwrite, targets=(rig_file,)) as outputs:
             truth = simulate_sync_log(target, config, outputs=outputs, delays=delays)
             rig = rig_from_truth(truth).model_dump(mode="json", exclude_defaults=True)
-            outputs.write_text(rig_file, yaml.safe_dump(rig, sort_keys=False))
+            outputs.write_text(rig_file, COMMENT_MARK + yaml.safe_dump(rig, sort_keys=False))
         lidar_truth = truth["lidar"]
         lines = [
             f"wrote {target} ({lidar_truth['model']}, {lidar_truth['revolutions']} revolutions, "

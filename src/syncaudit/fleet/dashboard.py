@@ -23,6 +23,7 @@ from syncaudit.errors import InputOpenError, OutputError
 from syncaudit.fleet.database import ResultsDB
 from syncaudit.fleet.gate_outputs import OVERWRITE_HINT
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import HTML_MARK, WRITTEN_BY, refusal
 
 EXPORT_QUERY = """
 SELECT l.vehicle, c.camera, coalesce(l.start_time, l.judged_at) AS time, l.path, l.verdict,
@@ -277,7 +278,8 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
     body = "".join(sections) or "<p>No audited camera in the database yet.</p>"
     return (
         "<!doctype html><html lang=en><head><meta charset=utf-8>"
-        f"<title>syncaudit fleet dashboard</title><style>{_STYLE}</style></head><body>"
+        + HTML_MARK
+        + f"<title>syncaudit fleet dashboard</title><style>{_STYLE}</style></head><body>"
         f"<h1>syncaudit fleet dashboard</h1><p>{len(seen)} judged log(s) with cameras: {counts}</p>"
         f'<label>vehicle <select id="vehicle"><option value="">all</option>{options}</select></label>'
         f"{body}<script>{_SCRIPT}</script></body></html>\n"
@@ -286,10 +288,31 @@ def render_dashboard(rows: list[dict[str, Any]], html_dir: Path) -> str:
 
 def _copy_to(con: Any, tmp: Path, fmt: str) -> None:
     """DuckDB COPY of the export query into `tmp` (an OutputSet temporary)."""
-    options = "(FORMAT parquet)" if fmt == "parquet" else "(FORMAT csv, HEADER true)"
+    mark = WRITTEN_BY.replace("'", "''")  # the mark `--overwrite` looks for (docs/outputs.md)
+    options = (
+        f"(FORMAT parquet, KV_METADATA {{syncaudit: '{mark}'}})"
+        if fmt == "parquet"
+        else "(FORMAT csv, HEADER true)"
+    )
     query = EXPORT_QUERY.replace("l.report, l.log_key, ", "l.report, ")
     quoted = str(tmp).replace("'", "''")
     con.execute(f"COPY ({query}) TO '{quoted}' {options}")
+
+
+def _check_dashboard_folder(html_dir: Path, index: Path) -> None:
+    """An existing `--html` folder is written into only when empty or a dashboard's own."""
+    if html_dir.is_symlink():
+        raise OutputError(f"{html_dir}: is a symbolic link; not writing into it")
+    entries = [p for p in html_dir.iterdir() if not p.name.startswith(".syncaudit-")]
+    if not entries:
+        return
+    why = refusal(index) if index.is_file() else "holds no index.html"
+    if why is not None:
+        detail = f"its index.html {why}" if index.is_file() else why
+        raise OutputError(
+            f"{html_dir}: is an existing folder that is not a dashboard folder ({detail}); "
+            "not writing into it (choose another --html folder)"
+        )
 
 
 def write_report(
@@ -310,13 +333,15 @@ def write_report(
     with outputs:
         for export in (parquet, csv):
             if export is not None:
-                outputs.add(export)
+                outputs.claim(export)
         index: Path | None = None
         if html_dir is not None:
+            outputs.refuse_input(html_dir)
             if html_dir.exists() and not html_dir.is_dir():
                 raise OutputError(f"{html_dir}: exists and is not a directory (--html needs one)")
             if html_dir.exists():
                 index = html_dir / "index.html"
+                _check_dashboard_folder(html_dir, index)
                 outputs.add(index)
             else:
                 folder = outputs.add(html_dir, kind="dir")

@@ -1,9 +1,11 @@
 """The results database: DuckDB tables of every judged log (schema in `fleet.schema`).
 
 DuckDB allows one process to open a database file for writing at a time (others get an
-IOException). Every access here is short and inside an exclusive lock on `<db>.lock`
-(fcntl), with retry and backoff on DuckDB's own lock error for other programs holding
-the file (a user's `duckdb` shell). Concurrent `gate` runs therefore take turns per
+IOException). Every access here is short and inside an exclusive lock (flock) on the
+database's folder: no lock file is made, so none is left after a run, an interruption or a
+killed process (the kernel drops the lock with the last descriptor). DuckDB's own lock
+error (another program holding the file, e.g. a user's `duckdb` shell) is retried with
+backoff. Concurrent `gate` runs therefore take turns per
 batch of rows; each batch is one transaction, so a row set is all there or not at all.
 """
 
@@ -12,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import os
 import time
 from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime
@@ -47,13 +50,15 @@ class ResultsDB:
 
         if read_only and not self.path.exists():
             raise OutputError(f"{self.path}: no such results database")
-        lock_path = self.path.with_name(self.path.name + ".lock")
+        folder = self.path.parent
         try:
-            handle = lock_path.open("a")
+            lock_fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
         except OSError as exc:
-            raise OutputError(f"{lock_path}: cannot create the lock file ({exc.strerror})") from exc
-        with handle:
-            self._lock(handle, lock_path)
+            raise OutputError(
+                f"{folder}: cannot lock the results database ({exc.strerror})"
+            ) from exc
+        try:
+            self._lock(lock_fd, folder)
             try:
                 con = self._open(duckdb, read_only)
                 try:
@@ -68,7 +73,9 @@ class ResultsDB:
                 finally:
                     con.close()
             finally:
-                fcntl.flock(handle, fcntl.LOCK_UN)
+                fcntl.flock(lock_fd, fcntl.LOCK_UN)
+        finally:
+            os.close(lock_fd)
 
     def _check_version(self, con: Any) -> None:
         """Refuse a database of another schema version (no silent mixing of layouts)."""
@@ -80,17 +87,18 @@ class ResultsDB:
                 f"writes {SCHEMA_VERSION}: use a new --db file"
             )
 
-    def _lock(self, handle: Any, lock_path: Path) -> None:
+    def _lock(self, lock_fd: int, folder: Path) -> None:
         deadline = time.monotonic() + self.lock_timeout_s
         delay = 0.01
         while True:
             try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 return
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     raise OutputError(
-                        f"{lock_path}: still locked by another run after {self.lock_timeout_s:g} s"
+                        f"{self.path}: still locked by another run after {self.lock_timeout_s:g} s "
+                        f"(the lock is held on its folder {folder})"
                     ) from None
                 time.sleep(delay)
                 delay = min(delay * 2, 0.5)

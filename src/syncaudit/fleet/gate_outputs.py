@@ -29,6 +29,7 @@ from syncaudit.fleet.log_pages import render_index
 from syncaudit.fleet.record import JudgedLog
 from syncaudit.fleet.run_summary import render_json, render_markdown
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import MARKUP_MARK, refusal
 
 OVERWRITE_HINT = "use --overwrite to replace it"
 _HIDDEN_TMP = ".syncaudit-"
@@ -37,6 +38,14 @@ _HIDDEN_TMP = ".syncaudit-"
 def _visible_entries(folder: Path) -> list[Path]:
     """What a folder holds, without the hidden temporaries of a run still writing there."""
     return [p for p in folder.iterdir() if not p.name.startswith(_HIDDEN_TMP)]
+
+
+def _marked_xml(text: str) -> str:
+    """An XML document with the mark as a comment after its declaration."""
+    if text.startswith("<?xml"):
+        end = text.index("?>") + 2
+        return text[:end] + "\n" + MARKUP_MARK.rstrip("\n") + text[end:]
+    return MARKUP_MARK + text
 
 
 class GateOutputs:
@@ -71,7 +80,7 @@ class GateOutputs:
                     continue
                 if target.is_dir():
                     raise OutputError(f"{target}: is a directory ({option} needs a file)")
-                self.outputs.add(target)
+                self.outputs.claim(target)
             if html_dir is not None:
                 self._plan_html(html_dir, overwrite)
         except BaseException:
@@ -79,23 +88,28 @@ class GateOutputs:
             raise
 
     def _plan_html(self, html: Path, overwrite: bool) -> None:
+        self.outputs.refuse_input(html)
         if html.exists() and not html.is_dir():
             raise OutputError(f"{html}: exists and is not a directory (--html needs one)")
         if not html.exists():
-            root = self.outputs.add(html, kind="dir")
+            root = self.outputs.claim(html, kind="dir")
             self._make_dir(root / "logs", html)
             self._logs_tmp = root / "logs"
             self._index = root / "index.html"
             return
         entries = _visible_entries(html)
+        index = html / "index.html"
+        if entries:
+            why = refusal(index) if index.is_file() else "holds no index.html"
+            if why is not None:
+                detail = f"its index.html {why}" if index.is_file() else why
+                raise OutputError(
+                    f"{html}: is an existing folder that is not a gate report folder ({detail}); "
+                    "not writing into it (choose another --html folder)"
+                )
         if entries and not overwrite:
             raise OutputError(
                 f"{html}: exists and is not empty (use --overwrite to add this run's reports to it)"
-            )
-        if entries and not (html / "index.html").is_file():
-            raise OutputError(
-                f"{html}: is an existing folder that is not a gate report folder (no "
-                "index.html); not writing into it (choose another --html folder)"
             )
         logs = html / "logs"
         if logs.exists() and not logs.is_dir():
@@ -107,7 +121,7 @@ class GateOutputs:
             self._make_dir(self._logs_tmp, logs)
         self._index = html / "index.html"
         self._index_is_output = True
-        self.outputs.add(self._index)
+        self.outputs.claim(self._index)
 
     @staticmethod
     def _make_dir(tmp: Path, target: Path) -> None:
@@ -146,9 +160,9 @@ class GateOutputs:
     ) -> None:
         """JUnit, Markdown, JSON and the HTML index, into their temporaries."""
         if self.junit is not None:
-            self.outputs.write_text(self.junit, render_junit(logs))
+            self.outputs.write_text(self.junit, _marked_xml(render_junit(logs)))
         if self.summary is not None:
-            self.outputs.write_text(self.summary, render_markdown(logs, warnings))
+            self.outputs.write_text(self.summary, MARKUP_MARK + render_markdown(logs, warnings))
         if self.json_out is not None:
             self.outputs.write_text(self.json_out, render_json(logs, policy_fp, warnings))
         if self.html_dir is not None and self._index is not None:

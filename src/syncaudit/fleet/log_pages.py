@@ -11,6 +11,7 @@ from typing import Any
 from syncaudit.fleet.checks import CheckResult, shown_limit, shown_value
 from syncaudit.fleet.job import ReportDraft
 from syncaudit.fleet.record import JudgedLog
+from syncaudit.writers.provenance import HTML_MARK
 
 _STYLE = """
 body{font:14px/1.45 system-ui,sans-serif;margin:2rem auto;max-width:1100px;color:#222}
@@ -103,7 +104,8 @@ def render_error_page(log: JudgedLog) -> str:
     """The report of a log that could not be audited: its error."""
     return (
         "<!doctype html><html lang=en><head><meta charset=utf-8>"
-        f"<title>syncaudit: {_e(log.path)}</title><style>{_STYLE}</style></head><body>"
+        + HTML_MARK
+        + f"<title>syncaudit: {_e(log.path)}</title><style>{_STYLE}</style></head><body>"
         f'<h1>syncaudit gate: <span class="error">ERROR</span></h1><p>{_e(log.path)}</p>'
         f"<p>{_e(log.error)}</p></body></html>\n"
     )
@@ -125,7 +127,9 @@ def render_index(logs: list[JudgedLog], links: dict[str, str]) -> str:
         )
     summary = " · ".join(f"{counts.get(v, 0)} {v}" for v in ("fail", "error", "warn", "pass"))
     return (
-        "<!doctype html><html lang=en><head><meta charset=utf-8><title>syncaudit gate</title>"
+        "<!doctype html><html lang=en><head><meta charset=utf-8>"
+        + HTML_MARK
+        + "<title>syncaudit gate</title>"
         f"<style>{_STYLE}</style></head><body><h1>syncaudit gate</h1><p>{summary}</p>"
         "<table><tr><th>log</th><th>vehicle</th><th>verdict</th><th>failed checks / error</th></tr>"
         + "".join(rows)

@@ -16,6 +16,7 @@ from syncaudit import __version__
 from syncaudit.fleet.checks import shown_limit, shown_value
 from syncaudit.fleet.record import JudgedLog
 from syncaudit.report.advice_text import advice_sentence, needs_action
+from syncaudit.writers.provenance import marked_json
 
 VERDICTS = ("fail", "error", "warn", "pass")
 SUMMARY_VERSION = 1
@@ -59,7 +60,8 @@ def render_json(
 ) -> str:
     """The JSON summary text (sorted keys, 2-space indent, trailing newline)."""
     data = summary_dict(logs, policy_fingerprint, warnings)
-    return json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    ordered = json.loads(json.dumps(data, sort_keys=True, allow_nan=False))
+    return json.dumps(marked_json(ordered), indent=2, allow_nan=False) + "\n"
 
 
 def _md(text: object) -> str:

@@ -30,6 +30,7 @@ from syncaudit.report.plot import (
 )
 from syncaudit.report.row_error import design_rows, phase_lock_html, row_error_svg
 from syncaudit.report.script import SCRIPT, STYLE
+from syncaudit.writers.provenance import HTML_MARK
 
 _e = esc
 
@@ -442,7 +443,8 @@ def page(title: str, body: str, *, t0_ns: float | None = None) -> str:
     t0 = f' data-t0-ms="{t0_ns / 1e6:.3f}"' if t0_ns is not None and t0_ns > 0 else ""
     return (
         "<!doctype html><html lang=en><head><meta charset=utf-8>"
-        f"<title>{_e(title)}</title><style>{STYLE}</style></head><body{t0}>"
+        + HTML_MARK
+        + f"<title>{_e(title)}</title><style>{STYLE}</style></head><body{t0}>"
         f"{body}<script>{SCRIPT}</script></body></html>\n"
     )
 

@@ -33,6 +33,7 @@ from syncaudit.simulate.calib_config import CalibSceneConfig, LidarSimConfig
 from syncaudit.simulate.scene import Scene, beam_pattern, build_scene, simulate_scan
 from syncaudit.writers.log_writer import LogFormat, LogWriter, infer_format, open_writer
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import marked_json
 
 __all__ = ["MATRIX", "CalibSceneConfig", "matrix_tolerance", "simulate_calib_session", "truth_path"]
 
@@ -566,7 +567,7 @@ def _simulate(
             "final_drift_deg": last_rot,
             "final_drift_m": last_trans,
         }
-    outputs.write_text(truth_path(out), json.dumps(truth, indent=2) + "\n")
+    outputs.write_text(truth_path(out), json.dumps(marked_json(truth), indent=2) + "\n")
     return truth
 
 

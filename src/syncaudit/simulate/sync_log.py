@@ -72,6 +72,7 @@ from syncaudit.simulate.trigger_designs import (
 )
 from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import marked_json
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
 TriggerPacket = Literal["containing", "first_after"]
@@ -1516,7 +1517,9 @@ def simulate_sync_log(
         truth = sim.run(out)
         for cam in truth["cameras"].values():
             cam.pop("_arrays")
-        outputs.write_text(truth_file, json.dumps(truth, indent=1, allow_nan=True) + "\n")
+        outputs.write_text(
+            truth_file, json.dumps(marked_json(truth), indent=1, allow_nan=True) + "\n"
+        )
     except BaseException:
         if own:
             outputs.discard()

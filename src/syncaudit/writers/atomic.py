@@ -2,9 +2,10 @@
 
 Commands route their outputs through `syncaudit.writers.outputs.OutputSet` directly (all
 targets checked first, committed together); these helpers are for library code that
-writes a single file on its own (e.g. `CalibrationResult.save`). Same rules: a temporary
-beside the target, renamed at the end, never a partial file; a folder is never replaced;
-a device (`/dev/null`) is written through.
+writes a single file on its own. Same rules: a temporary beside the target, renamed at the
+end, never a partial file; an existing target is replaced only when it carries the tool's
+mark (`writers.provenance`: the caller writes the mark into the text), anything else is
+refused; a device (`/dev/null`) is written through.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from syncaudit.writers.outputs import OutputSet
 
 
 def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
-    """Create or replace `path` with what `fill` writes, never leaving a partial file behind.
+    """Create `path` (or replace the tool's own) with what `fill` writes, never partially.
 
     Raises:
         OutputError: naming `path`, when it cannot be written.
@@ -27,6 +28,6 @@ def write_atomic(path: Path, fill: Callable[[IO[str]], None]) -> None:
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """Atomically create or replace a text file."""
+    """Atomically create a text file, or replace one the tool wrote (it carries the mark)."""
     with OutputSet(overwrite=True) as outputs:
         outputs.write_text(path, text)

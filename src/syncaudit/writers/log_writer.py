@@ -36,6 +36,7 @@ from rosbags.typesys import Stores, get_typestore
 from syncaudit.errors import ConfigError, UnknownTypeError
 from syncaudit.logs.typesys import TypeRegistry, normalise_type_name
 from syncaudit.writers.outputs import OutputSet
+from syncaudit.writers.provenance import BAG2_KEY, WRITTEN_BY, mark_bag1
 
 LogFormat = Literal["mcap", "mcap-ros1", "db3", "bag"]
 """'mcap': MCAP with ROS 2 CDR messages and ros2msg schemas (the default);
@@ -361,6 +362,7 @@ class Rosbag2LogWriter(LogWriter):
         self._bag.write(self._connections[topic], log_time_ns, data)
 
     def _finish(self) -> None:
+        self._bag.set_custom_data(BAG2_KEY, WRITTEN_BY)  # the mark `--overwrite` looks for
         self._bag.close()
 
     def _discard(self) -> None:
@@ -397,6 +399,7 @@ class Rosbag1LogWriter(LogWriter):
 
     def _finish(self) -> None:
         self._bag.close()
+        mark_bag1(self._tmp_path)  # the mark `--overwrite` looks for
 
     def _discard(self) -> None:
         if self._bag.bio is not None:

@@ -3,10 +3,11 @@
 One rule for every output of every command (`--json-out`, `--csv`, `--html`,
 `--pairings`, `simulate`'s log, truth and rig, `calib`'s outputs):
 
-1. Every target is checked before any work (`OutputSet.add`): an existing target needs
-   `overwrite`; an existing directory is replaced only when it is a log this tool writes
-   as a folder (a ROS 2 bag: `metadata.yaml` and `.db3` files, nothing else);
-   any other directory is refused, never deleted; an input of the run is never a target.
+1. Every target is checked before any work (`OutputSet.add`): an existing target is
+   replaced only when it carries this tool's mark (`syncaudit.writers.provenance`) and
+   `overwrite` is given; anything else (a recording, a foreign folder or file, a symbolic
+   link) is refused whatever the flags (exit 8). An input of the run, or one path given
+   as two outputs, is a usage error (exit 64), also through a symbolic link.
 2. Everything is written to temporaries in a hidden folder beside each target (same file
    system, so the final step is a rename).
 3. `commit()` moves every temporary onto its target with SIGINT/SIGTERM blocked; if a
@@ -32,27 +33,13 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Literal
 
-from syncaudit.errors import OutputError
+from syncaudit.errors import OutputError, UsageError
+from syncaudit.writers.provenance import SIDECAR_SUFFIXES, refusal, sidecar_of, sidecar_text
 
 OutputKind = Literal["file", "dir"]
 
 _TMP_PREFIX = ".syncaudit-"
 _TMP_SUFFIX = ".tmp"
-_BAG_DIR_FILES = (".db3", ".db3-shm", ".db3-wal", ".yaml")
-
-
-def _is_tool_bag_dir(path: Path) -> bool:
-    """Whether `path` is a folder this tool writes as a log: a ROS 2 bag, nothing else in it."""
-    try:
-        entries = list(path.iterdir())
-    except OSError:
-        return False
-    names = {entry.name for entry in entries}
-    return (
-        "metadata.yaml" in names
-        and all(entry.is_file() and entry.name.endswith(_BAG_DIR_FILES) for entry in entries)
-        and any(name.endswith(".db3") for name in names)
-    )
 
 
 def _is_device(path: Path) -> bool:
@@ -94,6 +81,8 @@ class OutputSet:
         (a gate run adds one report per log: thousands of targets)."""
         self._tmp_dirs: dict[Path, Path] = {}
         """folder of targets -> the hidden temporary folder made in it."""
+        self._claimed: set[Path] = set()
+        """The targets the user named (resolved): a second option naming one is refused."""
         self._done = False
 
     # -- planning -------------------------------------------------------------------------
@@ -110,13 +99,15 @@ class OutputSet:
         if target in self._targets:
             tmp, known = self._targets[target]
             if known != kind:
-                raise OutputError(f"{target}: given as two different outputs")
+                raise UsageError(
+                    f"{target}: given as two different outputs (one path, two outputs)"
+                )
             return tmp
         resolved = target.resolve()
         if resolved in self._inputs:
-            raise OutputError(f"{target}: is an input of this run; refusing to write over it")
+            raise UsageError(f"{target}: is an input of this run; refusing to write over it")
         if resolved in self._resolved:
-            raise OutputError(f"{target}: given as two different outputs")
+            raise UsageError(f"{target}: given as two different outputs (one path, two outputs)")
         if target.is_symlink() or target.exists():
             self._check_existing(target, kind)
         parent = target.parent
@@ -127,14 +118,33 @@ class OutputSet:
         self._resolved.add(resolved)
         return tmp
 
+    def refuse_input(self, target: str | Path) -> None:
+        """Raise UsageError (exit 64) when `target` names an input of the run (any name)."""
+        if Path(target).resolve() in self._inputs:
+            raise UsageError(f"{target}: is an input of this run; refusing to write over it")
+
+    def claim(self, target: str | Path, *, kind: OutputKind = "file") -> Path:
+        """`add` a target a user named on the command line: naming one path twice is refused.
+
+        `add` of a target already added returns its temporary (a log writer adds the path
+        its command claimed); `claim` is what the options go through.
+
+        Raises:
+            UsageError: the path (or another name of it) is claimed already (exit 64).
+        """
+        resolved = Path(target).resolve()
+        if resolved in self._claimed and not _is_device(Path(target)):
+            raise UsageError(f"{target}: given as two different outputs (one path, two outputs)")
+        tmp = self.add(target, kind=kind)
+        self._claimed.add(resolved)
+        return tmp
+
     def _check_existing(self, target: Path, kind: OutputKind) -> None:
         if _is_device(target):
             return  # written through at commit, never replaced
-        if target.is_dir() and not target.is_symlink() and not _is_tool_bag_dir(target):
-            raise OutputError(
-                f"{target}: is an existing folder that is not a log this tool wrote; "
-                "not replacing it (choose another name)"
-            )
+        why = refusal(target)
+        if why is not None:
+            raise OutputError(f"{target}: {why}; not replacing it (choose another name)")
         if not self.overwrite:
             raise OutputError(f"{target}: exists ({self._hint})")
 
@@ -214,8 +224,9 @@ class OutputSet:
             if appeared and not self.overwrite:
                 raise OutputError(f"{target}: appeared while writing; not replacing it")
         replaced: list[tuple[Path, Path | None]] = []  # (target, where its old content went)
+        moves = self._with_sidecars()
         try:
-            for target, (tmp, _) in self._targets.items():
+            for target, tmp in moves:
                 if _is_device(target):
                     with tmp.open("rb") as src, target.open("wb") as dst:
                         shutil.copyfileobj(src, dst)
@@ -239,6 +250,22 @@ class OutputSet:
             raise OutputError(
                 f"{failed}: cannot write ({_reason(exc)}); no output was changed"
             ) from None
+
+    def _with_sidecars(self) -> list[tuple[Path, Path]]:
+        """(target, temporary) of every output, plus the sidecar marking each CSV written."""
+        moves: list[tuple[Path, Path]] = []
+        for target, (tmp, kind) in self._targets.items():
+            moves.append((target, tmp))
+            if kind == "file" and target.suffix.lower() in SIDECAR_SUFFIXES:
+                if _is_device(target) or not tmp.is_file():
+                    continue
+                mark = tmp.with_name(f"{tmp.name}.syncaudit-mark")
+                try:
+                    mark.write_text(sidecar_text(tmp.read_bytes()), encoding="utf-8")
+                except OSError as exc:
+                    raise OutputError(f"{target}: cannot write ({_reason(exc)})") from None
+                moves.append((sidecar_of(target), mark))
+        return moves
 
     def discard(self) -> None:
         """Remove every temporary (and replaced previous outputs); targets stay as they are."""
