@@ -297,9 +297,8 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
     offset, how = host_offset_ns(scan, packet_ns, driver_ns)
     if scan.clock is not None and not scan.clock.synchronised:
         warnings.append(
-            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
-            f"(not synchronised): offset {offset / 1e9:+.6f} s {how}; t1 reported as "
-            "spread above the minimum"
+            f"LiDAR clock not synchronised with the host: host minus sensor {offset / 1e9:+.6f} s "
+            f"({how}); t1 reported as spread above the minimum"
         )
     return offset
 
@@ -347,7 +346,7 @@ def _audit(
         container=probe.log.summary.container,
         duration_s=probe.log.summary.duration_s,
         rig=rig,
-        lidar=lidar_row(scan),
+        lidar=lidar_row(scan, offset_ns=offset),
         clock_offset_ns=offset,
         cameras=cameras,
         missing=missing,
