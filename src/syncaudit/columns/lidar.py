@@ -76,6 +76,9 @@ class LidarScan:
     declared_rpm: float = float("nan")
     """Mean rotation rate the packets themselves declare (Hesai tail motor speed, Ouster
     lidar_mode), RPM; NaN where the vendor's packets carry none (Velodyne)."""
+    whole_turns: int = 0
+    """Whole turns the packets sweep, first sample to last: the revolutions `info` and
+    `audit` report, whatever the zero azimuth (zero crossings depend on it)."""
 
     @property
     def rpm_disagreement(self) -> float:

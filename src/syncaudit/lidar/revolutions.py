@@ -136,6 +136,7 @@ class RevolutionTracker:
     _gaps: list[tuple[int, float, int]] = field(default_factory=list)
     outlier_blocks: int = 0
     """Blocks ignored because their azimuth contradicts the rest of their packet."""
+    _first_unwrapped_deg: float | None = None
 
     def __post_init__(self) -> None:
         if self.direction not in (1, -1):
@@ -155,6 +156,8 @@ class RevolutionTracker:
         oriented = _orient(samples.sample_azimuth_deg, self.direction)
         turns = self._turns(times, oriented)
         unwrapped = oriented + FULL_TURN_DEG * turns
+        if self._first_unwrapped_deg is None:
+            self._first_unwrapped_deg = float(unwrapped[0])
         self._count_packets(samples.sensor_time_ns, unwrapped, packet_of)
         self._find_crossings(
             times, unwrapped, packet_of, samples.sensor_time_ns, samples.driver_stamp_ns
@@ -329,6 +332,17 @@ class RevolutionTracker:
                 dtype=np.float64,
             )
         return self._offsets_deg
+
+    @property
+    def whole_turns(self) -> int:
+        """Whole turns swept from the first sample to the last (gaps' hidden turns included).
+
+        The revolution count of a topic: unlike the zero crossings it does not depend on
+        where the rig puts the zero azimuth.
+        """
+        if self._carry is None or self._first_unwrapped_deg is None:
+            return 0
+        return int((self._carry.unwrapped_deg - self._first_unwrapped_deg) // FULL_TURN_DEG)
 
     @property
     def omega_blocks_deg_s(self) -> float:
