@@ -319,6 +319,21 @@ def _zero_from_triggers(
     )
 
 
+def _zero_warning(
+    rig: Rig, scan: LidarScan, tables: list[CameraTables], offset_ns: int
+) -> list[str]:
+    """Once for the LiDAR: every camera's trigger packets against the rig's zero crossings."""
+    from syncaudit.analysis.pairing import trigger_turn_fraction
+    from syncaudit.audit.zero_guess import zero_mismatch_warning
+
+    zero_host = scan.revolutions.zero_crossing_sensor_ns + offset_ns
+    fraction = trigger_turn_fraction(zero_host, np.sort(_trigger_packets_ns(tables)))
+    said = zero_mismatch_warning(
+        fraction, rig.lidar.zero_azimuth_deg, azimuth_increases=rig.lidar.azimuth_increases
+    )
+    return [] if said is None else [said]
+
+
 def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[str]) -> int:
     """Host minus sensor clock from every camera's triggers (a property of the LiDAR)."""
     from syncaudit.analysis.offset import host_offset_ns
@@ -376,12 +391,11 @@ def _audit(
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
     if scanner.keep_samples:
         rig, scan, note = _zero_from_triggers(rig, scanner, scan, all_tables)
-        if note is not None:
-            guessed = [*guessed, note]
-            warnings.append(f"{note} (revolutions start there)")
+        guessed = guessed if note is None else [*guessed, note]
     warnings.extend(scan.warnings)
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
+    warnings.extend(_zero_warning(rig, scan, all_tables, offset))
     cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
     warnings.extend(_floor_warnings(rig, cameras))
     warnings.extend(lidar_warnings(lidar_row(scan)))

@@ -20,7 +20,10 @@ from numpy.typing import NDArray
 
 FULL_TURN_DEG = 360.0
 
-__all__ = ["ZeroGuess", "guess_zero_azimuth"]
+__all__ = ["ZERO_MISMATCH_TURNS", "ZeroGuess", "guess_zero_azimuth", "zero_mismatch_warning"]
+
+ZERO_MISMATCH_TURNS = 0.125
+"""Trigger packets this far (in turns) from the rig's zero crossing: the rig is suspect."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,4 +80,26 @@ def guess_zero_azimuth(
         earliest_deg=(sign * (mean + (lo if sign > 0 else hi))) % FULL_TURN_DEG,
         latest_deg=(sign * (mean + (hi if sign > 0 else lo))) % FULL_TURN_DEG,
         packet_span_deg=span,
+    )
+
+
+def zero_mismatch_warning(
+    trigger_turn_fraction: float | None, zero_azimuth_deg: float, *, azimuth_increases: bool
+) -> str | None:
+    """The one warning, for the LiDAR, where its triggers fire far from the rig's zero.
+
+    `trigger_turn_fraction` is where every camera's trigger packets fall in their
+    revolution (0..1 of a turn past the zero crossing; None: no trigger packet).
+    """
+    if trigger_turn_fraction is None:
+        return None
+    off = min(trigger_turn_fraction, 1.0 - trigger_turn_fraction)
+    if off <= ZERO_MISMATCH_TURNS:
+        return None
+    step = FULL_TURN_DEG * trigger_turn_fraction
+    fired = (zero_azimuth_deg + (step if azimuth_increases else -step)) % FULL_TURN_DEG
+    return (
+        f"the triggers fire near packet azimuth {fired:.1f} deg, {off * FULL_TURN_DEG:.0f} deg "
+        f"from the rig's zero_azimuth_deg {zero_azimuth_deg:g}: check the rig (frames "
+        "may pair with the wrong revolution)"
     )
