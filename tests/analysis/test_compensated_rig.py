@@ -102,3 +102,21 @@ def test_delays_option_is_checked_and_controller_still_works(tmp_path: Path) -> 
         out = tmp_path / f"c{len(args)}.mcap"
         truth = _simulate(out, *args)
         assert {c["applied_delay"]["mode"] for c in truth["cameras"].values()} == {"controller"}
+
+
+def test_the_floor_does_not_charge_a_rig_for_its_per_frame_delays() -> None:
+    """The same frames, compensated or not: one floor (was 1455.6 us against 285.5 us)."""
+    from syncaudit.analysis.floor import error_floor
+
+    rng = np.random.default_rng(1)
+    exposure = np.repeat([2e6, 12e6, 2e6], 30)
+    residual = rng.normal(0.0, 300e3, exposure.size)  # quantisation and jitter
+    phase, chain = rng.uniform(0, 1.3e6, exposure.size), rng.normal(500e3, 40e3, exposure.size)
+    constant = error_floor(residual + exposure / 2, exposure, phase, chain, np.full(90, 15e6))
+    applied = 15e6 + exposure.mean() / 2 - exposure / 2
+    compensated = error_floor(residual + exposure.mean() / 2, exposure, phase, chain, applied)
+    assert compensated.error_mean_ns == pytest.approx(constant.error_mean_ns, rel=1e-9)
+    assert constant.error_mean_ns < 300e3
+    assert error_floor(residual + exposure / 2, exposure, phase, chain).error_mean_ns == (
+        pytest.approx(constant.error_mean_ns, rel=1e-9)
+    )
