@@ -87,6 +87,10 @@ def test_three_cameras_no_longer_shows_the_impossible_values() -> None:
         truth.t_rotate_ns + truth.packet_phase_ns, abs=1_000
     )
     assert result.lidar.revolutions == rig.lidar.revolutions == 99
+    from syncaudit.audit.inspect import inspect_log
+
+    (row,) = inspect_log(SAMPLES / "vlp16_three_cameras.mcap").lidars
+    assert row.revolutions == 99  # info counted 99, audit with the rig 100
 
 
 def test_the_guess_keeps_the_span_holding_most_trigger_packets() -> None:

@@ -45,7 +45,7 @@ class ZeroGuess:
             f"lidar.zero_azimuth_deg {self.zero_azimuth_deg:.2f} from where the triggers "
             f"fire ({self.triggers} trigger packets stamped at azimuth "
             f"{self.earliest_deg:.1f}-{self.latest_deg:.1f} deg, a packet spans "
-            f"{self.packet_span_deg:.2f} deg); set it in the rig"
+            f"{self.packet_span_deg:.2f} deg)"
         )
 
 
