@@ -73,8 +73,8 @@ def test_hdl32e_example(pcap_data: Path) -> None:
     assert (lidar.model, lidar.packets, lidar.dropped_packets) == ("HDL-32E", 876, 0)
     assert _rpm_close(lidar.rpm, 703.0)
     assert 154 <= lidar.packets_per_revolution <= 155
-    # 5 complete revolutions: 6 zero crossings, a partial one at either end.
-    assert lidar.revolutions == 6
+    # 5 complete revolutions (whole turns swept; a partial one at either end).
+    assert lidar.revolutions == 5
     assert not any("product byte" in w for w in report.warnings)
     assert _count(pcap_data, HDL32, "position_packets") == 100
     position = "/pcap/192_168_1_201_8308/position_packets: PPS absent x100; NMEA fix valid x100"
@@ -86,8 +86,8 @@ def test_monterey_hdl32e_wrap_block(pcap_data: Path) -> None:
     (lidar,) = report.lidars
     assert (lidar.model, lidar.packets) == ("HDL-32E", 2702)
     assert _rpm_close(lidar.rpm, 706.0)
-    # VeloView: 19 frames, 17 complete and 2 partial, i.e. 18 zero crossings.
-    assert lidar.revolutions == 18
+    # VeloView: 19 frames, 17 complete and 2 partial: 17 whole turns swept.
+    assert lidar.revolutions == 17
     assert lidar.azimuth_36000_blocks == 1
     assert _count(pcap_data, MONTEREY, "position_packets") == 299
 

@@ -133,7 +133,7 @@ def advise_camera(frames: Table, seed: ReplayResult | None) -> Advice:
     ok = np.isfinite(error) & np.isfinite(exposure)
     rows, error, exposure, applied = rows[ok], error[ok], exposure[ok], applied[ok]
     chain = np.sum([_floats(frames, f"t{k}_ns")[rows] for k in range(1, 5)], axis=0)
-    floor = error_floor(error, exposure, _floats(frames, "packet_phase_ns")[rows], chain)
+    floor = error_floor(error, exposure, _floats(frames, "packet_phase_ns")[rows], chain, applied)
     advised = np.full(len(frames), np.nan)
     current_mean, current_var = _stats(error)
     what_if = [WhatIf(AS_RECORDED, current_mean, current_var, 0)]

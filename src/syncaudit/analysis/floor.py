@@ -5,8 +5,9 @@ exposure that moves the mid-exposure; it cannot remove where the trigger packet 
 to sit relative to the zero crossing (a trigger fired from a packet is quantised to the
 packet period, about period / sqrt(12) standard deviation) nor the jitter of the trigger
 chain t1..t4. The floor is Eq. 5/6 of what is left once both removable parts are taken
-out of the recorded errors: `e - t5 / 2`, centred on its median (the centre that
-minimises Eq. 5).
+out of the recorded errors: `e - t5 / 2 - (d - median d)` (d: each frame's applied delay,
+so a rig already compensating per frame is not charged for it), centred on its median
+(the centre that minimises Eq. 5).
 """
 
 from __future__ import annotations
@@ -66,10 +67,15 @@ def error_floor(
     exposure_ns: NDArray[np.float64],
     phase_ns: NDArray[np.float64],
     chain_ns: NDArray[np.float64],
+    applied_ns: NDArray[np.float64] | None = None,
 ) -> ErrorFloor:
     """The floor of one camera from its paired frames' signed error, exposure, trigger
-    packet phase and trigger-chain latency (t1 + t2 + t3 + t4)."""
+    packet phase and trigger-chain latency (t1 + t2 + t3 + t4), and the delay each frame
+    was triggered with (`applied_ns`, NaN or None where unknown: taken as constant)."""
     residual = error_ns - exposure_ns / 2.0
+    if applied_ns is not None and np.isfinite(applied_ns).any():
+        known = np.isfinite(applied_ns)
+        residual = residual - np.where(known, applied_ns - np.median(applied_ns[known]), 0.0)
     residual = residual[np.isfinite(residual)]
     centred = np.abs(residual - np.median(residual)) if residual.size else residual
     return ErrorFloor(error_mean(centred), error_variance(centred), _std(phase_ns), _std(chain_ns))

@@ -436,32 +436,6 @@ def _frame_table(
     return Table(columns, len(frames))
 
 
-ZERO_MISMATCH_TURNS = 0.125
-"""Trigger packets this far (in turns) from the rig's zero crossing: the rig is suspect."""
-
-
-def _zero_warnings(revolutions: RevolutionPairing, lidar: LidarConfig) -> list[str]:
-    """Where the triggers fire, when the rig does not say or seems to say it wrongly."""
-    fraction = revolutions.trigger_turn_fraction
-    if fraction is None:
-        return []
-    step = FULL_TURN_DEG * fraction
-    fired = (lidar.zero_azimuth_deg + (step if lidar.azimuth_increases else -step)) % 360.0
-    if revolutions.zero_from_triggers:
-        return [
-            "lidar.zero_azimuth_deg not in the rig: revolutions start where the triggers "
-            f"fire, near packet azimuth {fired:.1f} deg (estimated; set it in the rig)"
-        ]
-    off = min(fraction, 1.0 - fraction)
-    if off <= ZERO_MISMATCH_TURNS:
-        return []
-    return [
-        f"the triggers fire near packet azimuth {fired:.1f} deg, {off * FULL_TURN_DEG:.0f} deg "
-        f"from the rig's zero_azimuth_deg {lidar.zero_azimuth_deg:g}: check the rig (frames "
-        "may pair with the wrong revolution)"
-    ]
-
-
 def _camera_warnings(frames: Table, stats: dict[str, LatencyStats]) -> list[str]:
     """What the log lacks for this camera, as warnings."""
     warnings: list[str] = []
@@ -536,7 +510,6 @@ def analyze_camera(
         window_frames=analysis.window_frames,
     )
     warnings = _camera_warnings(frames, stats)
-    warnings.extend(_zero_warnings(revolutions, lidar))
     if pairing_warning:
         warnings.insert(0, pairing_warning)
     if t4_warning:

@@ -150,8 +150,12 @@ class InfoReport:
         return cleaned
 
 
-def lidar_row(scan: LidarScan) -> LidarRow:
-    """The table row of a scanned LiDAR topic."""
+def lidar_row(scan: LidarScan, *, offset_ns: int | None = None) -> LidarRow:
+    """The table row of a scanned LiDAR topic.
+
+    `offset_ns` is the host-minus-sensor offset the audit measured (from its triggers):
+    the row then shows the one offset the analysis used, as the warning and JSON do.
+    """
     clock = scan.clock
     return LidarRow(
         topic=scan.topic,
@@ -159,7 +163,7 @@ def lidar_row(scan: LidarScan) -> LidarRow:
         model=scan.model,
         scans=scan.scans,
         packets=scan.packets,
-        revolutions=scan.revolutions.count,
+        revolutions=scan.whole_turns,  # whole turns: the same whatever the zero azimuth
         rpm=scan.rpm,
         packets_per_revolution=scan.packets_per_revolution,
         dropped_packets=scan.dropped_packets,
@@ -170,7 +174,11 @@ def lidar_row(scan: LidarScan) -> LidarRow:
         f"sector resumes {scan.cropped_sector[0]:.0f} deg past the zero crossing, in "
         f"{scan.cropped_sector[2]} revolutions (FOV-cropped recording, not counted as drops)",
         outlier_blocks=scan.outlier_blocks,
-        clock_offset_s=None if clock is None else clock.raw_median_ns / 1e9,
+        # Host minus sensor as the audit uses it (0 when synchronised, else the minimum
+        # filter); `audit` replaces it with the trigger-based offset where it has one.
+        clock_offset_s=None
+        if clock is None
+        else (clock.offset_ns if offset_ns is None else offset_ns) / 1e9,
         clock_synchronised=None if clock is None else clock.synchronised,
         t1_p50_us=None if clock is None else clock.t1_p50_ns / 1e3,
         t1_p99_us=None if clock is None else clock.t1_p99_ns / 1e3,

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from syncaudit.audit.health import LogHealth, log_health, no_packets_error
 from syncaudit.audit.inspect import LidarRow, lidar_row, lidar_warnings
@@ -47,11 +48,8 @@ MIN_ZERO_CROSSINGS = 2
 """A LiDAR is judged only with a whole revolution: two zero crossings."""
 
 
-def _no_revolution(lidar: LidarRow) -> str:
-    return (
-        f"{lidar.revolutions} zero crossing(s) in {lidar.packets} packets: "
-        "no complete revolution to measure"
-    )
+def _no_revolution(crossings: int, packets: int) -> str:
+    return f"{crossings} zero crossing(s) in {packets} packets: no complete revolution to measure"
 
 
 @dataclass(slots=True)
@@ -120,8 +118,10 @@ class AuditResult:
             for c in self.cameras
             if not c.sync.judged and not c.sync.optional
         ]
-        if self.lidar.revolutions < MIN_ZERO_CROSSINGS:
-            reasons.insert(0, f"LiDAR topic {self.lidar.topic}: {_no_revolution(self.lidar)}")
+        crossings = self.lidar.revolutions if self.revolutions is None else self.revolutions.count
+        if crossings < MIN_ZERO_CROSSINGS:
+            why = _no_revolution(crossings, self.lidar.packets)
+            reasons.insert(0, f"LiDAR topic {self.lidar.topic}: {why}")
         return reasons
 
     @property
@@ -265,10 +265,12 @@ def _read(
     check_crc: bool,
     warnings: list[str],
     meanwhile: Callable[[], object] | None = None,
-) -> tuple[LidarScan, list[CameraTables]]:
+) -> tuple[LidarScanner, LidarScan, list[CameraTables]]:
     """One pass over the log: the LiDAR's reduced timing and every camera's tables.
 
     What could not be given to a camera from a topic cameras share is added to `warnings`.
+    Where the rig does not state the zero azimuth the scanner keeps its samples, to track
+    the revolutions again from the guessed one (`_zero_from_triggers`).
     """
     lidar_cfg = rig.lidar
     scanner = LidarScanner.create(
@@ -277,6 +279,7 @@ def _read(
         azimuth_increases=lidar_cfg.azimuth_increases,
         target_azimuth_deg=tuple(a for _, a, _ in located),
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
+        keep_samples=_zero_unstated(rig) and bool(located),
     )
     plan, router = read_plan(probe, rig, [c for c, _, _ in located])
     clouds = None if plan.cloud is None else CloudFeeder(scanner, plan.cloud)
@@ -293,7 +296,59 @@ def _read(
         raise no_packets_error(probe.log, lidar_cfg.topic)  # names a cut or damage it saw
     warnings.extend(router.finish())
     tables = [router.builders[c.name].build() for c, _, _ in located]
-    return scan, tables
+    return scanner, scan, tables
+
+
+def _zero_unstated(rig: Rig) -> bool:
+    """True when the rig leaves the zero-crossing azimuth to the audit's guess."""
+    return "zero_azimuth_deg" not in rig.lidar.model_fields_set
+
+
+def _trigger_packets_ns(tables: list[CameraTables]) -> NDArray[np.int64]:
+    """Every camera's trigger packet stamps (host clock), those recorded (> 0) only."""
+    found = [np.asarray(t.triggers["lidar_packet_ns"], dtype=np.int64) for t in tables]
+    packets = np.concatenate(found) if found else np.empty(0, np.int64)
+    return packets[packets > 0]
+
+
+def _zero_from_triggers(
+    rig: Rig, scanner: LidarScanner, scan: LidarScan, tables: list[CameraTables]
+) -> tuple[Rig, LidarScan, str | None]:
+    """The rig with the zero azimuth guessed from the trigger packets, the revolutions
+    tracked again from it, and the note saying so (the rig and scan as they were, and
+    None, where no trigger packet lies among the LiDAR's packets)."""
+    from syncaudit.audit.zero_guess import guess_zero_azimuth
+
+    offset = _clock_offset(scan, tables, [])
+    packets = _trigger_packets_ns(tables)
+    guess = guess_zero_azimuth(
+        scanner.packet_azimuth_deg(packets - offset),
+        packets_per_revolution=scan.packets_per_revolution,
+        azimuth_increases=rig.lidar.azimuth_increases,
+    )
+    if guess is None:
+        return rig, scan, None
+    lidar = rig.lidar.model_copy(update={"zero_azimuth_deg": guess.zero_azimuth_deg})
+    return (
+        rig.model_copy(update={"lidar": lidar}),
+        scanner.retracked(lidar.zero_azimuth_deg),
+        (guess.note),
+    )
+
+
+def _zero_warning(
+    rig: Rig, scan: LidarScan, tables: list[CameraTables], offset_ns: int
+) -> list[str]:
+    """Once for the LiDAR: every camera's trigger packets against the rig's zero crossings."""
+    from syncaudit.analysis.pairing import trigger_turn_fraction
+    from syncaudit.audit.zero_guess import zero_mismatch_warning
+
+    zero_host = scan.revolutions.zero_crossing_sensor_ns + offset_ns
+    fraction = trigger_turn_fraction(zero_host, np.sort(_trigger_packets_ns(tables)))
+    said = zero_mismatch_warning(
+        fraction, rig.lidar.zero_azimuth_deg, azimuth_increases=rig.lidar.azimuth_increases
+    )
+    return [] if said is None else [said]
 
 
 def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[str]) -> int:
@@ -314,9 +369,8 @@ def _clock_offset(scan: LidarScan, tables: list[CameraTables], warnings: list[st
     offset, how = host_offset_ns(scan, packet_ns, driver_ns)
     if scan.clock is not None and not scan.clock.synchronised:
         warnings.append(
-            f"LiDAR clock is {scan.clock.raw_median_ns / 1e9:+.3f} s off the host clock "
-            f"(not synchronised): offset {offset / 1e9:+.6f} s {how}; t1 reported as "
-            "spread above the minimum"
+            f"LiDAR clock not synchronised with the host: host minus sensor {offset / 1e9:+.6f} s "
+            f"({how}); t1 reported as spread above the minimum"
         )
     return offset
 
@@ -348,13 +402,17 @@ def _audit(
     # Camera topics in encodings that cannot be read are dropped (warned); see rig_check.
     rig, warnings = check_rig_against_log(probe, rig)
     located = _locate_cameras(probe, rig, warnings)
-    scan, all_tables = _read(
+    scanner, scan, all_tables = _read(
         probe, rig, located, jobs=jobs, check_crc=check_crc, warnings=warnings, meanwhile=meanwhile
     )
     warnings.extend(w for tables in all_tables for w in tables.warnings)  # damaged, skipped
+    if scanner.keep_samples:
+        rig, scan, note = _zero_from_triggers(rig, scanner, scan, all_tables)
+        guessed = guessed if note is None else [*guessed, note]
     warnings.extend(scan.warnings)
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
+    warnings.extend(_zero_warning(rig, scan, all_tables, offset))
     cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
     warnings.extend(_floor_warnings(rig, cameras))
     from syncaudit.audit.trigger_design import add_designs
@@ -376,7 +434,7 @@ def _audit(
         container=probe.log.summary.container,
         duration_s=probe.log.summary.duration_s,
         rig=rig,
-        lidar=lidar_row(scan),
+        lidar=lidar_row(scan, offset_ns=offset),
         clock_offset_ns=offset,
         cameras=cameras,
         missing=missing,
@@ -395,7 +453,9 @@ def _missing_inputs(rig: Rig, scan: LidarScan) -> list[str]:
     if not rig.cameras:
         missing.append("no camera topics: images, exposure metadata and triggers are all missing")
     if scan.revolutions.count < MIN_ZERO_CROSSINGS:
-        missing.append(f"LiDAR topic {rig.lidar.topic}: {_no_revolution(lidar_row(scan))}")
+        missing.append(
+            f"LiDAR topic {rig.lidar.topic}: {_no_revolution(scan.revolutions.count, scan.packets)}"
+        )
     return missing
 
 

@@ -26,6 +26,7 @@ from syncaudit.cli.common import (
     output_set,
     print_json,
     run,
+    say,
     stdout_console,
 )
 from syncaudit.cli.startup import one_blas_thread
@@ -40,6 +41,13 @@ if TYPE_CHECKING:
 def audit(
     log: LogArgument,
     rig: RigOption = None,
+    no_rig: Annotated[
+        bool,
+        typer.Option(
+            "--no-rig",
+            help="Guess topics and cameras from the log even where a LOG.rig.yaml lies beside it.",
+        ),
+    ] = False,
     as_json: JsonFlag = False,
     json_out: JsonOutOption = None,
     pairings_out: Annotated[
@@ -100,6 +108,11 @@ def audit(
     source = log_location(log)
 
     def job() -> None:
+        if rig is not None and no_rig:
+            from syncaudit.errors import UsageError
+
+            raise UsageError("--rig and --no-rig: give one")
+        rig_path = rig or (None if no_rig else rig_beside(source))
         targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
         calibration = (
             _load_calibration(calibration_json, source, any_log=calibration_any_log)
@@ -108,13 +121,19 @@ def audit(
         )
         with output_set(
             overwrite=overwrite,
-            inputs=(*local_paths(source), rig, calibration_json, lidar_metadata, lidar_capture),
+            inputs=(
+                *local_paths(source),
+                rig_path,
+                calibration_json,
+                lidar_metadata,
+                lidar_capture,
+            ),
             targets=targets.files(),
         ) as outputs:
             targets.claim_pairings(outputs)
             result = _audit(
                 source,
-                rig,
+                rig_path,
                 jobs=jobs,
                 check_crc=check_crc,
                 tables=not as_json,
@@ -200,6 +219,20 @@ class _Targets:
             from syncaudit.writers.frames_csv import frames_csv
 
             outputs.write_text(self.csv, frames_csv(result))
+
+
+def rig_beside(source: str | Path) -> Path | None:
+    """The rig `LOG.rig.yaml` beside a local log, as `gate` takes it (None for a URL or none).
+
+    Said on stderr, so a user who meant the guess knows to pass `--no-rig`.
+    """
+    if not isinstance(source, Path):
+        return None
+    beside = source.with_name(source.name + ".rig.yaml")
+    if not beside.is_file():
+        return None
+    say(f"using rig {beside.name} beside the log (--rig to choose another, --no-rig to guess)")
+    return beside
 
 
 def _audit(

@@ -23,6 +23,7 @@ from syncaudit.simulate import LidarModel
 if TYPE_CHECKING:
     from syncaudit.analysis.controller import ControllerConfig
     from syncaudit.simulate.calib_config import CalibSceneConfig
+    from syncaudit.simulate.delays import CompensatedDelays, LiveDelays
     from syncaudit.writers.log_writer import LogFormat
 
 simulate_app = typer.Typer(
@@ -144,6 +145,15 @@ def simulate_sync(
             "`controller` mapping, else the controller's defaults).",
         ),
     ] = False,
+    delay_source: Annotated[
+        str | None,
+        typer.Option(
+            "--delays",
+            help="Where each frame's trigger delay comes from: constant (default), controller "
+            "(as --controller) or compensated (each frame's own exposure compensated exactly, "
+            "as a rig with exposure feed-forward).",
+        ),
+    ] = None,
     tunnel: Annotated[
         bool | None,
         typer.Option(
@@ -228,7 +238,6 @@ def simulate_sync(
     """Write a LiDAR + three cameras log, its truth (OUT.truth.json) and rig (OUT.rig.yaml)."""
 
     def job() -> None:
-        from syncaudit.cli.simulate_controller import ControllerDelays
         from syncaudit.simulate.sync_log import lidar_model, sync_sim_config
         from syncaudit.writers.log_writer import infer_format, log_target
 
@@ -273,9 +282,7 @@ def simulate_sync(
         from syncaudit.simulate.sync_log import simulate_sync_log, truth_path
         from syncaudit.writers.provenance import COMMENT_MARK
 
-        delays = (
-            ControllerDelays(controller_file) if controller or controller_file is not None else None
-        )
+        delays = _delay_source(delay_source, controller, controller_file)
         rig_file = rig_path(target)
         with output_set(overwrite=overwrite, targets=(rig_file,)) as outputs:
             truth = simulate_sync_log(target, config, outputs=outputs, delays=delays)
@@ -291,6 +298,32 @@ def simulate_sync(
         emit(lambda: print("\n".join(lines)))
 
     run(job)
+
+
+DELAY_SOURCES = ("constant", "controller", "compensated")
+
+
+def _delay_source(
+    name: str | None, controller: bool, controller_file: ControllerConfig | None
+) -> LiveDelays | CompensatedDelays | None:
+    """The simulator's delay source for `--delays` (and `--controller`, the config file's
+    `controller`): None for constant delays. Usage error for an unknown name or a clash."""
+    from syncaudit.cli.simulate_controller import ControllerDelays
+    from syncaudit.simulate.delays import CompensatedDelays
+
+    wants_controller = controller or controller_file is not None
+    if name is not None and name not in DELAY_SOURCES:
+        raise UsageError(f"--delays: {name!r} is not one of {', '.join(DELAY_SOURCES)}")
+    if name in ("constant", "compensated") and wants_controller:
+        raise UsageError(
+            f"--delays {name} and the controller (--controller or the config file's "
+            "`controller`): give one"
+        )
+    if name == "compensated":
+        return CompensatedDelays()
+    if name == "controller" or wants_controller:
+        return ControllerDelays(controller_file)
+    return None
 
 
 def _sync_file(path: Path) -> tuple[dict[str, Any], ControllerConfig | None]:

@@ -84,6 +84,9 @@ class LidarScan:
     the rig) differs from it."""
     decoder_notes: tuple[str, ...] = ()
     """What the decoder derived rather than read (older Ouster metadata), warned about."""
+    whole_turns: int = 0
+    """Whole turns the packets sweep, first sample to last: the revolutions `info` and
+    `audit` report, whatever the zero azimuth (zero crossings depend on it)."""
 
     @property
     def rpm_disagreement(self) -> float:

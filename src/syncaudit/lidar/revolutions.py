@@ -21,6 +21,8 @@ from syncaudit.columns.runs import run_starts
 from syncaudit.lidar.samples import PacketSamples
 
 FULL_TURN_DEG = 360.0
+MAX_SAMPLE_SPAN_DEG = 30.0
+"""A sample covers at most this much of a turn (a packet: 4.8 deg on a VLP-16 at 600 rpm)."""
 MAX_BLOCK_STEP_DEG = 90.0
 """Steps larger than this between consecutive blocks are gaps, not rotation samples."""
 CROP_BIN_DEG = 5.0
@@ -136,6 +138,9 @@ class RevolutionTracker:
     _gaps: list[tuple[int, float, int]] = field(default_factory=list)
     outlier_blocks: int = 0
     """Blocks ignored because their azimuth contradicts the rest of their packet."""
+    _first_unwrapped_deg: float | None = None
+    _last_step_deg: float = 0.0
+    """The last sample's own span (its step from the one before): the turn a sample covers."""
 
     def __post_init__(self) -> None:
         if self.direction not in (1, -1):
@@ -155,6 +160,16 @@ class RevolutionTracker:
         oriented = _orient(samples.sample_azimuth_deg, self.direction)
         turns = self._turns(times, oriented)
         unwrapped = oriented + FULL_TURN_DEG * turns
+        if self._first_unwrapped_deg is None:
+            self._first_unwrapped_deg = float(unwrapped[0])
+        if unwrapped.size >= 2:
+            step = float(unwrapped[-1] - unwrapped[-2])
+        elif self._carry is not None:
+            step = float(unwrapped[-1]) - self._carry.unwrapped_deg
+        else:
+            step = 0.0
+        if 0.0 < step < MAX_SAMPLE_SPAN_DEG:  # a gap's step is no sample's span
+            self._last_step_deg = step
         self._count_packets(samples.sensor_time_ns, unwrapped, packet_of)
         self._find_crossings(
             times, unwrapped, packet_of, samples.sensor_time_ns, samples.driver_stamp_ns
@@ -329,6 +344,19 @@ class RevolutionTracker:
                 dtype=np.float64,
             )
         return self._offsets_deg
+
+    @property
+    def whole_turns(self) -> int:
+        """Whole turns swept from the first sample to the end of the last (gaps' hidden
+        turns included): one frame of 64 Ouster packets of 16 columns is one turn.
+
+        The revolution count of a topic: unlike the zero crossings it does not depend on
+        where the rig puts the zero azimuth.
+        """
+        if self._carry is None or self._first_unwrapped_deg is None:
+            return 0
+        swept = self._carry.unwrapped_deg - self._first_unwrapped_deg + self._last_step_deg
+        return int(swept // FULL_TURN_DEG)
 
     @property
     def omega_blocks_deg_s(self) -> float:

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from syncaudit.columns.lidar import LidarScan
+import numpy as np
+from numpy.typing import NDArray
+
+from syncaudit.columns.lidar import ClockReport, LidarScan
 from syncaudit.lidar import ouster
 from syncaudit.lidar.clock import ClockEstimator
 from syncaudit.lidar.revolutions import RevolutionTracker
@@ -44,8 +47,13 @@ class LidarScanner:
     wrap_blocks: int = 0
     product_id_model: str = ""
     notes: dict[str, None] = field(default_factory=dict)
+    keep_samples: bool = False
+    """Keep every batch fed, so `retracked` can find the revolutions again at another zero
+    azimuth (the audit's guessed one) without reading the log twice: ~40 bytes a packet."""
     _pending: list[PacketSamples] = field(default_factory=list)
     _pending_packets: int = 0
+    _kept: list[PacketSamples] = field(default_factory=list)
+    _clock: ClockReport | None = None
 
     @classmethod
     def create(
@@ -56,6 +64,7 @@ class LidarScanner:
         azimuth_increases: bool = True,
         target_azimuth_deg: tuple[float, ...] = (),
         clock_tolerance_ns: int = 50_000_000,
+        keep_samples: bool = False,
     ) -> LidarScanner:
         """A scanner for one topic with the rig's zero crossing and target azimuths."""
         tracker = RevolutionTracker(
@@ -63,7 +72,12 @@ class LidarScanner:
             direction=1 if azimuth_increases else -1,
             target_azimuth_deg=target_azimuth_deg,
         )
-        return cls(topic, tracker, ClockEstimator(tolerance_ns=clock_tolerance_ns))
+        return cls(
+            topic,
+            tracker,
+            ClockEstimator(tolerance_ns=clock_tolerance_ns),
+            keep_samples=keep_samples,
+        )
 
     def feed(self, samples: PacketSamples, messages: int = 1) -> None:
         """Add one scan message (or a batch of `messages` single-packet messages)."""
@@ -89,12 +103,65 @@ class LidarScanner:
             return
         batch = concat_samples(self._pending)
         self._pending, self._pending_packets = [], 0
+        if self.keep_samples:
+            self._kept.append(batch)
         self.tracker.feed(batch)
         self.clock.feed(batch.driver_stamp_ns, batch.sensor_time_ns)
 
     def finish(self) -> LidarScan:
         """The reduced timing of everything fed."""
         self._flush()
+        self._clock = self.clock.finish()
+        return self._scan(self.tracker)
+
+    def retracked(self, zero_azimuth_deg: float) -> LidarScan:
+        """The scan `finish` gave, its revolutions found again from `zero_azimuth_deg`.
+
+        Needs `keep_samples`; the result is what a scanner created with that zero azimuth
+        gives for the same packets (the same tracker fed the same batches).
+        """
+        if not self.keep_samples:
+            raise ValueError("retracked needs a scanner created with keep_samples=True")
+        tracker = RevolutionTracker(
+            zero_azimuth_deg=zero_azimuth_deg,
+            direction=self.tracker.direction,
+            target_azimuth_deg=self.tracker.target_azimuth_deg,
+        )
+        for batch in self._kept:
+            tracker.feed(batch)
+        return self._scan(tracker)
+
+    def packet_azimuth_deg(self, sensor_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The packet azimuth at each sensor time, between the kept samples (NaN outside them).
+
+        The forward step between the two samples around a time is interpolated, so a
+        time at a sample is that sample's azimuth; a step of 90 deg or more (a gap) is NaN.
+        """
+        out = np.full(sensor_ns.shape, np.nan)
+        if not self._kept or not sensor_ns.size:
+            return out
+        times = np.concatenate([b.sample_time_ns for b in self._kept])
+        azimuth = (
+            self.tracker.direction * np.concatenate([b.sample_azimuth_deg for b in self._kept])
+        ) % 360.0  # oriented: grows with rotation
+        n = times.size
+        right = np.searchsorted(times, sensor_ns, side="left")  # first sample at/after
+        at = np.minimum(right, n - 1)
+        exact = (right < n) & (times[at] == sensor_ns)
+        right = np.clip(right, 1, max(n - 1, 1))
+        left = right - 1
+        step = (azimuth[right] - azimuth[left]) % 360.0
+        dt = (times[right] - times[left]).astype(np.float64)
+        safe = np.where(dt > 0, dt, 1.0)
+        between = (sensor_ns > times[left]) & (sensor_ns < times[right]) & (dt > 0) & (step < 90.0)
+        oriented = np.where(
+            exact, azimuth[at], azimuth[left] + step * (sensor_ns - times[left]) / safe
+        )
+        ok = exact | between
+        out[ok] = (self.tracker.direction * oriented[ok]) % 360.0
+        return out
+
+    def _scan(self, tracker: RevolutionTracker) -> LidarScan:
         return LidarScan(
             topic=self.topic,
             vendor=self.vendor,
@@ -103,11 +170,12 @@ class LidarScanner:
             packets=self.packets,
             return_modes=tuple(sorted(self.modes)),
             dual_return=self.dual,
-            revolutions=self.tracker.finish(),
-            clock=self.clock.finish(),
-            omega_blocks_deg_s=self.tracker.omega_blocks_deg_s,
-            cropped_sector=self.tracker.cropped_sector(),
-            outlier_blocks=self.tracker.outlier_blocks,
+            revolutions=tracker.finish(),
+            clock=self._clock,
+            omega_blocks_deg_s=tracker.omega_blocks_deg_s,
+            cropped_sector=tracker.cropped_sector(),
+            outlier_blocks=tracker.outlier_blocks,
+            whole_turns=tracker.whole_turns,
             declared_rpm=self.declared_rpm_sum / self.declared_rpm_count
             if self.declared_rpm_count
             else float("nan"),

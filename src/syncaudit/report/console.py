@@ -48,7 +48,7 @@ def render_info(report: InfoReport, console: Console) -> None:
             elif lidar.clock_synchronised:
                 clock = "[green]synchronised[/]"
             else:
-                clock = f"[red]NOT synchronised[/] ({_num(lidar.clock_offset_s, '{:+.3f} s')})"
+                clock = f"[red]NOT synchronised[/] ({_num(lidar.clock_offset_s, '{:+.6f} s')})"
             lidars.add_row(
                 lidar.topic,
                 f"{lidar.vendor} {lidar.model}" + (" dual" if lidar.dual_return else ""),
@@ -186,7 +186,7 @@ def render_audit(result: AuditResult, console: Console) -> None:
         + (
             "synchronised"
             if lidar.clock_synchronised
-            else f"[red]NOT synchronised[/] ({_num(lidar.clock_offset_s, '{:+.3f} s')})"
+            else f"[red]NOT synchronised[/] ({_num(lidar.clock_offset_s, '{:+.6f} s')})"
         )
         + f", t1 p50/p99 {_num(lidar.t1_p50_us)}/{_num(lidar.t1_p99_us)} us"
     )

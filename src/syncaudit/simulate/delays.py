@@ -1,11 +1,14 @@
-"""Where the simulated cameras' applied trigger delays come from: constant, or a caller's policy.
+"""Where the simulated cameras' applied trigger delays come from: constant, compensated, or a
+caller's policy.
 
 The simulator checks nothing, so it does not run the project's delay controller
 (`syncaudit.analysis.controller`, which the audit replays and which a simulated log is
 used to test). A caller that wants delays changing frame by frame passes a `LiveDelays`:
 per camera, an object told what the camera driver measured for each frame and answering
-the delay of the next one (the CLI wraps the controller so). Without one, every frame of
-a camera gets the same delay.
+the delay of the next one (the CLI wraps the controller so). `CompensatedDelays` is the
+simulator's own ideal per-frame compensation: each frame's delay takes its own exposure's
+half off, as a rig with exact exposure feed-forward does. Without either, every frame of a
+camera gets the same delay.
 """
 
 from __future__ import annotations
@@ -13,6 +16,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
 
 CONSTANT_WINDOW_FRAMES = 10
 """The window (frames) the truth names for its t5 average when the delays are constant:
@@ -75,3 +81,33 @@ class LiveDelays(Protocol):
     def for_camera(self, initial_delay_ns: int) -> CameraDelays:
         """A fresh policy for one camera that starts at `initial_delay_ns`."""
         ...
+
+
+@dataclass(frozen=True, slots=True)
+class CompensatedDelays:
+    """Each frame's delay compensates its own exposure exactly (ideal exposure feed-forward).
+
+    Frame i is triggered with `initial + t5_mean / 2 - t5_i / 2`: the camera's constant
+    delay (the ideal mean plus its `delay_error_us`) with the log's mean half exposure
+    replaced by the frame's own. What a rig that knows the exposure the camera is about to
+    use applies; the error left is the trigger chain's jitter and the packet quantisation,
+    plus the camera's `delay_error_us`.
+    """
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """What the truth records under `config.controller`."""
+        return {"policy": "compensated", "exposure": "each frame's own, exactly"}
+
+    @property
+    def window_frames(self) -> int:
+        """No t5 window is used; the truth names the constant delays' one."""
+        return CONSTANT_WINDOW_FRAMES
+
+    def applied_ns(self, initial_ns: int, exposure_ns: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Every frame's delay (ns, never negative) from the camera's constant `initial_ns`."""
+        half_mean = round(float(exposure_ns.mean()) / 2.0) if exposure_ns.size else 0
+        applied: NDArray[np.int64] = np.maximum(
+            0, initial_ns + half_mean - exposure_ns.astype(np.int64) // 2
+        )
+        return applied

@@ -59,6 +59,7 @@ from syncaudit.simulate.cloud_writer import CloudConvention, cloud_message, clou
 from syncaudit.simulate.delays import (
     CONSTANT_WINDOW_FRAMES,
     CameraDelays,
+    CompensatedDelays,
     FrameTiming,
     LiveDelays,
 )
@@ -643,7 +644,10 @@ class _Simulation:
     """One run of the simulator: arrays first (vectorised), then messages."""
 
     def __init__(
-        self, config: SyncSimConfig, outputs: OutputSet, delays: LiveDelays | None
+        self,
+        config: SyncSimConfig,
+        outputs: OutputSet,
+        delays: LiveDelays | CompensatedDelays | None,
     ) -> None:
         self.cfg = config
         self.outputs = outputs
@@ -920,7 +924,7 @@ class _Simulation:
             index, chain, times, zero_true_ns[: chain.n], image_log, omega_mean_deg_ns
         )
         record["applied_delay"] = {
-            "mode": "constant" if self.delays is None else "controller",
+            "mode": _delay_mode(self.delays),
             "delay_error_ns": delay_error_ns,
             "initial_ns": int(applied[0]),
             "final_ns": int(applied[-1]),
@@ -1028,6 +1032,8 @@ class _Simulation:
         """Step 2: the delay each frame is triggered with, and the changes made to it."""
         if self.delays is None:
             return np.full(chain.n, initial_ns, dtype=np.int64), []
+        if isinstance(self.delays, CompensatedDelays):
+            return self.delays.applied_ns(initial_ns, chain.t5), []
         return self._live_delays(self.delays.for_camera(initial_ns), initial_ns, chain, revs_ns)
 
     def _camera_truth(
@@ -1485,17 +1491,25 @@ def _jpeg_image(writer: LogWriter, header: Any, size: int, seed: int) -> bytes:
     return writer.serialize(msg)
 
 
+def _delay_mode(delays: LiveDelays | CompensatedDelays | None) -> str:
+    """The truth's `applied_delay.mode`: 'constant', 'compensated' or 'controller'."""
+    if delays is None:
+        return "constant"
+    return "compensated" if isinstance(delays, CompensatedDelays) else "controller"
+
+
 def simulate_sync_log(
     out: Path,
     config: SyncSimConfig,
     *,
     outputs: OutputSet | None = None,
-    delays: LiveDelays | None = None,
+    delays: LiveDelays | CompensatedDelays | None = None,
 ) -> dict[str, Any]:
     """Write a simulated log to `out` (format `config.log_format`) and its truth to `<out>.truth.json`.
 
     Returns the truth. `delays` runs live on every camera (a delay controller the caller
-    supplies, see `syncaudit.simulate.delays`); None keeps each camera's delay constant. Both outputs go through `outputs` (committed by its owner) or, without
+    supplies, see `syncaudit.simulate.delays`); `CompensatedDelays` compensates each frame's
+    own exposure exactly; None keeps each camera's delay constant. Both outputs go through `outputs` (committed by its owner) or, without
     one, through an own OutputSet committed here: all or nothing.
 
     Raises:
