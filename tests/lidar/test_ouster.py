@@ -380,3 +380,20 @@ def test_declared_rate_from_lidar_mode(rec: Recording, meta: OusterMetadata) -> 
     assert scan.declared_rpm == 1200.0
     (warning,) = scan.warnings
     assert "1200 RPM of the metadata's lidar_mode" in warning
+
+
+@pytest.mark.parametrize(
+    ("head", "accepted"),
+    [(b"\x00\x01", True), (b"\x00\x00", True), (b"\x00\x02", False), (b"\x00\x03", False)],
+)
+def test_packet_msg_takes_plain_cdr_only(head: bytes, accepted: bool) -> None:
+    """CDR_LE/CDR_BE as every reader of logs.wire; a parameter list (PL_CDR) is refused."""
+    from syncaudit.lidar.ouster import ouster_packet_bytes
+
+    order = "<" if head[1] & 1 else ">"
+    raw = head + b"\x00\x00" + struct.pack(order + "I", 4) + b"\x01\x02\x03\x04"
+    if accepted:
+        assert bytes(ouster_packet_bytes(raw, "cdr")) == b"\x01\x02\x03\x04"
+    else:
+        with pytest.raises(DecodeError, match="CDR encapsulation"):
+            ouster_packet_bytes(raw, "cdr")

@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 
 from syncaudit.errors import DecodeError
 from syncaudit.lidar.packets import PacketTiming
+from syncaudit.logs.wire import WireError, cdr_byte_order
 
 ENCODER_TICKS_PER_REV = 90112
 """Encoder counts per revolution in LEGACY packets (azimuth = 360 * count / 90112)."""
@@ -462,11 +463,10 @@ def ouster_packet_bytes(
         start, order = 4, "<"
     elif encoding == "cdr":
         start = 8
-        if size < 4:
-            raise DecodeError(f"ouster PacketMsg: {size} bytes, too short for a CDR header")
-        if view[0] != 0 or view[1] > 3:  # CDR_BE, CDR_LE, PL_CDR_BE, PL_CDR_LE
-            raise DecodeError(f"ouster PacketMsg: {bytes(view[:2]).hex()} is no XCDR1 header")
-        order = "<" if view[1] & 1 else ">"
+        try:  # plain CDR only, as every reader of logs.wire accepts (PL_CDR is refused)
+            order = cdr_byte_order(view)
+        except WireError as exc:
+            raise DecodeError(f"ouster PacketMsg: {exc}") from None
     else:
         raise DecodeError(f"ouster PacketMsg: unknown encoding {encoding!r}")
     if size < start:
