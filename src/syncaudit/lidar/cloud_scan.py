@@ -17,7 +17,7 @@ from syncaudit.columns.lidar import LidarScan
 from syncaudit.lidar.cloud_samples import CloudSamples, CloudSettings, cloud_samples
 from syncaudit.lidar.scan import LidarScanner
 from syncaudit.logs import LogReader, RawMessage
-from syncaudit.logs.parallel import iter_items
+from syncaudit.logs.parallel import WholeMessages, iter_items
 
 __all__ = ["CLOUD_TYPES", "CloudExtractor", "CloudFeeder", "is_cloud_type", "scan_cloud"]
 
@@ -36,24 +36,10 @@ def is_cloud_type(msgtype: str) -> bool:
 
 
 @dataclass(frozen=True, slots=True)
-class CloudExtractor:
+class CloudExtractor(WholeMessages):
     """What `logs.parallel` makes of one cloud topic's messages (picklable)."""
 
-    topic: str
     settings: CloudSettings
-
-    @property
-    def topics(self) -> list[str]:
-        """The cloud topic."""
-        return [self.topic]
-
-    def prefix_bytes(self, topic: str) -> int:
-        """Clouds are read whole."""
-        return 0
-
-    def rosbags_encodings(self, log: LogReader) -> set[str]:
-        """None: clouds are read from their bytes."""
-        return set()
 
     def extract(self, msg: RawMessage, log: LogReader) -> CloudSamples | None:
         """The sectors of one cloud."""

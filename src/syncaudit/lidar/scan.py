@@ -19,7 +19,7 @@ from syncaudit.lidar.revolutions import RevolutionTracker
 from syncaudit.lidar.samples import PacketSamples, concat_samples, packet_samples
 from syncaudit.lidar.stream import decode_ouster_message, decode_scan, packet_family
 from syncaudit.logs import LogReader, RawMessage
-from syncaudit.logs.parallel import iter_items
+from syncaudit.logs.parallel import WholeMessages, iter_items
 
 __all__ = ["LidarScan", "LidarScanner", "PacketExtractor", "packet_samples_of", "scan_lidar"]
 
@@ -204,28 +204,14 @@ def packet_samples_of(
 
 
 @dataclass(frozen=True, slots=True)
-class PacketExtractor:
+class PacketExtractor(WholeMessages):
     """What `logs.parallel` makes of one LiDAR topic's messages: their packets' timing
     samples (picklable for worker processes)."""
 
-    topic: str
     family: str
     ouster_meta: ouster.OusterMetadata | None = None
     model: str | None = None
     """The model the rig states (`lidar.model`), else None: the packets tell."""
-
-    @property
-    def topics(self) -> list[str]:
-        """The packet topic."""
-        return [self.topic]
-
-    def prefix_bytes(self, topic: str) -> int:
-        """Packets are read whole."""
-        return 0
-
-    def rosbags_encodings(self, log: LogReader) -> set[str]:
-        """None: packets are decoded from their bytes."""
-        return set()
 
     def extract(self, msg: RawMessage, log: LogReader) -> PacketSamples | None:
         """The samples of one packet message."""

@@ -62,6 +62,27 @@ class Extractor(Protocol[ItemT_co]):
         ...
 
 
+@dataclass(frozen=True, slots=True)
+class WholeMessages:
+    """The part of an extractor that reads one topic's messages whole, from their bytes
+    (no type registry): a LiDAR's packets or clouds. Subclasses add `extract`."""
+
+    topic: str
+
+    @property
+    def topics(self) -> list[str]:
+        """The one topic."""
+        return [self.topic]
+
+    def prefix_bytes(self, topic: str) -> int:
+        """Messages are read whole."""
+        return 0
+
+    def rosbags_encodings(self, log: LogReader) -> set[str]:
+        """None: the messages are decoded from their bytes."""
+        return set()
+
+
 def default_jobs() -> int:
     """Worker processes to use: the cores this process may run on."""
     try:
