@@ -137,19 +137,31 @@ def advise_camera(frames: Table, seed: ReplayResult | None) -> Advice:
     advised = np.full(len(frames), np.nan)
     current_mean, current_var = _stats(error)
     what_if = [WhatIf(AS_RECORDED, current_mean, current_var, 0)]
-    if not error.size:
-        why = "no paired frames: nothing to replay"
+
+    def advice(
+        action: Action,
+        shift_ns: float | None,
+        expected: tuple[float, float],
+        why: str,
+        feedforward: FeedForwardReplay | None,
+    ) -> Advice:
+        """The recommendation: what every branch below shares, its own parts given."""
         return Advice(
-            "none",
-            None,
-            current_mean,
-            current_var,
-            current_mean,
-            floor,
-            why,
-            what_if,
-            advised,
-            None,
+            action=action,
+            shift_ns=shift_ns,
+            expected_mean_ns=expected[0],
+            expected_var_ns2=expected[1],
+            current_mean_ns=current_mean,
+            floor=floor,
+            why=why,
+            what_if=what_if,
+            advised_delay_ns=advised,
+            feedforward=feedforward,
+        )
+
+    if not error.size:
+        return advice(
+            "none", None, (current_mean, current_var), "no paired frames: nothing to replay", None
         )
     shift = -float(np.median(error))
     shift_mean, shift_var = _stats(error + shift)
@@ -169,18 +181,7 @@ def advise_camera(frames: Table, seed: ReplayResult | None) -> Advice:
     if at_floor or current_mean - min(shift_mean, ours.error_mean_ns) < margin:
         advised[rows] = applied
         why = _at_floor_why(current_mean, floor, min(shift_mean, ours.error_mean_ns))
-        return Advice(
-            "none",
-            None,
-            current_mean,
-            current_var,
-            current_mean,
-            floor,
-            why,
-            what_if,
-            advised,
-            ours,
-        )
+        return advice("none", None, (current_mean, current_var), why, ours)
     # A shift that reaches the floor is the advice: it is one number, the same every frame.
     reaches_floor = shift_mean - floor.error_mean_ns < margin
     if reaches_floor or shift_mean - ours.error_mean_ns < margin:
@@ -194,18 +195,7 @@ def advise_camera(frames: Table, seed: ReplayResult | None) -> Advice:
             f"a constant shift of the trigger by {shift / 1e3:+.1f} us lowers Eq. 5 from "
             f"{current_mean / 1e3:.1f} to {shift_mean / 1e3:.1f} us, {tail}"
         )
-        return Advice(
-            "shift_trigger",
-            shift,
-            shift_mean,
-            shift_var,
-            current_mean,
-            floor,
-            why,
-            what_if,
-            advised,
-            ours,
-        )
+        return advice("shift_trigger", shift, (shift_mean, shift_var), why, ours)
     advised[rows] = np.where(known, applied + (ours.errors_ns - error), np.nan)
     why = (
         f"the error follows {_follows(error, exposure)}, which no constant removes: "
@@ -213,18 +203,8 @@ def advise_camera(frames: Table, seed: ReplayResult | None) -> Advice:
         f"{ours.error_mean_ns / 1e3:.1f} us (floor {floor.error_mean_ns / 1e3:.1f} us), "
         f"a constant shift of {shift / 1e3:+.1f} us only to {shift_mean / 1e3:.1f} us"
     )
-    return Advice(
-        "per_frame_compensation",
-        None,
-        ours.error_mean_ns,
-        ours.error_var_ns2,
-        current_mean,
-        floor,
-        why,
-        what_if,
-        advised,
-        ours,
-    )
+    expected = (ours.error_mean_ns, ours.error_var_ns2)
+    return advice("per_frame_compensation", None, expected, why, ours)
 
 
 def _follows(error_ns: NDArray[np.float64], exposure_ns: NDArray[np.float64]) -> str:
