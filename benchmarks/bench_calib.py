@@ -65,7 +65,7 @@ def _session(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dic
     """Simulate one session (not timed) and return its truth; with `keep`, a session left
     in `root` by an earlier run with the same configuration is reused."""
     path = root / f"{case}_s{seed}_{stops}stops.mcap"
-    config = calib_scene_config(seed=seed, n_stops=stops, **MATRIX[case])
+    config = calib_scene_config(seed=seed, **{"n_stops": stops, **MATRIX[case]})
     if keep and path.exists() and truth_path(path).exists():
         truth: dict[str, Any] = json.loads(truth_path(path).read_text())
         if truth["config"] == json.loads(json.dumps(config.model_dump(mode="json"))):
