@@ -79,7 +79,7 @@ def _case_config(name: str) -> CalibSceneConfig:
     """One session of a matrix case as the fast subset runs it (seed 0 unless `SEEDS`)."""
     case = MATRIX[name]
     stops = 12 if case["motion"] == "turntable" or name in SEEDS else FAST_STOPS
-    config = calib_scene_config(seed=SEEDS.get(name, 0), **{"n_stops": stops, **case})
+    config = calib_scene_config(seed=SEEDS.get(name, 0), **{**case, "n_stops": stops})
     if case["motion"] == "drive":
         config = config.model_copy(update={"moving_scans_range": FAST_MOVING_SCANS})
     return config

@@ -59,9 +59,7 @@ class LidarSimConfig(ConfigModel):
 class SceneConfig(ConfigModel):
     """What the ray-cast calibration environment contains."""
 
-    kind: Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"] = (
-        "yard"
-    )
+    kind: Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"] = "yard"
     """yard: walls, boxes and poles; ground_and_wall: flat ground and one long wall;
     corridor: flat ground between two long parallel walls (both degenerate); parking_lot:
     rows of parked cars with gaps, lamp posts and a building on one side, no enclosing walls;
