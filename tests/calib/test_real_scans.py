@@ -37,7 +37,8 @@ def _pcd_xyz(path: Path) -> NDArray[np.float64]:
     raw = path.read_bytes()
     end = raw.index(b"DATA binary\n") + len(b"DATA binary\n")
     pts = np.frombuffer(raw, "<f4", offset=end).reshape(-1, 3).astype(np.float64)
-    return pts[np.isfinite(pts).all(axis=1) & (np.linalg.norm(pts, axis=1) > 0.5)]
+    keep = np.isfinite(pts).all(axis=1) & (np.linalg.norm(pts, axis=1) > 0.5)
+    return np.asarray(pts[keep], dtype=np.float64)
 
 
 @pytest.mark.parametrize("folder", SCANS)
