@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
 from syncaudit.calib import io, jointgraph, posegraph, se3
+from syncaudit.calib.crosspairs import cross_links
 from syncaudit.calib.ground import ground_plane
 from syncaudit.calib.links import accepted_edges
 from syncaudit.calib.maptomap import NOT_CALIBRATED, compared
@@ -189,6 +190,15 @@ def _refine(
     return unless_slid(m2m, ext, "the joint estimate")
 
 
+def _free(solution: jointgraph.JointSolution, j: int, config: CalibConfig) -> bool:
+    limits = config.validation
+    return bool(
+        jointgraph.free_directions(
+            solution.covariances[j], limits.max_rotation_deg, limits.max_translation_cm
+        )
+    )
+
+
 def _free_reason(
     lidar: LidarState, free: list[FreeDirectionOut], stops: dict[int, list[int]], names: list[str]
 ) -> str:
@@ -238,9 +248,25 @@ def joint_extrinsics(
     planar = up if config.pose_graph.motion == "planar" else None
     problem = jointgraph.Problem(anchor, initial, seeds, links, grounds, planar)
     solution = jointgraph.solve(problem, config.pose_graph)
-    refinements: dict[int, Alignment | None] = {}
-    map_links = []
+    cross: list[jointgraph.Link] = []
+    cross_tried: dict[int, int] = {}
     for j, lidar in enumerate(lidars[1:], start=1):
+        found, tried = cross_links(ref, lidar, j, solution.poses, solution.extrinsics[j], config)
+        cross += found
+        cross_tried[j] = len(tried)
+    if cross:
+        # The ground and planar priors only seed the cross pairs: the pairs see the ground
+        # and the structure themselves, and a flat-ground assumption would bias them.
+        problem = jointgraph.Problem(
+            anchor, solution.poses, solution.extrinsics, links + cross, [], planar
+        )
+        solution = jointgraph.solve(problem, config.pose_graph)
+    limits = config.validation
+    refinements: dict[int, Alignment | None] = {}
+    map_links: list[jointgraph.Link] = []
+    for j, lidar in enumerate(lidars[1:], start=1):
+        if not _free(solution, j, config):
+            continue
         m2m = _refine(ref, lidar, solution, j, config)
         refinements[j] = m2m
         if m2m is not None and m2m.accepted:
@@ -252,7 +278,7 @@ def joint_extrinsics(
             )
     if map_links:
         problem = jointgraph.Problem(
-            anchor, solution.poses, solution.extrinsics, links + map_links, grounds, planar
+            anchor, solution.poses, solution.extrinsics, links + cross + map_links, [], planar
         )
         solution = jointgraph.solve(problem, config.pose_graph)
     limits = config.validation
@@ -278,7 +304,7 @@ def joint_extrinsics(
             "stop_angle_disagreement_deg": None,
             "hand_eye_rotation_residual_deg": None,
         }
-        m2m = refinements[j]
+        m2m = refinements.get(j)
         if free:
             reason = _free_reason(lidar, free, placed, names)
             reasons.append(reason)
@@ -312,12 +338,13 @@ def joint_extrinsics(
                 refinement=None if m2m is None else AlignmentOut.of(m2m),
             )
         )
-    kinds = [link.kind for link in links + map_links]
+    kinds = [link.kind for link in links + cross + map_links]
     joint = JointOut(
         chosen=not reasons,
         stops=order,
         links={
             "scan": kinds.count("scan"),
+            "cross": sum(1 for link in cross if link.kind == "cross"),
             "map": kinds.count("map"),
             "odometry": kinds.count("odometry"),
             "ground": max(len(grounds) - 1, 0) if any(g.lidar == 0 for g in grounds) else 0,

@@ -309,15 +309,15 @@ def _residual(gtsam: Any, link: Link, result: Any) -> LinkResidual:
 def free_directions(
     covariance: F64, max_rotation_deg: float, max_translation_cm: float
 ) -> list[tuple[str, tuple[float, float, float], float]]:
-    """Directions of an extrinsic the graph leaves looser than half the validation limits:
+    """Directions of an extrinsic the graph leaves looser than the validation limits:
     ("rotation" | "translation", unit axis in the LiDAR frame, 1-sigma in deg | cm).
 
     Rotation and translation blocks are judged apart (their units differ), each by the
     eigenvectors of its marginal covariance."""
     out: list[tuple[str, tuple[float, float, float], float]] = []
     for kind, block, scale, limit in (
-        ("rotation", covariance[:3, :3], math.degrees(1.0), max_rotation_deg / 2.0),
-        ("translation", covariance[3:, 3:], 100.0, max_translation_cm / 2.0),
+        ("rotation", covariance[:3, :3], math.degrees(1.0), max_rotation_deg),
+        ("translation", covariance[3:, 3:], 100.0, max_translation_cm),
     ):
         values, vectors = np.linalg.eigh(block)
         for value, vector in zip(values, vectors.T, strict=True):

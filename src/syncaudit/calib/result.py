@@ -237,7 +237,7 @@ class ExtrinsicOut(_Out):
 
 
 class FreeDirectionOut(_Out):
-    """A direction of an extrinsic the joint graph leaves looser than half the limits."""
+    """A direction of an extrinsic the joint graph leaves looser than the limits."""
 
     kind: str
     """"rotation" (about `axis`) or "translation" (along `axis`)."""
