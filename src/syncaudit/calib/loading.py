@@ -42,10 +42,6 @@ def choose_topics(path: Path, config: CalibConfig) -> list[str]:
     return topics
 
 
-_TIMED_POINTS = 8000
-"""Raw points kept per scan with their times (every n-th), for deskewing moving scans."""
-
-
 def read_scans(
     path: Path, topics: list[str], config: CalibConfig, notes: list[str]
 ) -> dict[str, tuple[str, list[SampledScan]]]:
@@ -70,11 +66,7 @@ def read_scans(
         if points.shape[0] < _MIN_POINTS:
             skipped += 1
             continue
-        timed = times = None
-        if scan.times_ns is not None:
-            stride = max(1, scan.points_m.shape[0] // _TIMED_POINTS)
-            timed, times = scan.points_m[::stride].copy(), scan.times_ns[::stride].copy()
-        scans[scan.topic].append(SampledScan(scan.stamp_ns, points, timed, times))
+        scans[scan.topic].append(SampledScan(scan.stamp_ns, points))
     if skipped:
         notes.append(f"{skipped} scan(s) with fewer than {_MIN_POINTS} points skipped")
     for topic in topics:

@@ -21,11 +21,6 @@ class SampledScan:
 
     stamp_ns: int
     points_m: NDArray[np.float32]
-    timed_m: NDArray[np.float32] | None = None
-    """A sparse subset of the raw points (every n-th), kept with their times for deskewing
-    scans taken while moving; None when the cloud has no per-point time."""
-    times_ns: NDArray[np.int64] | None = None
-    """Time of each `timed_m` point from `stamp_ns`."""
 
 
 @dataclass
