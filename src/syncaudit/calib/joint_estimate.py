@@ -190,6 +190,14 @@ def _refine(
     return unless_slid(m2m, ext, "the joint estimate")
 
 
+def _reached(link: jointgraph.Link, aligned: list[jointgraph.Link], anchor: int) -> bool:
+    """Whether alignments alone connect both stops of `link` to the anchor."""
+    edges = [posegraph.Edge(a.stop_a, a.stop_b, np.eye(4), np.eye(6), 1.0) for a in aligned]
+    nodes = {a.stop_a for a in aligned} | {a.stop_b for a in aligned} | {anchor}
+    reached = posegraph.connected(nodes, edges, anchor)
+    return link.stop_a in reached and link.stop_b in reached
+
+
 def _free(solution: jointgraph.JointSolution, j: int, config: CalibConfig) -> bool:
     limits = config.validation
     return bool(
@@ -256,10 +264,16 @@ def joint_extrinsics(
         cross_tried[j] = len(tried)
     if cross:
         # The ground and planar priors only seed the cross pairs: the pairs see the ground
-        # and the structure themselves, and a flat-ground assumption would bias them.
-        problem = jointgraph.Problem(
-            anchor, solution.poses, solution.extrinsics, links + cross, [], planar
-        )
+        # and the structure themselves, and a flat-ground assumption would bias them. So
+        # does odometry (1-2 % scale error) where alignments place the stops: it stays
+        # only for the stops no alignment reaches.
+        aligned = [link for link in links if link.kind != "odometry"] + cross
+        links = aligned + [
+            link
+            for link in links
+            if link.kind == "odometry" and not _reached(link, aligned, anchor)
+        ]
+        problem = jointgraph.Problem(anchor, solution.poses, solution.extrinsics, links, [], planar)
         solution = jointgraph.solve(problem, config.pose_graph)
     limits = config.validation
     refinements: dict[int, Alignment | None] = {}
@@ -278,7 +292,7 @@ def joint_extrinsics(
             )
     if map_links:
         problem = jointgraph.Problem(
-            anchor, solution.poses, solution.extrinsics, links + cross + map_links, [], planar
+            anchor, solution.poses, solution.extrinsics, links + map_links, [], planar
         )
         solution = jointgraph.solve(problem, config.pose_graph)
     limits = config.validation
@@ -338,7 +352,7 @@ def joint_extrinsics(
                 refinement=None if m2m is None else AlignmentOut.of(m2m),
             )
         )
-    kinds = [link.kind for link in links + cross + map_links]
+    kinds = [link.kind for link in links + map_links]
     joint = JointOut(
         chosen=not reasons,
         stops=order,
