@@ -28,6 +28,7 @@ from syncaudit.calib.posegraph import backend
 from syncaudit.calib.settings import PoseGraphConfig
 
 F64 = NDArray[np.float64]
+_WEAK_PRIOR_SIGMA = 100.0
 _STEP = 1e-6
 """Central-difference step on the tangent space (rad / m)."""
 
@@ -242,6 +243,14 @@ def solve(problem: Problem, config: PoseGraphConfig) -> JointSolution:
             )
     for lidar, ext in problem.initial_extrinsics.items():
         values.insert(_e(gtsam, lidar), _pose3(gtsam, ext))
+    # A very weak prior on every variable keeps the system solvable where the data leave
+    # a direction free (its marginal then shows a 1-sigma of 100 rad / 100 m).
+    weak = gtsam.noiseModel.Isotropic.Sigma(6, _WEAK_PRIOR_SIGMA)
+    for stop, pose in problem.initial_poses.items():
+        if stop != problem.anchor:
+            graph.add(gtsam.PriorFactorPose3(_x(gtsam, stop), _pose3(gtsam, pose), weak))
+    for lidar, ext in problem.initial_extrinsics.items():
+        graph.add(gtsam.PriorFactorPose3(_e(gtsam, lidar), _pose3(gtsam, ext), weak))
     for link in problem.links:
         graph.add(_link_factor(gtsam, link, kernel))
     ref_ground = next((g for g in problem.grounds if g.lidar == 0), None)
