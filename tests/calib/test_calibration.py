@@ -75,6 +75,12 @@ stops 6-10 1.38 m off (1.7 cm calibration error with these moving scans, 1.21 cm
 benchmark's)."""
 
 
+FAST_CASES = [name for name in MATRIX if not name.startswith("parking-")] + ["parking-64-bumper"]
+"""The matrix cases the fast subset runs: all but four of the parking-lot cases, which
+`benchmarks/bench_calib.py` runs (with them the module's sessions took over its 1200 s
+timeout on the shared machine at load 18-22); parking-64-bumper is issue 29's failing kind."""
+
+
 def _case_config(name: str) -> CalibSceneConfig:
     """One session of a matrix case as the fast subset runs it (seed 0 unless `SEEDS`)."""
     case = MATRIX[name]
@@ -96,7 +102,7 @@ def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     root = tmp_path_factory.mktemp("calib")
     workers = max(1, min(2, os.cpu_count() or 1))
     context = multiprocessing.get_context("spawn")
-    configs = {name: _case_config(name) for name in MATRIX}
+    configs = {name: _case_config(name) for name in FAST_CASES}
     paths = {name: root / f"{name}.mcap" for name in configs}
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         sims = {
@@ -111,7 +117,7 @@ def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         return {name: (paths[name], sims[name].result(), calibs[name].result()) for name in configs}
 
 
-@pytest.mark.parametrize("case", list(MATRIX))
+@pytest.mark.parametrize("case", FAST_CASES)
 def test_matrix_case_meets_its_tolerance(matrix_runs: dict[str, Any], case: str) -> None:
     _path, truth, result = matrix_runs[case]
     assert result.calibratable, result.reason
