@@ -149,7 +149,7 @@ def test_map_pairs_are_built_from_the_stops_both_graphs_hold(
 
     kinds = set()
     for case, (_path, _truth, result) in matrix_runs.items():
-        for ext in result.extrinsics:
+        for ext in result.baseline:  # the map pairs are the baseline's bridge
             assert ext.map_pairs, case
             assert all(p.anchor_stop in p.reference_stops for p in ext.map_pairs), case
             shared = [p for p in ext.map_pairs if p.reference_stops == p.lidar_stops]
@@ -187,8 +187,8 @@ def test_a_wrong_coarse_link_is_caught_across_lidars(matrix_runs: dict[str, Any]
 def test_driving_stops_are_the_true_stops(matrix_runs: dict[str, Any]) -> None:
     """Stillness from scan-to-scan change finds every stop of every driving case, each
     inside its true window, whatever the mount (a bumper LiDAR sees mostly ground)."""
-    for case, spec in MATRIX.items():
-        if spec["motion"] != "drive":
+    for case in FAST_CASES:
+        if MATRIX[case]["motion"] != "drive":
             continue
         _path, truth, result = matrix_runs[case]
         assert len(result.stops) == len(truth["stops"]), case
@@ -236,7 +236,7 @@ def test_result_json_html_and_console(matrix_runs: dict[str, Any], tmp_path: Pat
     )
     assert 0.0 < pair["alignment"]["expected_overlap"] <= 1.0
     assert data["anchor_stops"][0] == data["reference_stop"]
-    (ext,) = data["extrinsics"]
+    (ext,) = data["baseline"]  # the map pairs are the baseline's bridge
     assert ext["map_pairs"] and ext["map_pairs"][0]["anchor_stop"] == data["reference_stop"]
     out = tmp_path / "calib.json"
     write_text_atomic(out, json.dumps(data, indent=2) + "\n")
