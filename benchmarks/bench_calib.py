@@ -65,7 +65,7 @@ def _session(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dic
     """Simulate one session (not timed) and return its truth; with `keep`, a session left
     in `root` by an earlier run with the same configuration is reused."""
     path = root / f"{case}_s{seed}_{stops}stops.mcap"
-    config = calib_scene_config(seed=seed, n_stops=stops, **MATRIX[case])
+    config = calib_scene_config(seed=seed, **{"n_stops": stops, **MATRIX[case]})
     if keep and path.exists() and truth_path(path).exists():
         truth: dict[str, Any] = json.loads(truth_path(path).read_text())
         if truth["config"] == json.loads(json.dumps(config.model_dump(mode="json"))):
@@ -91,12 +91,19 @@ def _run(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[st
         "rot_deg": None,
         "trans_cm": None,
     }
-    ext = result.extrinsics[0]
-    if ext.result is not None:
-        rear = next(x for x in truth["lidars"] if x["topic"] == ext.topic)
-        true = np.array(rear[f"true_{truth['reference_lidar']}_from_lidar"]["matrix"])
-        rot_deg, trans_m = se3.transform_difference(true, np.array(ext.result.matrix))
-        row["rot_deg"], row["trans_cm"] = rot_deg, trans_m * 100.0
+    rear = next(x for x in truth["lidars"] if x["topic"] == result.extrinsics[0].topic)
+    true = np.array(rear[f"true_{truth['reference_lidar']}_from_lidar"]["matrix"])
+    joint = result.joint.lidars[0].extrinsic if result.joint and result.joint.lidars else None
+    for key, ext in (
+        ("", result.extrinsics[0]),
+        ("base_", result.baseline[0] if result.baseline else None),
+        ("joint_", joint),
+    ):
+        row[f"{key}rot_deg"] = row[f"{key}trans_cm"] = None
+        if ext is not None and ext.result is not None:
+            rot_deg, trans_m = se3.transform_difference(true, np.array(ext.result.matrix))
+            row[f"{key}rot_deg"], row[f"{key}trans_cm"] = rot_deg, trans_m * 100.0
+    row["method"] = "joint" if result.joint is not None and result.joint.chosen else "baseline"
     if not keep:
         for extra in path.parent.glob(path.name + "*"):
             extra.unlink()
@@ -127,7 +134,8 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
     ok = True
     print(
         f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
-        f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s}  target  verdict"
+        f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s} "
+        f"{'base rot':>8s} {'base cm':>7s} {'worse':>5s}  target  verdict"
     )
     for case in cases:
         mine = [r for r in rows if r["case"] == case]
@@ -137,26 +145,45 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
         cm = [r["trans_cm"] for r in done] or [float("nan")]
         walls = [r["wall_s"] for r in mine]
         cpus = [r["cpu_s"] for r in mine]
+        base = [r for r in mine if r.get("base_rot_deg") is not None]
+        base_rot = max((r["base_rot_deg"] for r in base), default=float("nan"))
+        base_cm = max((r["base_trans_cm"] for r in base), default=float("nan"))
+        worse = sum(1 for r in mine if _worse_than_baseline(r))
         good = (
             len(done) == len(mine)
             and max(rot) <= lim_rot
             and max(cm) <= lim_cm
             and max(cpus) < TARGET_S
+            and worse == 0
         )
         ok &= good
         print(
             f"{case:24s} {len(mine):3d} {max(rot):8.4f} {statistics.median(rot):8.4f} "
             f"{max(cm):7.3f} {statistics.median(cm):7.3f} {max(walls):8.1f} "
-            f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f}  "
+            f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f} "
+            f"{base_rot:8.4f} {base_cm:7.3f} {worse:5d}  "
             f"{lim_rot}/{lim_cm}  {'OK' if good else 'MISSED'}"
             + ("" if len(done) == len(mine) else f" ({len(mine) - len(done)} not calibrated)")
         )
     return ok
 
 
+def _worse_than_baseline(row: dict[str, Any]) -> bool:
+    """Whether the chosen estimate is farther from the truth than the baseline's, in
+    rotation or translation, or missing where the baseline calibrated."""
+    if row.get("base_rot_deg") is None:
+        return False
+    if row["rot_deg"] is None:
+        return True
+    return bool(
+        row["rot_deg"] > row["base_rot_deg"] + 1e-4 or row["trans_cm"] > row["base_trans_cm"] + 1e-3
+    )
+
+
 _ROW = re.compile(
     r"^(?P<case>\S+) seed (?P<seed>\d+): wall +(?P<wall>[\d.]+) s, cpu +(?P<cpu>[\d.]+) s; "
     r"(?:(?P<rot>[\d.]+) deg (?P<cm>[\d.]+) cm|not calibrated: (?P<reason>.*?)); stops used"
+    r"(?:.*?; baseline (?:(?P<brot>[\d.]+) deg (?P<bcm>[\d.]+) cm|not calibrated))?"
 )
 
 
@@ -177,6 +204,8 @@ def _rows_from(paths: list[Path]) -> list[dict[str, Any]]:
                     "rot_deg": None if m["rot"] is None else float(m["rot"]),
                     "trans_cm": None if m["cm"] is None else float(m["cm"]),
                     "reason": m["reason"],
+                    "base_rot_deg": None if m["brot"] is None else float(m["brot"]),
+                    "base_trans_cm": None if m["bcm"] is None else float(m["bcm"]),
                 }
             )
     return rows
@@ -261,9 +290,15 @@ def main(argv: list[str] | None = None) -> int:
                     if row["rot_deg"] is not None
                     else f"not calibrated: {row['reason']}"
                 )
+                base = (
+                    f"{row['base_rot_deg']:.4f} deg {row['base_trans_cm']:.3f} cm"
+                    if row["base_rot_deg"] is not None
+                    else "not calibrated"
+                )
                 print(
                     f"{case} seed {seed}: wall {row['wall_s']:5.1f} s, cpu {row['cpu_s']:5.1f} s;"
-                    f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f}",
+                    f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f};"
+                    f" {row['method']}; baseline {base}",
                     flush=True,
                 )
                 for note in row["cross_check"]:

@@ -75,11 +75,17 @@ stops 6-10 1.38 m off (1.7 cm calibration error with these moving scans, 1.21 cm
 benchmark's)."""
 
 
+FAST_CASES = [name for name in MATRIX if not name.startswith("parking-")] + ["parking-64-bumper"]
+"""The matrix cases the fast subset runs: all but four of the parking-lot cases, which
+`benchmarks/bench_calib.py` runs (with them the module's sessions took over its 1200 s
+timeout on the shared machine at load 18-22); parking-64-bumper is issue 29's failing kind."""
+
+
 def _case_config(name: str) -> CalibSceneConfig:
     """One session of a matrix case as the fast subset runs it (seed 0 unless `SEEDS`)."""
     case = MATRIX[name]
     stops = 12 if case["motion"] == "turntable" or name in SEEDS else FAST_STOPS
-    config = calib_scene_config(seed=SEEDS.get(name, 0), n_stops=stops, **case)
+    config = calib_scene_config(seed=SEEDS.get(name, 0), **{**case, "n_stops": stops})
     if case["motion"] == "drive":
         config = config.model_copy(update={"moving_scans_range": FAST_MOVING_SCANS})
     return config
@@ -96,7 +102,7 @@ def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     root = tmp_path_factory.mktemp("calib")
     workers = max(1, min(2, os.cpu_count() or 1))
     context = multiprocessing.get_context("spawn")
-    configs = {name: _case_config(name) for name in MATRIX}
+    configs = {name: _case_config(name) for name in FAST_CASES}
     paths = {name: root / f"{name}.mcap" for name in configs}
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         sims = {
@@ -111,7 +117,7 @@ def matrix_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         return {name: (paths[name], sims[name].result(), calibs[name].result()) for name in configs}
 
 
-@pytest.mark.parametrize("case", list(MATRIX))
+@pytest.mark.parametrize("case", FAST_CASES)
 def test_matrix_case_meets_its_tolerance(matrix_runs: dict[str, Any], case: str) -> None:
     _path, truth, result = matrix_runs[case]
     assert result.calibratable, result.reason
@@ -143,7 +149,7 @@ def test_map_pairs_are_built_from_the_stops_both_graphs_hold(
 
     kinds = set()
     for case, (_path, _truth, result) in matrix_runs.items():
-        for ext in result.extrinsics:
+        for ext in result.baseline:  # the map pairs are the baseline's bridge
             assert ext.map_pairs, case
             assert all(p.anchor_stop in p.reference_stops for p in ext.map_pairs), case
             shared = [p for p in ext.map_pairs if p.reference_stops == p.lidar_stops]
@@ -181,8 +187,8 @@ def test_a_wrong_coarse_link_is_caught_across_lidars(matrix_runs: dict[str, Any]
 def test_driving_stops_are_the_true_stops(matrix_runs: dict[str, Any]) -> None:
     """Stillness from scan-to-scan change finds every stop of every driving case, each
     inside its true window, whatever the mount (a bumper LiDAR sees mostly ground)."""
-    for case, spec in MATRIX.items():
-        if spec["motion"] != "drive":
+    for case in FAST_CASES:
+        if MATRIX[case]["motion"] != "drive":
             continue
         _path, truth, result = matrix_runs[case]
         assert len(result.stops) == len(truth["stops"]), case
@@ -230,7 +236,7 @@ def test_result_json_html_and_console(matrix_runs: dict[str, Any], tmp_path: Pat
     )
     assert 0.0 < pair["alignment"]["expected_overlap"] <= 1.0
     assert data["anchor_stops"][0] == data["reference_stop"]
-    (ext,) = data["extrinsics"]
+    (ext,) = data["baseline"]  # the map pairs are the baseline's bridge
     assert ext["map_pairs"] and ext["map_pairs"][0]["anchor_stop"] == data["reference_stop"]
     out = tmp_path / "calib.json"
     write_text_atomic(out, json.dumps(data, indent=2) + "\n")

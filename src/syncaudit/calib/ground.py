@@ -41,3 +41,25 @@ def remove_ground(points_m: F64) -> F64:
     rest can tell turns apart."""
     keep = off_ground(points_m)
     return points_m[keep] if keep.sum() >= 50 else points_m
+
+
+def ground_plane(points_m: F64, up: F64) -> tuple[F64, float, int] | None:
+    """The ground plane in a LiDAR's own frame: (unit normal along `up`, offset d with
+    n.p + d = 0, inliers), or None when fewer than 200 points lie on it.
+
+    Seeded by the lowest points along `up` (within a band above their 5th percentile),
+    then refitted three times by total least squares on the points within 5 cm of it."""
+    u = up / np.linalg.norm(up)
+    height = points_m @ u
+    inliers = points_m[height < float(np.percentile(height, 5)) + _GROUND_BAND_M]
+    normal, offset = u, -float(np.median(inliers @ u)) if inliers.size else 0.0
+    for _ in range(3):
+        near = np.abs(points_m @ normal + offset) < 0.05
+        if int(near.sum()) < 200:
+            return None
+        inliers = points_m[near]
+        centre = inliers.mean(axis=0)
+        _s, _v, vt = np.linalg.svd(inliers - centre, full_matrices=False)
+        normal = vt[2] if float(vt[2] @ u) >= 0 else -vt[2]
+        offset = -float(normal @ centre)
+    return np.asarray(normal, dtype=np.float64), offset, int(inliers.shape[0])

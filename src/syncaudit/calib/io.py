@@ -34,6 +34,8 @@ class Scan:
     frame_id: str
     stamp_ns: int
     points_m: NDArray[np.float32]
+    times_ns: NDArray[np.int64] | None = None
+    """Per-point time relative to `stamp_ns` (None: the cloud has no time field)."""
 
 
 @dataclass(frozen=True)
@@ -76,11 +78,30 @@ def pointcloud2_dtype(fields: Iterable[Any], point_step: int, is_bigendian: bool
 
 def decode_xyz(msg: Any, topic: str = "") -> NDArray[np.float32]:
     """(N, 3) float32 x/y/z of a PointCloud2, without NaN/inf points or all-zero returns."""
+    return decode_xyz_times(msg, topic)[0]
+
+
+_TIME_FIELDS: tuple[tuple[str, float, bool], ...] = (
+    ("time", 1e9, False),
+    ("t", 1.0, False),
+    ("timestamp", 1e9, True),
+    ("time_stamp", 1e9, True),
+)
+"""Per-point time fields drivers publish: (name, to-ns factor, absolute). Velodyne's
+`time` (float s from the scan stamp), Ouster's `t` (uint32 ns from it), Hesai's and
+nebula's `timestamp` / `time_stamp` (float s, absolute: the scan stamp is subtracted)."""
+
+
+def decode_xyz_times(
+    msg: Any, topic: str = "", stamp_ns: int = 0
+) -> tuple[NDArray[np.float32], NDArray[np.int64] | None]:
+    """x/y/z as `decode_xyz` and each kept point's time from the scan stamp (ns; None when
+    the cloud has no time field)."""
     width, height = int(msg.width), int(msg.height)
     point_step, row_step = int(msg.point_step), int(msg.row_step)
     n = width * height
     if n == 0:
-        return np.zeros((0, 3), dtype=np.float32)
+        return np.zeros((0, 3), dtype=np.float32), None
     if point_step <= 0 or row_step < width * point_step:
         raise LogReadError(f"{topic}: PointCloud2 point_step/row_step inconsistent with width")
     dtype = pointcloud2_dtype(msg.fields, point_step, bool(msg.is_bigendian))
@@ -100,7 +121,16 @@ def decode_xyz(msg: Any, topic: str = "") -> NDArray[np.float32]:
     for i, axis in enumerate(("x", "y", "z")):
         xyz[:, i] = points[axis]
     keep = np.isfinite(xyz).all(axis=1) & (np.abs(xyz).sum(axis=1) > 0.0)
-    return xyz[keep] if not keep.all() else xyz
+    times = None
+    names = set(dtype.names or ())
+    for name, factor, absolute in _TIME_FIELDS:
+        if name in names and np.asarray(points[name]).ndim == 1:
+            raw_t = np.asarray(points[name], dtype=np.float64) * factor
+            times = np.rint(raw_t - (stamp_ns if absolute else 0)).astype(np.int64)
+            break
+    if keep.all():
+        return xyz, times
+    return xyz[keep], None if times is None else times[keep]
 
 
 def _stamp_ns(msg: Any, log_time_ns: int) -> int:
@@ -140,8 +170,9 @@ def iter_scans(path: Path, topics: Iterable[str]) -> Iterator[Scan]:
             yield Scan(
                 topic=raw.topic,
                 frame_id=str(msg.header.frame_id).lstrip("/"),
-                stamp_ns=_stamp_ns(msg, raw.log_time_ns),
-                points_m=decode_xyz(msg, raw.topic),
+                stamp_ns=(stamp := _stamp_ns(msg, raw.log_time_ns)),
+                points_m=(decoded := decode_xyz_times(msg, raw.topic, stamp))[0],
+                times_ns=decoded[1],
             )
 
 

@@ -180,7 +180,7 @@ def _search_pairs(
     return search
 
 
-_NOT_CALIBRATED: dict[str, Any] = {
+NOT_CALIBRATED: dict[str, Any] = {
     "result": None,
     "rotation_diff_deg": None,
     "translation_diff_cm": None,
@@ -193,7 +193,7 @@ _NOT_CALIBRATED: dict[str, Any] = {
 """The fields of an `ExtrinsicOut` that only a calibrated LiDAR fills."""
 
 
-def _compared(
+def compared(
     cal: F64, rec: F64, estimates: list[tuple[F64, F64]], config: CalibConfig
 ) -> dict[str, Any]:
     """Step 6: the fused extrinsic against the recorded one, and the estimates' spread."""
@@ -240,14 +240,12 @@ def extrinsic(
     if first is None:
         why = ref.reason if not ref.graphs else other.reason
         why = why or f"{other.topic}: no stop anchors both LiDARs' local maps"
-        return ExtrinsicOut(
-            **base, **_NOT_CALIBRATED, calibrated=False, reason=why, map_to_map=None
-        )
+        return ExtrinsicOut(**base, **NOT_CALIBRATED, calibrated=False, reason=why, map_to_map=None)
     if not estimates:
         reason = f"{other.topic}: map-to-map alignment with {ref.topic} rejected: {first.reason}"
         return ExtrinsicOut(
             **base,
-            **_NOT_CALIBRATED,
+            **NOT_CALIBRATED,
             calibrated=False,
             reason=reason,
             map_to_map=AlignmentOut.of(first),
@@ -257,7 +255,7 @@ def extrinsic(
     angle_diff, hand_eye = _consistency(ref, other, cal, anchors)
     return ExtrinsicOut(
         **base,
-        **_compared(cal, rec, estimates, config),
+        **compared(cal, rec, estimates, config),
         calibrated=True,
         reason=None,
         map_to_map=AlignmentOut.of(first),

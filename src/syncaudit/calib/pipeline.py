@@ -25,7 +25,11 @@
    no anchor's shared stops gave an accepted alignment), seeded with the recorded
    extrinsic: the result is `reference_from_lidar`, the extrinsic calibration (estimates
    from several anchors are fused by their information);
-7. validate against the recorded extrinsic: rotation and translation difference, pass/fail.
+7. validate against the recorded extrinsic: rotation and translation difference, pass/fail;
+8. the joint estimate (`joint_estimate`): every LiDAR's stop alignments, the odometry and
+   the ground planes in one graph with the extrinsics as unknowns (a stop one LiDAR saw
+   still places the vehicle), refined map to map on its poses; chosen over steps 5-6 (the
+   baseline, also reported) unless it leaves a direction free, which it then names.
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
@@ -48,6 +52,7 @@ import numpy as np
 from syncaudit.calib import io, posegraph
 from syncaudit.calib.crosscheck import cross_check
 from syncaudit.calib.degeneracy import degenerate_scene
+from syncaudit.calib.joint_estimate import joint_extrinsics
 from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
 from syncaudit.calib.maptomap import extrinsic, map_at
 from syncaudit.calib.outcome import (
@@ -124,6 +129,15 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         for lidar in lidars:
             local = map_at(lidar, reference, config)
             lidar.map_points = 0 if local is None else local[0].size
+    baseline = extrinsics
+    with timer.stage("joint"):
+        joint, joint_extrinsics_out = joint_extrinsics(
+            lidars, reference, recorded, baseline, odometry, config
+        )
+    if joint.chosen:
+        extrinsics = joint_extrinsics_out
+    elif joint.reason:
+        notes.append(f"joint graph not used: {joint.reason}")
     with timer.stage("top_views"):
         tops = top_views(lidars, anchors, extrinsics, recorded)
     limits = config.validation
@@ -143,6 +157,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
                 "or a richer scene would make the calibration firmer"
             )
     failures = [e.reason for e in extrinsics if not e.calibrated and e.reason]
+    if failures and joint.reason:
+        failures.insert(0, joint.reason)
     calibratable = not failures
     timer.seconds["total"] = sum(timer.seconds.values())
     return CalibrationResult(
@@ -160,6 +176,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         stops=stops_out(stops),
         lidars=[lidar_out(lidar, stops, top) for lidar, top in zip(lidars, tops, strict=True)],
         extrinsics=extrinsics,
+        baseline=baseline,
+        joint=joint,
         notes=notes,
         timings_s=dict(timer.seconds),
         libraries=library_versions(),

@@ -236,6 +236,51 @@ class ExtrinsicOut(_Out):
     """Largest rotation misfit of A X = X B over common stops with the calibrated X."""
 
 
+class FreeDirectionOut(_Out):
+    """A direction of an extrinsic the joint graph leaves looser than the limits."""
+
+    kind: str
+    """"rotation" (about `axis`) or "translation" (along `axis`)."""
+    axis: tuple[float, float, float]
+    """Unit vector in the LiDAR's frame."""
+    sigma: float
+    """1-sigma of the joint graph along it, deg or cm."""
+
+
+class JointLidarOut(_Out):
+    """One LiDAR's extrinsic from the joint graph and what constrained it."""
+
+    extrinsic: ExtrinsicOut
+    sigma_deg: float
+    sigma_cm: float
+    """Largest 1-sigma of the rotation (deg) and translation (cm) of the joint estimate."""
+    free_directions: list[FreeDirectionOut] = []
+    scan_links: int
+    """This LiDAR's cross-scan alignments in the graph."""
+    stops: list[int]
+    """Stops this LiDAR's alignments place."""
+    refinement: AlignmentOut | None
+    """Map-to-map GICP on the joint poses, seeded by the joint estimate (a factor when
+    accepted)."""
+
+
+class JointOut(_Out):
+    """The joint graph: every LiDAR's stop alignments and the extrinsics solved together."""
+
+    chosen: bool
+    """Whether `extrinsics` holds this estimate (else the baseline's)."""
+    stops: list[int]
+    """Vehicle stops the graph placed."""
+    links: dict[str, int]
+    """Factors by kind: scan (cross-scan alignments), map (refinements), odometry, ground."""
+    lidars: list[JointLidarOut]
+    error_before: float
+    error_after: float
+    iterations: int
+    reason: str | None
+    """Why it could not calibrate (free directions, by which stops), or None."""
+
+
 class VehicleStopOut(_Out):
     """A vehicle stop and which LiDAR topics have static scans there."""
 
@@ -273,6 +318,11 @@ class CalibrationResult(_Out):
     stops: list[VehicleStopOut]
     lidars: list[LidarOut]
     extrinsics: list[ExtrinsicOut]
+    """The chosen estimate per LiDAR: the joint graph's when it calibrated, else the
+    baseline's (per-LiDAR graphs bridged by map-to-map GICP)."""
+    baseline: list[ExtrinsicOut] = []
+    """The per-LiDAR pipeline's estimate (kept as the baseline the joint one is judged by)."""
+    joint: JointOut | None = None
     notes: list[str]
     timings_s: dict[str, float]
     libraries: dict[str, str]

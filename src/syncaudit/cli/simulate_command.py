@@ -381,7 +381,7 @@ MOTIONS = ("turntable", "drive")
 ORGANIZED = ("none", "second", "both")
 TF_CHAINS = ("direct", "sensor_kit")
 ODOMETRY = ("none", "odometry", "tf", "both")
-SCENES = ("yard", "ground_and_wall", "corridor")
+SCENES = ("yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open")
 BEAMS = (16, 32, 64, 128)
 
 
@@ -447,7 +447,8 @@ def simulate_calib(
         typer.Option(
             "--scene",
             help="yard (walls, boxes, poles), ground_and_wall or corridor (both degenerate: "
-            "not calibratable).",
+            "not calibratable), parking_lot (rows of parked cars, lamp posts, one building) or "
+            "parking_lot_open (cars on one side of the aisle only).",
         ),
     ] = None,
     range_noise_m: Annotated[

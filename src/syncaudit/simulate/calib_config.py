@@ -59,9 +59,12 @@ class LidarSimConfig(ConfigModel):
 class SceneConfig(ConfigModel):
     """What the ray-cast calibration environment contains."""
 
-    kind: Literal["yard", "ground_and_wall", "corridor"] = "yard"
+    kind: Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"] = "yard"
     """yard: walls, boxes and poles; ground_and_wall: flat ground and one long wall;
-    corridor: flat ground between two long parallel walls (both degenerate)."""
+    corridor: flat ground between two long parallel walls (both degenerate); parking_lot:
+    rows of parked cars with gaps, lamp posts and a building on one side, no enclosing walls;
+    parking_lot_open: the same with cars on one side of the aisle only (the other LiDAR sees
+    open tarmac at most stops)."""
     yard_size_m: tuple[float, float] = (26.0, 20.0)
     n_boxes: int = Field(default=8, ge=0, le=200)
     n_poles: int = Field(default=10, ge=0, le=200)
@@ -288,6 +291,10 @@ class CalibSceneConfig(ConfigModel):
         return self.sweep_deg / (self.n_stops - 1)
 
 
+SceneKind = Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"]
+"""The scene kinds `SceneConfig.kind` accepts."""
+
+
 def calib_scene_config(
     *,
     beams: int = 32,
@@ -298,7 +305,7 @@ def calib_scene_config(
     organized: Literal["none", "second", "both"] = "none",
     tf_chain: Literal["direct", "sensor_kit"] = "direct",
     odometry: Literal["none", "odometry", "tf", "both"] = "none",
-    scene: Literal["yard", "ground_and_wall", "corridor"] = "yard",
+    scene: SceneKind = "yard",
     range_noise_m: float = 0.01,
     rear_rotation_error_deg: float = 0.05,
     rear_translation_error_cm: float = 0.3,
@@ -316,7 +323,9 @@ def calib_scene_config(
         rear_translation_error_cm=rear_translation_error_cm,
         organized=(organized == "both", organized in ("second", "both")),
     )
-    if motion == "drive":
+    if scene.startswith("parking"):
+        scene_config = SceneConfig(kind=scene, yard_size_m=(60.0, 40.0), clear_radius_m=4.0)
+    elif motion == "drive":
         scene_config = SceneConfig(kind=scene, yard_size_m=(30.0, 24.0), clear_radius_m=6.0)
     else:
         scene_config = SceneConfig(kind=scene)

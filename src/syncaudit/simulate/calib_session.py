@@ -78,8 +78,47 @@ MATRIX: dict[str, dict[str, Any]] = {
         "tf_chain": "sensor_kit",
         "odometry": "tf",
     },
+    "parking-64-bumper": {
+        "beams": 64,
+        "mount": "bumper_front_rear",
+        "motion": "drive",
+        "scene": "parking_lot",
+        "n_stops": 11,
+    },
+    "parking-16-roof": {
+        "beams": 16,
+        "mount": "roof_front_rear",
+        "motion": "drive",
+        "scene": "parking_lot",
+        "n_stops": 15,
+    },
+    "parking-32-left-right": {
+        "beams": 32,
+        "mount": "roof_left_right",
+        "motion": "drive",
+        "scene": "parking_lot",
+        "n_stops": 10,
+    },
+    "parking-128-left-right": {
+        "beams": 128,
+        "mount": "roof_left_right",
+        "motion": "drive",
+        "scene": "parking_lot",
+        "n_stops": 8,
+        "odometry": "odometry",
+    },
+    "parking-64-open-bumper": {
+        "beams": 64,
+        "mount": "bumper_front_rear",
+        "motion": "drive",
+        "scene": "parking_lot_open",
+        "n_stops": 12,
+    },
 }
-"""The calibration test matrix: `calib_scene_config` arguments per case (add `seed`)."""
+"""The calibration test matrix: `calib_scene_config` arguments per case (add `seed`; a case
+naming `n_stops` keeps its own count). The parking-lot cases (issue 29) have no enclosing
+walls; in `parking-64-open-bumper` only one side of the aisle holds cars, so at most stops
+one LiDAR sees open tarmac."""
 
 _NS = 1_000_000_000
 _LOG_LATENCY_NS = 4_000_000

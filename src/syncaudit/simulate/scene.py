@@ -197,6 +197,8 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
             center = (-side * half_m * math.sin(yaw), side * half_m * math.cos(yaw), 1.5)
             walls.append(Box(center, (80.0, 0.3, 3.0), yaw, "wall", 0.5))
         return Scene(boxes=tuple(walls), poles=())
+    if config.kind in ("parking_lot", "parking_lot_open"):
+        return _parking_lot(config, rng)
     size_x, size_y = config.yard_size_m
     yard_yaw = float(rng.uniform(-math.pi, math.pi))
     offset = rng.uniform(-1.0, 1.0, size=2)
@@ -233,6 +235,59 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
         else:
             radius = float(rng.uniform(0.05, 0.2))
             poles.append(Pole((x, y), radius, float(rng.uniform(1.5, 5.0)), 0.9))
+    return Scene(boxes=tuple(boxes), poles=tuple(poles))
+
+
+_CAR_SLOT_M = 2.6
+_CAR_LENGTH_M = 4.6
+_CAR_OCCUPANCY = 0.7
+
+
+def _parking_lot(config: SceneConfig, rng: np.random.Generator) -> Scene:
+    """Rows of nose-in parked cars (70 % of slots taken) either side of the aisle the
+    vehicle drives in, back-to-back rows behind them, lamp posts between those, a
+    building along one long side and nothing else (no enclosing walls: the far field is
+    open tarmac). `parking_lot_open` keeps only the cars on one side (y > 0) of the aisle.
+
+    The lot is rotated and shifted at random as a whole; the aisle runs along its x.
+    """
+    size_x, size_y = config.yard_size_m
+    lot_yaw = float(rng.uniform(-math.pi, math.pi))
+    offset = rng.uniform(-0.5, 0.5, size=2)
+    rot2 = rigid.yaw_matrix(lot_yaw)[:2, :2]
+
+    def place(x: float, y: float) -> tuple[float, float]:
+        cx, cy = rot2 @ np.array([x, y]) + offset
+        return float(cx), float(cy)
+
+    boxes: list[Box] = []
+    poles: list[Pole] = []
+    first_row_m = config.clear_radius_m + 2.5 + _CAR_LENGTH_M / 2.0
+    sides = (1.0,) if config.kind == "parking_lot_open" else (1.0, -1.0)
+    n_slots = int((size_x - 4.0) // _CAR_SLOT_M)
+    x0 = -n_slots * _CAR_SLOT_M / 2.0
+    for side in sides:
+        for row_y in (first_row_m, first_row_m + _CAR_LENGTH_M + 0.3):
+            if row_y + _CAR_LENGTH_M / 2.0 > size_y / 2.0:
+                continue
+            for slot in range(n_slots):
+                if rng.uniform() > _CAR_OCCUPANCY:
+                    continue
+                x = x0 + (slot + 0.5) * _CAR_SLOT_M + float(rng.normal(0.0, 0.15))
+                width = float(rng.uniform(1.7, 2.0))
+                length = float(rng.uniform(4.0, 5.0))
+                height = float(rng.uniform(1.4, 2.1))
+                cx, cy = place(x, side * (row_y + float(rng.normal(0.0, 0.2))))
+                yaw = lot_yaw + math.pi / 2.0 + float(rng.normal(0.0, 0.05))
+                boxes.append(
+                    Box((cx, cy, height / 2.0 + 0.15), (length, width, height), yaw, "car", 0.6)
+                )
+        lamp_y = side * (first_row_m + (_CAR_LENGTH_M + 0.3) / 2.0)
+        for slot in range(2, n_slots, 5):
+            cx, cy = place(x0 + slot * _CAR_SLOT_M, lamp_y)
+            poles.append(Pole((cx, cy), 0.12, float(rng.uniform(5.0, 7.0)), 0.9))
+    cx, cy = place(0.0, size_y / 2.0 + 1.0)
+    boxes.append(Box((cx, cy, 4.0), (size_x, 2.0, 8.0), lot_yaw, "wall", 0.5))
     return Scene(boxes=tuple(boxes), poles=tuple(poles))
 
 
