@@ -501,9 +501,9 @@ def run_mutant(mutant: Mutant, cache: Path, work: Path, *, with_info: bool = Tru
             "--csv",
             str(out / OUTPUTS[1]),
             "--html",
-            str(out / OUTPUTS[2]),
-            "--pairings",
             str(out / OUTPUTS[3]),
+            "--pairings",
+            str(out / OUTPUTS[4]),
         ],
         cwd=work,
     )
