@@ -139,6 +139,19 @@ def test_ptp_phase_on_a_locked_lidar_gets_each_cameras_phase(logs: dict[str, Any
     assert result["phase_lock"]["move_lock"] is None
 
 
+def test_the_cameras_recommendation_carries_the_designs_setting(logs: dict[str, Any]) -> None:
+    """Where the advice shifts the trigger, its `set` is the design's parameter (issue 27)."""
+    truth, result = logs["ptp_locked"]
+    shifted = [c for c in result["cameras"] if c["recommendation"]["action"] == "shift_trigger"]
+    assert shifted, [c["recommendation"]["why"] for c in result["cameras"]]
+    for cam in shifted:
+        rec = cam["recommendation"]
+        assert rec["set"] == cam["trigger_design"]["recommendation"]["set"]
+        assert rec["set"]["parameter"] == "phase"
+        true = truth["cameras"][cam["camera"]]["trigger_design"]["true_shift_ns"] / 1e3
+        assert rec["shift_us"] == pytest.approx(true, abs=TOLERANCE_US)
+
+
 def test_ptp_cameras_off_together_move_the_lidar_lock_angle(logs: dict[str, Any]) -> None:
     truth, result = logs["ptp_together"]
     _check_correction(truth, result, "ptp_phase")

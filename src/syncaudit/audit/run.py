@@ -84,6 +84,11 @@ class CameraAudit:
             }
         )
         out["trigger_design"] = self.design
+        design_advice = (self.design or {}).get("recommendation")
+        setting = design_advice.get("set") if isinstance(design_advice, dict) else None
+        if setting and out["recommendation"]["action"] == "shift_trigger":
+            # The same shift (minus the median error), in the units the design is set in.
+            out["recommendation"]["set"] = setting
         return out
 
 
