@@ -127,9 +127,11 @@ _VELODYNE_BLOCKS_PER_AZIMUTH: dict[str, int] = {"VLP-16": 1, "VLP-32C": 1, "VLS-
 JPEG_FORMAT = "jpeg"
 """`CompressedImage.format` of the JPEG-like payloads written when `image_bytes` is set."""
 CLOUD_TOPIC = "/points"
-_X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0, "ouster": 0.0}
+_X_AXIS_AZIMUTH_DEG: dict[str, float] = {"velodyne": 0.0, "hesai": 90.0, "ouster": 180.0}
 """Packet azimuth of the LiDAR frame's +X axis in the vendors' ROS drivers: Velodyne
-x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise."""
+x = r cos(az), y = -r sin(az); Hesai x = r sin(az), y = r cos(az). Both grow clockwise.
+Ouster: the mounts are given in the sensor frame (ouster-ros' os_sensor), which the Ouster
+manual turns 180 deg about z from the lidar frame whose +X is at encoder angle 0."""
 
 
 # ==================================================================================== config
