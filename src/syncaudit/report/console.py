@@ -142,9 +142,9 @@ def _design_line(design: dict[str, Any]) -> str:
     """The design and what to set: `ptp_phase: shift -698.5 us -> set phase = 27.1 deg`."""
     rec = design["recommendation"]
     line = f"{design['design']}: {rec['action']}"
-    if rec["action"] != "none":
+    if rec["action"] == "shift_trigger":
         line += f" by {_us(rec['shift_us'])} us"
-    if rec.get("set"):
+    if rec.get("set") and rec["action"] == "shift_trigger":
         line += f" -> set [bold]{rec['set']['parameter']} = {rec['set']['value']}[/] {rec['set']['unit']}"
     rows = design.get("rolling_shutter")
     if rows:
