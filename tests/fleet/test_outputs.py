@@ -113,7 +113,7 @@ def test_init_policy_target_is_checked_first_and_never_an_input(tmp_path: Path) 
     result = runner.invoke(  # the sample fails the defaults: refused, nothing written
         app, ["gate", "--init", str(THREE_CAMERAS), "-o", str(policy), "--overwrite"]
     )
-    assert result.exit_code == 10 and policy.read_text() == "previous"
+    assert result.exit_code == 10 and policy.read_text() == previous
     assert not _temporaries(tmp_path)
     result = runner.invoke(
         app,

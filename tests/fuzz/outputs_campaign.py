@@ -113,7 +113,9 @@ FLAGS: tuple[Flag, ...] = (
     Flag("gate --html", _gate("--html"), "gate-html", _log, ("policy",)),
     Flag(
         "gate --init -o",
-        lambda t, w: ["gate", "--init", str(w / "log.bag"), "-o", str(t)],
+        # --accept-bad: the fuzz log fails the default thresholds, and --init refuses such
+        # logs before it writes anything; the case is about the output, not the doubt.
+        lambda t, w: ["gate", "--init", str(w / "log.bag"), "-o", str(t), "--accept-bad"],
         "policy-out.yaml",
         _log,
     ),

@@ -14,7 +14,8 @@ from .conftest import SAMPLES, ServerState
 
 runner = CliRunner()
 LOGS = ("vlp16_three_cameras.mcap", "vlp16_short.bag")
-COMMANDS = (["audit", "--json"], ["info", "--json"], ["rig"])
+# --no-rig: the local file has its rig beside it, which a URL's audit does not look for.
+COMMANDS = (["audit", "--json", "--no-rig"], ["info", "--json"], ["rig"])
 
 
 def _output(args: list[str]) -> str:
