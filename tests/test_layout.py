@@ -31,33 +31,10 @@ ALLOWED: dict[str, set[str]] = {
     "writers": {"logs", "columns"},
     "report": {"columns", "analysis", "audit", "calib", "writers"},
     "simulate": {"lidar", "writers", "columns"},
-    "fleet": {
-        "logs",
-        "remote",
-        "lidar",
-        "camera",
-        "columns",
-        "analysis",
-        "audit",
-        "calib",
-        "report",
-        "writers",
-    },
-    "cli": {
-        "logs",
-        "remote",
-        "lidar",
-        "camera",
-        "columns",
-        "analysis",
-        "audit",
-        "calib",
-        "report",
-        "writers",
-        "simulate",
-        "fleet",
-    },
+    "fleet": {"logs", "remote", "lidar", "camera", "columns", "analysis", "audit", "calib"}
+    | {"report", "writers"},
 }
+ALLOWED["cli"] = ALLOWED["fleet"] | {"simulate", "fleet"}
 READING = {"logs", "remote", "lidar", "camera", "columns"}
 
 
