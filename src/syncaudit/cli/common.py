@@ -296,7 +296,11 @@ HtmlOption = Annotated[
 ]
 GateFlag = Annotated[bool, typer.Option("--gate", help="Exit 10 when the check fails (CI gate).")]
 OverwriteFlag = Annotated[
-    bool, typer.Option("--overwrite", help="Replace outputs that exist (all of them or none).")
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace outputs syncaudit wrote before (never another file; all or none).",
+    ),
 ]
 
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from syncaudit.cli.common import app, note, run, say, stderr_console
+from syncaudit.cli.common import OverwriteFlag, app, note, run, say, stderr_console
 from syncaudit.errors import ConfigError, UsageError
 
 if TYPE_CHECKING:
@@ -127,9 +127,7 @@ def gate(
     force: Annotated[
         bool, typer.Option("--force", help="Judge again logs already in the database.")
     ] = False,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace existing output files.")
-    ] = False,
+    overwrite: OverwriteFlag = False,
     cluster: Annotated[
         str | None,
         typer.Option(
@@ -202,9 +200,7 @@ def report(
     csv: Annotated[
         Path | None, typer.Option("--csv", help="Export the per-camera table as CSV.")
     ] = None,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace existing outputs.")
-    ] = False,
+    overwrite: OverwriteFlag = False,
 ) -> None:
     """Dashboard of Eq. 5 error, delays and t1..t4 per vehicle and camera over time."""
 
