@@ -166,3 +166,34 @@ def test_cli_shared_topics_and_stamp_audit_to_the_truth(tmp_path: Path) -> None:
         assert abs(cam["error_mean_us"] - t["error_mean_ns"] / 1e3) < 5.0
     bad = runner.invoke(app, ["simulate", "sync", str(tmp_path / "x.mcap"), "--stamp", "late"])
     assert bad.exit_code == 64 and "--stamp" in bad.output
+
+
+def test_extra_lidar_packets_and_an_unchanged_audit(tmp_path: Path) -> None:
+    """A second LiDAR's scans land on its own topic with its own model and packet count,
+    and leave the trigger LiDAR, the cameras and the rig's audit exactly as without it."""
+    from syncaudit.audit.run import audit_log
+    from syncaudit.rig import load_rig
+    from syncaudit.simulate.rig_file import rig_from_truth
+    from syncaudit.simulate.sync_log import ExtraLidarSim
+
+    base = {"seed": 4, "duration_s": 2.0, "cameras": SIX[:2], "zero_azimuth_deg": 305.0}
+    extra = ExtraLidarSim(model="VLP-32C", topic="/rear/velodyne_packets", frame_id="rear")
+    plain_truth = simulate_sync_log(tmp_path / "plain.mcap", SyncSimConfig(**base))
+    both_truth = simulate_sync_log(
+        tmp_path / "both.mcap", SyncSimConfig(**base, extra_lidars=[extra])
+    )
+    facts = both_truth["extra_lidars"][0]
+    assert facts["model"] == "VLP-32C" and facts["scans"] > 10
+    timing = _decoded(tmp_path / "both.mcap", "/rear/velodyne_packets")
+    assert timing.model == "VLP-32C" and timing.n_packets == facts["packets_written"]
+    assert both_truth["cameras"]["cam0"]["frames"] == plain_truth["cameras"]["cam0"]["frames"]
+    rig_file = tmp_path / "rig.yaml"
+    rig_file.write_text(json.dumps(rig_from_truth(plain_truth).model_dump(mode="json")))
+    rig = load_rig(rig_file)
+    plain = audit_log(tmp_path / "plain.mcap", rig, jobs=1).to_dict()
+    both = audit_log(tmp_path / "both.mcap", rig, jobs=1).to_dict()
+    assert both["cameras"] == plain["cameras"]
+    with pytest.raises(ValueError, match="unique"):
+        SyncSimConfig(**base, extra_lidars=[extra, extra])
+    with pytest.raises(ValueError, match="Velodyne or Hesai"):
+        ExtraLidarSim(model="OS-1-64", topic="/o", frame_id="o")

@@ -200,6 +200,23 @@ class CameraSim(_Strict):
     """Offset of the (initial) applied delay from the log's true ideal delay."""
 
 
+class ExtraLidarSim(_Strict):
+    """Another spinning LiDAR on the vehicle, recorded beside the trigger LiDAR: its packets
+    only (no camera fires from it), as fleets record a rear or side LiDAR."""
+
+    model: LidarModel
+    topic: str = Field(pattern=r"^/[A-Za-z0-9_/]+$")
+    frame_id: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_]+$")
+    rpm: float = Field(default=600.0, ge=300.0, le=1200.0)
+    start_azimuth_deg: float = Field(default=0.0, ge=0.0, lt=360.0)
+
+    @model_validator(mode="after")
+    def _check(self) -> ExtraLidarSim:
+        if _VENDOR_OF[self.model] == "ouster":
+            raise ValueError("an extra LiDAR is a Velodyne or Hesai model (packet scans)")
+        return self
+
+
 def _default_cameras() -> list[CameraSim]:
     return [
         CameraSim(name="front", yaw_deg=0.0),
@@ -294,6 +311,9 @@ class SyncSimConfig(_Strict):
     trigger_design: TriggerDesignSim | None = None
     """Trigger the cameras by another design than the chain (`simulate.trigger_designs`):
     bare `builtin_interfaces/Time` trigger records, or none for free-running cameras."""
+    extra_lidars: list[ExtraLidarSim] = Field(default_factory=list, max_length=8)
+    """More LiDARs whose packet scans the log records on their own topics (the truth's
+    `extra_lidars`; the rig names only the trigger LiDAR)."""
 
     @model_validator(mode="after")
     def _check(self) -> SyncSimConfig:
@@ -308,6 +328,11 @@ class SyncSimConfig(_Strict):
             raise ValueError("image_bytes needs image_kind 'compressed'")
         if self.vendor == "ouster":
             ouster_packets.columns_per_frame(self.rpm)  # 600 or 1200 RPM (lidar_mode)
+        topics = [e.topic for e in self.extra_lidars]
+        if len(set(topics)) != len(topics) or {"/velodyne_packets", "/pandar_packets"} & set(
+            topics
+        ):
+            raise ValueError(f"extra LiDAR topics must be unique and not the trigger's: {topics}")
         return self
 
     @property
@@ -888,10 +913,47 @@ class _Simulation:
                 "fires from and names in lidar_packet_time",
             },
             "lidar": lidar_truth,
+            "extra_lidars": [],
             "cameras": {c["name"]: c for c in cams},
         }
-        self._write(out, pk, zero_packet, cams)
+        extras = [self._extra(i, extra) for i, extra in enumerate(cfg.extra_lidars)]
+        truth["extra_lidars"] = [facts for _, facts in extras]
+        self._write(out, pk, zero_packet, cams, [stream for stream, _ in extras])
         return truth
+
+    def _extra(
+        self, index: int, extra: ExtraLidarSim
+    ) -> tuple[tuple[_Simulation, _Packets, NDArray[np.int64]], dict[str, Any]]:
+        """An extra LiDAR's simulation (its own seed, rotation and packet clock), its
+        packets and zero packets, and its truth."""
+        cfg = self.cfg.model_copy(
+            update={
+                "seed": self.cfg.seed * 7919 + index + 1,
+                "lidar_model": extra.model,
+                "rpm": extra.rpm,
+                "start_azimuth_deg": extra.start_azimuth_deg,
+                "lidar_frame": extra.frame_id,
+                "zero_azimuth_deg": None,
+                "cloud_convention": None,
+                "trigger_design": None,
+                "extra_lidars": [],
+            }
+        )
+        sim = _Simulation(cfg, self.outputs, None)
+        sim.topic = extra.topic
+        pk = sim.packets()
+        _, zero_packet = sim.crossings(pk)
+        last = int(zero_packet[-1])
+        facts = {
+            "topic": extra.topic,
+            "msgtype": sim.msgtype,
+            "model": extra.model,
+            "frame_id": extra.frame_id,
+            "rpm_nominal": extra.rpm,
+            "packets_written": int(pk.delivered[: last + 1].sum()),
+            "scans": int(zero_packet.size),
+        }
+        return (sim, pk, zero_packet), facts
 
     def _camera(
         self,
@@ -1422,7 +1484,12 @@ class _Simulation:
                 out.add(log_ns + 3_000, topics["trigger"], writer.serialize(msg))
 
     def _write(
-        self, out: Path, pk: _Packets, zero_packet: NDArray[np.int64], cams: list[dict[str, Any]]
+        self,
+        out: Path,
+        pk: _Packets,
+        zero_packet: NDArray[np.int64],
+        cams: list[dict[str, Any]],
+        extras: list[tuple[_Simulation, _Packets, NDArray[np.int64]]],
     ) -> None:
         cfg = self.cfg
         with open_writer(
@@ -1433,6 +1500,8 @@ class _Simulation:
                 writer.add_topic(self.topic, self.msgtype)
                 if self.vendor == "ouster":
                     writer.add_topic(self.metadata_topic, "std_msgs/msg/String")
+            for sim, _, _ in extras:
+                writer.add_topic(sim.topic, sim.msgtype)
             if cfg.cloud_convention is not None:
                 writer.add_topic(CLOUD_TOPIC, "sensor_msgs/msg/PointCloud2")
             image_type = (
@@ -1461,6 +1530,7 @@ class _Simulation:
             merged = heapq.merge(
                 self._scan_messages(writer, pk, zero_packet) if cfg.lidar_packets else iter(()),
                 self._cloud_messages(writer, pk, zero_packet),
+                *(sim._scan_messages(writer, xpk, xzero) for sim, xpk, xzero in extras),
                 iter(camera_msgs.items),
                 key=lambda item: (item[0], item[1]),
             )
