@@ -432,8 +432,10 @@ class _Packets:
     """(n,) packet time in the sensor clock, whole microseconds."""
     capture_ns: NDArray[np.int64]
     """(n,) the same instant in true (host) time: checkpoint 240."""
-    block_true_ns: NDArray[np.int64]
-    """(n, B) true time of each block's azimuth sample."""
+    block_true_ns: NDArray[np.int64] | None
+    """(n, B) true time of each block's azimuth sample: Ouster's column stamps; None for
+    Velodyne and Hesai, whose packets state only the packet's time (not kept: on a
+    two-hour log it would be the simulator's largest array)."""
     azimuth_q: NDArray[np.int64]
     """(n, B) unwrapped block azimuth in the packet's units (0.01 deg)."""
     delivered: NDArray[np.bool_]
@@ -745,17 +747,18 @@ class _Simulation:
         t0_sensor = cfg.start_time_ns + cfg.clock_offset_ns
         stamp = (t0_sensor + (clk.period_num_ns * k) // clk.period_den) // NS_PER_US * NS_PER_US
         capture = stamp - cfg.clock_offset_ns
-        block_true = capture[:, None] + clk.block_offset_ns[None, :]
-        azimuth_q = np.empty(block_true.shape, dtype=np.int64)
-        # In slices: the rotation model's float temporaries stay small on long logs.
+        azimuth_q = np.empty((n, clk.block_offset_ns.size), dtype=np.int64)
+        # In slices: the block times and the rotation model's float temporaries stay small
+        # on long logs.
         for lo in range(0, n, _PACKETS_PER_SLICE):
             rows = slice(lo, lo + _PACKETS_PER_SLICE)
-            t_rel = (block_true[rows] - cfg.start_time_ns).astype(np.float64)
+            block_true = capture[rows, None] + clk.block_offset_ns[None, :]
+            t_rel = (block_true - cfg.start_time_ns).astype(np.float64)
             angle = self.rotation.angle_deg(t_rel)
             azimuth_q[rows] = np.rint(angle * clk.azimuth_units_per_deg)
         delivered = self.rng_drop.random(n) >= cfg.packet_drop_fraction
         t1 = cfg.t1.draw_ns(self.rng_t1, n)
-        return _Packets(stamp, capture, block_true, azimuth_q, delivered, t1, capture + t1)
+        return _Packets(stamp, capture, None, azimuth_q, delivered, t1, capture + t1)
 
     def _ouster_packets(self) -> _Packets:
         """Ouster packets: each column fires when the encoder reaches its angle (360 deg x
@@ -1278,6 +1281,7 @@ class _Simulation:
         for lo in range(0, end, 4096):
             rows = np.arange(lo, min(end, lo + 4096))
             column = pk.azimuth_q[rows] // 360
+            assert pk.block_true_ns is not None  # Ouster packets keep their column stamps
             stamps = pk.block_true_ns[rows] + cfg.clock_offset_ns
             data = ouster_packets.encode_packets(
                 cfg.ouster_profile, column % cols, stamps, column[:, 0] // cols, cols
