@@ -1,20 +1,70 @@
-"""Our controller's window median is numpy's, bit for bit, and the replay is unchanged by it."""
+"""Our controller's replay: vectorised by blocks, the frame-at-a-time loop bit for bit."""
 
 from __future__ import annotations
 
 from collections import deque
 
 import numpy as np
+import pytest
 
-from syncaudit.analysis.feedforward import FeedForwardConfig, _median, replay_feedforward
+from syncaudit.analysis.feedforward import FeedForwardConfig, _window_medians, replay_feedforward
 
 
-def test_window_median_equals_numpys_bit_for_bit() -> None:
+def _reference(
+    err: list[float], applied: list[float], exposure: list[float], config: FeedForwardConfig
+) -> tuple[list[float], list[float], int]:
+    """The controller as docs/advice.md states it, one frame at a time (np.median)."""
+    base = applied[0] + exposure[0] / 2.0
+    window: deque[float] = deque(maxlen=config.window_frames)
+    delays, errors, adjustments = [], [], 0
+    for i in range(len(err)):
+        if i == 0:
+            delay = applied[0]
+        else:
+            trend = exposure[i - 1] - exposure[i - 2] if i >= 2 else 0.0
+            delay = base - (exposure[i - 1] + config.trend_gain * trend) / 2.0
+        corrected = err[i] + (delay - applied[i])
+        delays.append(delay)
+        errors.append(corrected)
+        window.append(corrected)
+        if len(window) == config.window_frames:
+            median = float(np.median(list(window)))
+            if abs(median) > config.deadband_ns:
+                base -= median
+                adjustments += 1
+                window.clear()
+    return delays, errors, adjustments
+
+
+def test_window_medians_equal_numpys_bit_for_bit() -> None:
     rng = np.random.default_rng(7)
     for size in range(1, 22):
-        for _ in range(200):
-            values = (rng.normal(size=size) * 1e5).round(1).tolist()
-            assert _median(deque(values)) == float(np.median(values))
+        values = (rng.normal(size=size + 50) * 1e5).round(1)
+        expected = [float(np.median(values[i : i + size])) for i in range(51)]
+        assert _window_medians(values, size).tolist() == expected
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 37, 500, 4000])
+@pytest.mark.parametrize("config", [(5, 50_000, 0.0), (10, 100_000, 0.5), (20, 200_000, 1.0)])
+def test_replay_is_the_frame_loop_bit_for_bit(n: int, config: tuple[int, int, float]) -> None:
+    """Drifting bias, jitter, steps and a tunnel's exposure ramp: every delay, error and
+    the number of changes equal the frame-at-a-time controller's exactly."""
+    rng = np.random.default_rng(n)
+    t = np.arange(n, dtype=np.float64)
+    exposure = 2e6 + 10e6 * (np.clip((t - n * 0.3) / 40, 0, 1) - np.clip((t - n * 0.6) / 40, 0, 1))
+    exposure += rng.normal(size=n) * 2e4
+    applied = 1e7 + np.where(t > n / 2, 3e5, 0.0) + rng.normal(size=n) * 1e3
+    error = 2e5 * np.sin(t / 97) + rng.normal(size=n) * 8e4 + exposure / 2
+    cfg = FeedForwardConfig(*config)
+    replay = replay_feedforward(error, applied, exposure, cfg)
+    delays, errors, adjustments = _reference(
+        error.tolist(), applied.tolist(), exposure.tolist(), cfg
+    )
+    assert replay.delays_ns.tolist() == delays
+    assert replay.errors_ns.tolist() == errors
+    assert replay.adjustments == adjustments
+    if n >= 500:
+        assert adjustments > 3  # the case exercises the bias loop
 
 
 def test_replay_moves_the_base_by_the_window_median() -> None:
