@@ -602,6 +602,8 @@ def _resolve_model(
                 f"the rig states {stated} but the packets' product byte says {id_model}"
             )
         return stated
+    if id_model not in SHARED_ID_MODELS:  # the byte names one model: no cadence needed
+        return id_model
     return model_by_cadence(id_model, packet_gap_us(_toh_us(fields)), bool(rmode[0] == RETURN_DUAL))
 
 
