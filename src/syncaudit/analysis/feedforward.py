@@ -83,52 +83,49 @@ def replay_feedforward(
     """Run our controller over one camera's paired frames, in order (finite inputs).
 
     The first frame keeps its recorded delay (nothing is known before it); `base` starts
-    so that the feed-forward reproduces it. Vectorised by blocks: between two changes of
-    the bias loop `base` is constant, so a block's delays, errors and window medians are
-    array operations (the same IEEE operations, in the same order, as one frame at a time);
-    after a change the block is recomputed from the next frame.
+    so that the feed-forward reproduces it. The window's median is taken only when it can
+    leave the dead band: at least half the window beyond the band on one side (counted as
+    frames enter and leave), which most frames of a calm loop are not.
     """
     n = len(error_ns)
-    delays = np.empty(n)
-    errors = np.empty(n)
     if not n:
-        return FeedForwardReplay(config, delays, errors, 0)
-    err = np.asarray(error_ns, dtype=np.float64)
-    applied = np.asarray(applied_ns, dtype=np.float64)
-    exposure = np.asarray(exposure_ns, dtype=np.float64)
-    feed = _feed_forward_ns(exposure, config.trend_gain)
-    base = float(applied[0]) + float(exposure[0]) / 2.0
+        return FeedForwardReplay(config, np.empty(0), np.empty(0), 0)
+    err, applied = error_ns.tolist(), applied_ns.tolist()
+    feed = _feed_forward_ns(np.asarray(exposure_ns, dtype=np.float64), config.trend_gain).tolist()
+    base = applied[0] + float(exposure_ns[0]) / 2.0
     band, size = config.deadband_ns, config.window_frames
+    half = size // 2
+    delays = [applied[0]] + [0.0] * (n - 1)
+    errors = [0.0] * n
+    window: list[float] = []
+    above = below = 0  # frames of the window past +band / -band
     adjustments = 0
-    start = 0  # first frame of the bias loop's current window
-    i = 0
-    block = _MIN_BLOCK
-    while i < n:
-        hi = min(n, i + block)
-        delay = base - feed[i:hi]
-        if i == 0:
-            delay[0] = applied[0]
-        delays[i:hi] = delay
-        errors[i:hi] = err[i:hi] + (delay - applied[i:hi])
-        first_end = max(i, start + size - 1)
-        if first_end < hi:
-            medians = _window_medians(errors[first_end - size + 1 : hi], size)
-            hit = np.flatnonzero(np.abs(medians) > band)
-            if hit.size:
-                base -= float(medians[hit[0]])
+    for i in range(n):
+        delay = applied[0] if i == 0 else base - feed[i]
+        corrected = err[i] + (delay - applied[i])
+        delays[i] = delay
+        errors[i] = corrected
+        if len(window) == size:
+            old = window.pop(0)
+            above -= old > band
+            below -= old < -band
+        window.append(corrected)
+        above += corrected > band
+        below += corrected < -band
+        if len(window) == size and (above >= half or below >= half) and half:
+            median = _median(window)
+            if abs(median) > band:
+                base -= median
                 adjustments += 1
-                start = i = first_end + int(hit[0]) + 1
-                block = _MIN_BLOCK
-                continue
-        i = hi
-        block = min(2 * block, _MAX_BLOCK)
-    return FeedForwardReplay(config, delays, errors, adjustments)
-
-
-_MIN_BLOCK = 32
-_MAX_BLOCK = 1024
-"""Frames per vectorised block: small right after a change (the rest of a block is
-recomputed after one), doubling while the loop holds still."""
+                window.clear()
+                above = below = 0
+        elif len(window) == size and not half:  # a window of one frame
+            if abs(corrected) > band:
+                base -= corrected
+                adjustments += 1
+                window.clear()
+                above = below = 0
+    return FeedForwardReplay(config, np.array(delays), np.array(errors), adjustments)
 
 
 def _feed_forward_ns(exposure: NDArray[np.float64], gain: float) -> NDArray[np.float64]:
@@ -142,15 +139,14 @@ def _feed_forward_ns(exposure: NDArray[np.float64], gain: float) -> NDArray[np.f
     return feed
 
 
-def _window_medians(values: NDArray[np.float64], size: int) -> NDArray[np.float64]:
-    """The median of every `size` consecutive values, as np.median gives it bit for bit
-    (the middle value, or the middle pair's sum halved)."""
-    ordered = np.sort(np.lib.stride_tricks.sliding_window_view(values, size), axis=1)
-    middle = size // 2
-    if size % 2:
-        return ordered[:, middle]
-    out: NDArray[np.float64] = (ordered[:, middle - 1] + ordered[:, middle]) / 2.0
-    return out
+def _median(values: list[float]) -> float:
+    """np.median of a few floats, bit for bit (the middle value, or the middle pair's sum
+    halved), ~20x faster on a window this small."""
+    ordered = sorted(values)
+    middle = len(ordered) // 2
+    if len(ordered) % 2:
+        return ordered[middle]
+    return (ordered[middle - 1] + ordered[middle]) / 2.0
 
 
 WINDOWS = (5, 10, 20)
