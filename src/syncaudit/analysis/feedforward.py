@@ -112,16 +112,10 @@ def replay_feedforward(
         window.append(corrected)
         above += corrected > band
         below += corrected < -band
-        if len(window) == size and (above >= half or below >= half) and half:
+        if len(window) == size and (above >= half or below >= half):
             median = _median(window)
             if abs(median) > band:
                 base -= median
-                adjustments += 1
-                window.clear()
-                above = below = 0
-        elif len(window) == size and not half:  # a window of one frame
-            if abs(corrected) > band:
-                base -= corrected
                 adjustments += 1
                 window.clear()
                 above = below = 0
