@@ -8,6 +8,8 @@ host-LiDAR clock offset, analyse each camera and replay its controller, assemble
 
 from __future__ import annotations
 
+import itertools
+import multiprocessing
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +36,7 @@ from syncaudit.logs import LogReader, open_log
 from syncaudit.logs.parallel import default_jobs, iter_items
 from syncaudit.rig import CameraConfig, Rig
 from syncaudit.units import finite_or_none, json_ready, ns_to_us
+from syncaudit.workers import worker_pool
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -418,7 +421,9 @@ def _audit(
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
     warnings.extend(_zero_warning(rig, scan, all_tables, offset))
-    cameras = _analyse_cameras(probe.log, rig, scan, located, all_tables, offset, missing)
+    cameras = _analyse_cameras(
+        probe.log, rig, scan, located, all_tables, offset, missing, jobs=jobs
+    )
     warnings.extend(_floor_warnings(rig, cameras))
     from syncaudit.audit.trigger_design import add_designs
 
@@ -485,36 +490,76 @@ def _analyse_cameras(
     all_tables: list[CameraTables],
     offset_ns: int,
     missing: list[str],
+    jobs: int = 1,
 ) -> list[CameraAudit]:
-    """Each placed camera's synchronisation and its replayed controller; what each camera's
-    log lacks is added to `missing`."""
-    # Imported only now: `_read` has them imported while workers read.
-    from syncaudit.analysis.advice import advise_camera
-    from syncaudit.analysis.replay import replay_controller
-    from syncaudit.analysis.sync import analyze_camera
-
-    controller = _controller_config(rig)
-    audits: list[CameraAudit] = []
-    for index, ((cam, azimuth, source), tables) in enumerate(zip(located, all_tables, strict=True)):
+    """Each placed camera's synchronisation and its replayed controllers; what each camera's
+    log lacks is added to `missing`. Cameras are independent: with `jobs` > 1 and forking
+    available, forked workers analyse them side by side (the same result, in camera order)."""
+    for (cam, _, _), tables in zip(located, all_tables, strict=True):
         missing.extend(_missing(log, cam, tables))
+    job = _CameraJob(rig, scan, located, all_tables, offset_ns)
+    indexes = list(range(len(located)))
+    if jobs < 2 or len(located) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return [job.audit(i) for i in indexes]
+    token = f"cameras#{next(_camera_tokens)}"
+    _CAMERA_JOBS[token] = job
+    try:
+        context = multiprocessing.get_context("fork")
+        with worker_pool(
+            min(jobs, len(located)), context, label="a camera analysis process"
+        ) as pool:
+            return list(pool.map(_audit_camera, [token] * len(indexes), indexes))
+    finally:
+        _CAMERA_JOBS.pop(token, None)
+
+
+@dataclass(frozen=True, slots=True)
+class _CameraJob:
+    """What each camera's analysis reads (forked workers inherit it: nothing is pickled
+    but the camera's index and its result)."""
+
+    rig: Rig
+    scan: LidarScan
+    located: list[Located]
+    all_tables: list[CameraTables]
+    offset_ns: int
+
+    def audit(self, index: int) -> CameraAudit:
+        """One camera's synchronisation (Eq. 1-6), the replayed controllers and the advice."""
+        # Imported only now: `_read` has them imported while workers read.
+        from syncaudit.analysis.advice import advise_camera
+        from syncaudit.analysis.replay import replay_controller
+        from syncaudit.analysis.sync import analyze_camera
+
+        rig = self.rig
+        cam, azimuth, source = self.located[index]
         sync = analyze_camera(
-            scan,
-            tables,
+            self.scan,
+            self.all_tables[index],
             camera=cam,
             target_index=index,
             camera_azimuth_deg=azimuth,
-            offset_ns=offset_ns,
+            offset_ns=self.offset_ns,
             lidar=rig.lidar,
             analysis=rig.analysis,
             thresholds=rig.thresholds,
         )
-        replay = replay_controller(sync.table, controller)
+        replay = replay_controller(sync.table, _controller_config(rig))
         advice = advise_camera(sync.table, replay)
         # Judged against what a correction can change; the CSV shows the advised delays.
         sync.correctable = not advice.at_floor
         sync.table = sync.table.with_columns({"advised_delay_ns": advice.advised_delay_ns})
-        audits.append(CameraAudit(sync, azimuth, source, replay, advice))
-    return audits
+        return CameraAudit(sync, azimuth, source, replay, advice)
+
+
+_CAMERA_JOBS: dict[str, _CameraJob] = {}
+"""The analysis each running camera pool serves, by token (forked workers look it up)."""
+_camera_tokens = itertools.count()
+
+
+def _audit_camera(token: str, index: int) -> CameraAudit:
+    """A forked worker's task: camera `index` of the job `token` names."""
+    return _CAMERA_JOBS[token].audit(index)
 
 
 def _floor_warnings(rig: Rig, cameras: list[CameraAudit]) -> list[str]:
