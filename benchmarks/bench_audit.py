@@ -276,6 +276,8 @@ class TreeSampler(threading.Thread):
         self.interval = interval
         self.peak_rss_kb = 0
         self.peak_pss_kb = 0
+        self.peak_largest_kb = 0
+        """Peak RSS of the largest single process (the parent or one worker)."""
         self.max_procs = 0
         self.samples = 0
         self._stop_event = threading.Event()
@@ -298,6 +300,7 @@ class TreeSampler(threading.Thread):
             rss += r
             pss += p
             alive += r > 0
+            self.peak_largest_kb = max(self.peak_largest_kb, r)
         self.peak_rss_kb = max(self.peak_rss_kb, rss)
         self.peak_pss_kb = max(self.peak_pss_kb, pss)
         self.max_procs = max(self.max_procs, alive)
@@ -328,6 +331,8 @@ class Run:
     """Peak over time of the tree's summed RSS (at least the largest process's ru_maxrss)."""
     pss_mb: float = float("nan")
     """Peak over time of the tree's summed PSS (at most the RSS figure)."""
+    largest_mb: float = float("nan")
+    """Peak RSS of the largest single process (at least its ru_maxrss)."""
     procs: int = 0
     returncode: int | None = None
     timed_out: bool = False
@@ -399,6 +404,7 @@ def measure(
     run.other_cpu_s = max(0.0, busy - run.cpu_s)
     run.rss_mb = max(sampler.peak_rss_kb, usage.ru_maxrss) * 1024 / MB
     run.pss_mb = sampler.peak_pss_kb * 1024 / MB if sampler.peak_pss_kb else run.rss_mb
+    run.largest_mb = max(sampler.peak_largest_kb, usage.ru_maxrss) * 1024 / MB
     run.procs = max(sampler.max_procs, 1)
     run.stdout = out_path.read_text(errors="replace")[-20_000:]
     run.stderr = err_path.read_text(errors="replace")[-20_000:]
@@ -1377,6 +1383,17 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="containers: also audit with syncaudit imported from this src folder (e.g. "
         "`git archive <commit> src | tar -x -C DIR`), interleaved: before/after",
     )
+    parser.add_argument(
+        "--dense",
+        action="store_true",
+        help="the dense long-drive shape instead (benchmarks/dense_shape.py: 32- and "
+        "128-beam LiDARs, six cameras at 10 Hz, 10/60/120-minute logs, one bag)",
+    )
+    parser.add_argument(
+        "--minutes",
+        default="10,60,120",
+        help="--dense: log lengths in minutes (the middle one is the timed log)",
+    )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--convert-to", choices=CONTAINERS, help=argparse.SUPPRESS)
     parser.add_argument("--convert-from", type=Path, help=argparse.SUPPRESS)
@@ -1388,7 +1405,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     if args.generate_to is not None:
-        generate(args.generate_to, args.duration_s)
+        if args.dense:
+            from dense_shape import generate_dense
+
+            generate_dense(args.generate_to, args.duration_s)
+        else:
+            generate(args.generate_to, args.duration_s)
         return 0
     if args.convert_to is not None:
         convert_container(args.convert_from, args.convert_to, args.convert_dst)
@@ -1402,6 +1424,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         scratch = cache / "run"
         shutil.rmtree(scratch, ignore_errors=True)
         scratch.mkdir()
+        if args.dense:
+            from dense_shape import bench_dense
+
+            return bench_dense(args, cache, scratch)
         return _bench(args, size_gb, cache, scratch)
 
 

@@ -71,7 +71,7 @@ from syncaudit.simulate.trigger_designs import (
     design_times,
     locked_start_deg,
 )
-from syncaudit.writers.log_writer import LogFormat, LogWriter, open_writer
+from syncaudit.writers.log_writer import BagCompression, LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
 from syncaudit.writers.provenance import marked_json
 
@@ -233,6 +233,8 @@ class SyncSimConfig(_Strict):
     start_time_ns: int = Field(default=1_700_000_000 * NS_PER_S, gt=0)
     """True (host) time of the log start."""
     log_format: LogFormat = "mcap"
+    bag_compression: BagCompression = "none"
+    """ROS 1 bags: chunk compression (lz4 or bz2, as `rosbag record --lz4` / `--bz2`)."""
     overwrite: bool = False
 
     lidar_model: LidarModel = "VLP-16"
@@ -1497,7 +1499,11 @@ class _Simulation:
     ) -> None:
         cfg = self.cfg
         with open_writer(
-            out, cfg.log_format, overwrite=cfg.overwrite, outputs=self.outputs
+            out,
+            cfg.log_format,
+            overwrite=cfg.overwrite,
+            outputs=self.outputs,
+            bag_compression=cfg.bag_compression,
         ) as writer:
             writer.add_topic("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
             if cfg.lidar_packets:

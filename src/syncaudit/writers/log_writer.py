@@ -373,15 +373,28 @@ class Rosbag2LogWriter(LogWriter):
             conn.close()
 
 
+BagCompression = Literal["none", "lz4", "bz2"]
+"""ROS 1 bag chunk compression (`rosbag record --lz4 / --bz2`)."""
+
+
 class Rosbag1LogWriter(LogWriter):
-    """A ROS 1 bag (uncompressed chunks), ROS 1 serialization."""
+    """A ROS 1 bag (chunks uncompressed, or lz4 / bz2 as `rosbag record` writes them), ROS 1
+    serialization."""
 
     fmt: LogFormat = "bag"
     encoding: Literal["cdr", "ros1"] = "ros1"
 
-    def __init__(self, path: Path, overwrite: bool, outputs: OutputSet | None = None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        overwrite: bool,
+        outputs: OutputSet | None = None,
+        compression: BagCompression = "none",
+    ) -> None:
         super().__init__(path, overwrite, writer_registry(ros1=True), outputs)
         self._bag = Rosbag1Writer(self._tmp_path)
+        if compression != "none":
+            self._bag.set_compression(Rosbag1Writer.CompressionFormat[compression.upper()])
         try:
             self._bag.open()
         except BaseException:
@@ -413,8 +426,10 @@ def open_writer(
     overwrite: bool = False,
     mcap_chunk_bytes: int = MCAP_CHUNK_BYTES,
     outputs: OutputSet | None = None,
+    bag_compression: BagCompression = "none",
 ) -> LogWriter:
-    """Start writing a log at `path` in `fmt` (None: infer from the suffix).
+    """Start writing a log at `path` in `fmt` (None: infer from the suffix); a ROS 1 bag's
+    chunks compressed as `bag_compression` says.
 
     For 'db3' `path` is the bag directory to create, exactly as given (the CLI names it
     with `log_target`). With `outputs`
@@ -434,7 +449,7 @@ def open_writer(
     if fmt == "db3":
         return Rosbag2LogWriter(path, overwrite, outputs)
     if fmt == "bag":
-        return Rosbag1LogWriter(path, overwrite, outputs)
+        return Rosbag1LogWriter(path, overwrite, outputs, bag_compression)
     raise ConfigError(f"unknown log format {fmt!r}; expected one of {', '.join(FORMATS)}")
 
 
