@@ -10,7 +10,7 @@ import pytest
 
 from syncaudit.errors import ConfigError, OutputError, UnknownTypeError
 from syncaudit.logs import open_log
-from syncaudit.writers.log_writer import FORMATS, LogFormat, LogWriter, open_writer
+from syncaudit.writers.log_writer import FORMATS, BagCompression, LogFormat, LogWriter, open_writer
 
 NAMES: dict[str, str] = {
     "mcap": "out.mcap",
@@ -178,7 +178,7 @@ def test_a_folder_the_tool_did_not_write_is_never_replaced(tmp_path: Path) -> No
     (path / "sub" / "precious").write_text("mine")
     for fmt in ("mcap", "mcap-ros1"):
         with pytest.raises(OutputError, match="not replacing it"):
-            open_writer(path, fmt, overwrite=True)  # type: ignore[arg-type]
+            open_writer(path, fmt, overwrite=True)
     assert (path / "sub" / "precious").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["X.mcap"]
 
@@ -232,7 +232,7 @@ def test_misuse_is_refused(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("compression", ["lz4", "bz2"])
-def test_bag_chunks_compressed_as_asked(tmp_path: Path, compression: str) -> None:
+def test_bag_chunks_compressed_as_asked(tmp_path: Path, compression: BagCompression) -> None:
     """A ROS 1 bag with lz4 / bz2 chunks (as `rosbag record --lz4`) holds what was written."""
     path = tmp_path / "c.bag"
     with open_writer(path, "bag", bag_compression=compression) as writer:  # type: ignore[arg-type]
