@@ -235,7 +235,7 @@ def test_misuse_is_refused(tmp_path: Path) -> None:
 def test_bag_chunks_compressed_as_asked(tmp_path: Path, compression: BagCompression) -> None:
     """A ROS 1 bag with lz4 / bz2 chunks (as `rosbag record --lz4`) holds what was written."""
     path = tmp_path / "c.bag"
-    with open_writer(path, "bag", bag_compression=compression) as writer:  # type: ignore[arg-type]
+    with open_writer(path, "bag", bag_compression=compression) as writer:
         written = _write_sample(writer)
     with open_log(path) as log:
         read: dict[str, list[tuple[int, bytes]]] = {t: [] for t in written}
