@@ -47,6 +47,28 @@ anew: on a ROS 1 lz4 bag about 0.1 CPU s per GB, a third of the decompression. K
 heap, the next chunk reuses the same pages."""
 
 
+PARENT_MMAP_BYTES = 128 << 10
+"""In a reading parent, allocations from this size up are mapped and unmapped on free."""
+
+
+def return_large_frees() -> None:
+    """In the parent of a read pool: keep glibc serving large allocations by `mmap`, so
+    freeing one returns its pages at once (Linux; elsewhere nothing is done).
+
+    The parent unpickles every worker's results (MBs each) and frees them after merging;
+    glibc's default raises its mmap threshold after each such free (up to 32 MB), and
+    later results then come from the heap, whose freed pages stay resident: on a dense
+    10-minute log the parent's peak RSS went from 188 to 145 MB with the threshold fixed
+    at glibc's own default of 128 KiB (which fixing it keeps from moving).
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.mallopt(_M_MMAP_THRESHOLD, PARENT_MMAP_BYTES)
+        except (OSError, AttributeError):  # pragma: no cover - no mallopt: best effort
+            pass
+
+
 def _init_worker(parent_pid: int) -> None:
     """Worker start: ignore Ctrl-C, die with the parent, then accept signals again."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)

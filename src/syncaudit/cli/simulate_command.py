@@ -114,7 +114,7 @@ def simulate_sync(
         ),
     ] = None,
     duration_s: Annotated[
-        float | None, typer.Option("--duration", min=0.001, max=3600.0, help="Seconds of log.")
+        float | None, typer.Option("--duration", min=0.001, max=14_400.0, help="Seconds of log (up to 4 h).")
     ] = None,
     seed: SeedOption = None,
     fmt: FormatOption = None,

@@ -26,11 +26,11 @@ from typing import Any, Generic, Protocol, TypeVar
 from syncaudit.logs.base import LogReader
 from syncaudit.logs.model import ChannelInfo, RawMessage, ReadUnit
 from syncaudit.logs.unit_readers import UnitReader, group_units, open_unit_reader
-from syncaudit.workers import worker_pool
+from syncaudit.workers import return_large_frees, worker_pool
 
 GROUP_BYTES = 24 * 1024 * 1024
 """Compressed bytes of log per worker task: large enough to amortise, small for memory."""
-TASKS_PER_WORKER = 8
+TASKS_PER_WORKER = 2
 """Tasks in flight per worker: enough queued work that workers never wait on a parent
 busy with something else (its one-off imports); results are small, so memory stays low."""
 
@@ -318,6 +318,7 @@ def _parallel_results(
     freeze = gc.get_freeze_count() == 0
     if freeze:
         gc.freeze()
+    return_large_frees()
     try:
         with worker_pool(jobs, context, label=f"{path}: a reader worker process") as pool:
             window: list[Future[list[Keyed[ItemT]]]] = []

@@ -229,7 +229,9 @@ class SyncSimConfig(_Strict):
     """Everything `simulate_sync_log` needs; defaults give a 10 s VLP-16 log, 3 cameras."""
 
     seed: int = 0
-    duration_s: float = Field(default=10.0, gt=0.0, le=3_600.0)
+    duration_s: float = Field(default=10.0, gt=0.0, le=4 * 3_600.0)
+    """Up to four hours: a dense two-hour log (two LiDARs, six cameras) takes ~10 GB to
+    simulate (its packet arrays are built whole)."""
     start_time_ns: int = Field(default=1_700_000_000 * NS_PER_S, gt=0)
     """True (host) time of the log start."""
     log_format: LogFormat = "mcap"
