@@ -47,7 +47,7 @@ WORKER_UNIT_BYTES = 16 << 20
 """Payload bytes (images counted whole) per unit of `read_units`, whose reader streams its
 rows: a unit costs ~19 us (its query, its set-up); reading the 2 GB benchmark bag took 0.18
 s of CPU in 1 MiB units (2,693), 0.14 in 4 MiB (539), 0.13 in 16 MiB (130). collect groups
-units into tasks of GROUP_BYTES (24 MB) by their cost."""
+units into tasks of GROUP_BYTES (8 MB) by their cost."""
 INLINE_BYTES = 16 * 1024
 """Wanted payloads up to this size are read with their rows; bigger ones through blob I/O,
 whose opening (~3 us) costs less than a second copy of them."""
