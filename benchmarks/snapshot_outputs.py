@@ -87,7 +87,12 @@ def main() -> int:
                 run(["info", target.name, "--json"], out / f"info-{target.name}.json", logs)
                 run(["audit", target.name, "--json"], out / f"audit-{target.name}.json", logs)
     gate_inputs = [n for n in subjects if n.startswith("sim")]
-    run(["gate", "--init", "-o", "policy.yaml", *gate_inputs], out / "gate-init.txt", logs)
+    # --accept-bad: the simulated logs fail the default policy (issue 24: --init refuses them).
+    run(
+        ["gate", "--init", "--accept-bad", "-o", "policy.yaml", *gate_inputs],
+        out / "gate-init.txt",
+        logs,
+    )
     shutil.copy(logs / "policy.yaml", out / "gate-policy.yaml")
     run(
         ["gate", "--policy", "policy.yaml", "--no-db", "--json-out", "gate.json", *subjects],

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.columns.distinct import distinct
 from syncaudit.columns.lidar import RevolutionColumns
 from syncaudit.columns.runs import run_starts
 from syncaudit.lidar.samples import PacketSamples
@@ -129,12 +129,14 @@ class RevolutionTracker:
     _last_packet_ns: int | None = None
     _gap_median_ns: float = math.nan
     """The last chunk's median packet gap: the likely median of the next."""
-    _zero: dict[int, tuple[int, int, int]] = field(default_factory=dict)
-    _targets: dict[int, NDArray[np.int64]] = field(default_factory=dict)
-    """Per revolution k: each target's crossing time (-1 where not seen)."""
+    _zero: _Rows = field(default_factory=lambda: _Rows(4))
+    """(revolution k, zero-crossing time, its packet's sensor and driver stamps); a later
+    row of the same k replaces an earlier one."""
+    _targets: _Rows = field(default_factory=lambda: _Rows(3))
+    """(revolution k, target index j, crossing time); later rows of a (k, j) replace."""
     _offsets_deg: NDArray[np.float64] | None = None
-    _packets: dict[int, int] = field(default_factory=dict)
-    _dropped: dict[int, int] = field(default_factory=dict)
+    _counts: _Rows = field(default_factory=lambda: _Rows(3))
+    """(revolution k, packets, dropped packets) of each chunk, summed per k at the end."""
     _gaps: list[tuple[int, float, int]] = field(default_factory=list)
     outlier_blocks: int = 0
     """Blocks ignored because their azimuth contradicts the rest of their packet."""
@@ -281,10 +283,7 @@ class RevolutionTracker:
         for i in np.flatnonzero(missing).tolist():
             angle = float((unwrapped[first[i]] - self._zero_oriented) % FULL_TURN_DEG)
             self._gaps.append((int(rev[i]), angle, int(missing[i])))
-        revs, counts, drops = _per_revolution(rev, missing)
-        for k, count, drop in zip(revs.tolist(), counts.tolist(), drops.tolist(), strict=True):
-            self._packets[k] = self._packets.get(k, 0) + count
-            self._dropped[k] = self._dropped.get(k, 0) + drop
+        self._counts.add(*_per_revolution(rev, missing))
         self._last_packet_ns = int(stamps[-1])
 
     def _find_crossings(
@@ -319,21 +318,14 @@ class RevolutionTracker:
         t_cross = _interpolate(angles, unwrapped, times, at)
         zero = j_of == 0
         at_zero = np.minimum(at[zero], packet_of.size - 1)
-        for k, t, p in zip(
-            ks[zero].tolist(), t_cross[zero].tolist(), packet_of[at_zero].tolist(), strict=True
-        ):
-            if p < 0 and self._carry is not None:
-                self._zero[k] = (t, self._carry.packet_sensor_ns, self._carry.packet_driver_ns)
-            else:
-                self._zero[k] = (t, int(sensor_ns[p]), int(driver_ns[p]))
-        target_k, target_j, target_t = ks[~zero], j_of[~zero] - 1, t_cross[~zero]
-        n_targets = offsets.size - 1
-        for k in distinct(target_k).tolist():
-            row = self._targets.get(k)
-            if row is None:
-                row = self._targets[k] = np.full(n_targets, -1, dtype=np.int64)
-            mine = target_k == k
-            row[target_j[mine]] = target_t[mine]
+        packet = packet_of[at_zero]
+        own = np.maximum(packet, 0)
+        zero_sensor, zero_driver = sensor_ns[own], driver_ns[own]
+        if self._carry is not None:  # packet -1: the carried sample's packet
+            zero_sensor = np.where(packet < 0, self._carry.packet_sensor_ns, zero_sensor)
+            zero_driver = np.where(packet < 0, self._carry.packet_driver_ns, zero_driver)
+        self._zero.add(ks[zero], t_cross[zero], zero_sensor, zero_driver)
+        self._targets.add(ks[~zero], j_of[~zero] - 1, t_cross[~zero])
 
     def _offsets(self) -> NDArray[np.float64]:
         """Angle of each boundary past the zero crossing: 0, then each target's."""
@@ -373,7 +365,7 @@ class RevolutionTracker:
             bins.setdefault(round(gap[1] / CROP_BIN_DEG), []).append(gap)
         best = max(bins.values(), key=len)
         revolutions = len({g[0] for g in best})
-        if revolutions < 2 or revolutions < 0.8 * max(len(self._zero), 1):
+        if revolutions < 2 or revolutions < 0.8 * max(self._zero.distinct_keys(), 1):
             return None
         return (
             float(np.median([g[1] for g in best])),
@@ -383,36 +375,106 @@ class RevolutionTracker:
 
     def finish(self) -> RevolutionColumns:
         """Per-revolution columns for every revolution whose start was seen."""
+        zk, zero, zero_sensor, zero_driver = self._zero.last_per_key()
+        # Packets and drops of the revolutions whose start was seen, summed over chunks.
+        ck, counts, drops = self._counts.columns()
+        at, seen = _positions(zk, ck)
+        packets = np.bincount(at[seen], weights=counts[seen], minlength=zk.size).astype(np.int64)
+        dropped = np.bincount(at[seen], weights=drops[seen], minlength=zk.size).astype(np.int64)
         crop = self.cropped_sector()
-        if crop is not None:
+        if crop is not None and zk.size:
             centre = round(crop[0] / CROP_BIN_DEG)
             for k, angle, missing in self._gaps:
-                if round(angle / CROP_BIN_DEG) == centre:
-                    self._dropped[k] -= missing
-        ks = sorted(self._zero)
-        zero = np.array([self._zero[k][0] for k in ks], dtype=np.int64)
-        omega = np.full(len(ks), np.nan)
-        if len(ks) > 1:
-            consecutive = np.diff(np.array(ks)) == 1
+                i = int(np.searchsorted(zk, k))
+                if round(angle / CROP_BIN_DEG) == centre and i < zk.size and zk[i] == k:
+                    dropped[i] -= missing
+        omega = np.full(zk.size, np.nan)
+        if zk.size > 1:
+            consecutive = np.diff(zk) == 1
             period_s = np.diff(zero).astype(np.float64) / 1e9
             omega[:-1] = np.where(consecutive, FULL_TURN_DEG / period_s, np.nan)
         n_targets = len(self.target_azimuth_deg)
-        unseen = np.full(n_targets, -1, dtype=np.int64)
-        crossings = (
-            np.stack([self._targets.get(k, unseen) for k in ks])
-            if ks
-            else np.empty((0, n_targets), dtype=np.int64)
-        )
+        crossings = np.full((zk.size, n_targets), -1, dtype=np.int64)
+        tk, tj, tt = self._targets.last_per_key(keys=2)
+        row, mine = _positions(zk, tk)
+        crossings[row[mine], tj[mine]] = tt[mine]
         return RevolutionColumns(
             zero_crossing_sensor_ns=zero,
             omega_deg_s=omega,
-            packets=np.array([self._packets.get(k, 0) for k in ks], dtype=np.int64),
-            dropped_packets=np.array([self._dropped.get(k, 0) for k in ks], dtype=np.int64),
+            packets=packets,
+            dropped_packets=dropped,
             crossing_sensor_ns=crossings,
             target_azimuth_deg=np.array(self.target_azimuth_deg, dtype=np.float64),
-            zero_packet_sensor_ns=np.array([self._zero[k][1] for k in ks], dtype=np.int64),
-            zero_packet_driver_ns=np.array([self._zero[k][2] for k in ks], dtype=np.int64),
+            zero_packet_sensor_ns=zero_sensor,
+            zero_packet_driver_ns=zero_driver,
         )
+
+
+def _positions(
+    keys: NDArray[np.int64], wanted: NDArray[np.int64]
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """Where each wanted value sits in the sorted distinct `keys`, and whether it is there."""
+    at = np.searchsorted(keys, wanted)
+    if not keys.size:
+        return at, np.zeros(wanted.size, dtype=bool)
+    found: NDArray[np.bool_] = keys[np.minimum(at, keys.size - 1)] == wanted
+    return at, found
+
+
+class _Rows:
+    """Rows of int64 columns appended a chunk at a time, kept as a few numpy arrays: a
+    revolution costs 8 bytes a column (a dict entry of Python ints cost ~10x that)."""
+
+    __slots__ = ("_done", "_parts", "width")
+
+    MERGE_PARTS = 64
+    """Chunks gathered before they are joined into one array per column."""
+
+    def __init__(self, width: int) -> None:
+        self.width = width
+        self._parts: list[tuple[NDArray[np.int64], ...]] = []
+        self._done: tuple[NDArray[np.int64], ...] = tuple(
+            np.empty(0, dtype=np.int64) for _ in range(width)
+        )
+
+    def add(self, *columns: NDArray[Any]) -> None:
+        """Append rows (one array per column, equal lengths; values taken as int64)."""
+        if columns[0].size:
+            self._parts.append(tuple(np.asarray(c).astype(np.int64) for c in columns))
+            if len(self._parts) >= self.MERGE_PARTS:
+                self.columns()
+
+    def columns(self) -> tuple[NDArray[np.int64], ...]:
+        """Every row so far, in the order added, one array per column."""
+        if self._parts:
+            self._done = tuple(
+                np.concatenate([self._done[i], *(p[i] for p in self._parts)])
+                for i in range(self.width)
+            )
+            self._parts = []
+        return self._done
+
+    def last_per_key(self, keys: int = 1) -> tuple[NDArray[np.int64], ...]:
+        """The rows sorted by their first `keys` columns, one per key: the last added."""
+        cols = self.columns()
+        n = cols[0].size
+        if not n:
+            return cols
+        # lexsort sorts by its last key first; ties keep their order, so the last row of
+        # each key is the last of its run.
+        order = np.lexsort((np.arange(n), *reversed(cols[:keys])))
+        ordered = [c[order] for c in cols]
+        last = np.ones(n, dtype=bool)
+        if n > 1:
+            same = np.ones(n - 1, dtype=bool)
+            for c in ordered[:keys]:
+                same &= c[1:] == c[:-1]
+            last[:-1] = ~same
+        return tuple(c[last] for c in ordered)
+
+    def distinct_keys(self) -> int:
+        """Rows with distinct first columns."""
+        return int(np.unique(self.columns()[0]).size)
 
 
 def _per_revolution(
