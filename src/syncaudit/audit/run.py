@@ -323,8 +323,9 @@ def _zero_from_triggers(
     rig: Rig, scanner: LidarScanner, scan: LidarScan, tables: list[CameraTables]
 ) -> tuple[Rig, LidarScan, str | None]:
     """The rig with the zero azimuth guessed from the trigger packets, the revolutions
-    tracked again from it, and the note saying so (the rig and scan as they were, and
-    None, where no trigger packet lies among the LiDAR's packets)."""
+    tracked again from it (where the scanner kept every sample; else the scan as it was,
+    for the caller to read again), and the note saying so (the rig and scan as they
+    were, and None, where no trigger packet lies among the kept packets)."""
     from syncaudit.audit.zero_guess import guess_zero_azimuth
 
     offset = _clock_offset(scan, tables, [])
@@ -337,11 +338,8 @@ def _zero_from_triggers(
     if guess is None:
         return rig, scan, None
     lidar = rig.lidar.model_copy(update={"zero_azimuth_deg": guess.zero_azimuth_deg})
-    return (
-        rig.model_copy(update={"lidar": lidar}),
-        scanner.retracked(lidar.zero_azimuth_deg),
-        (guess.note),
-    )
+    retracked = scanner.retracked(lidar.zero_azimuth_deg) if scanner.kept_all else scan
+    return rig.model_copy(update={"lidar": lidar}), retracked, guess.note
 
 
 def _zero_warning(
@@ -417,6 +415,10 @@ def _audit(
     if scanner.keep_samples:
         rig, scan, note = _zero_from_triggers(rig, scanner, scan, all_tables)
         guessed = guessed if note is None else [*guessed, note]
+        if note is not None and not scanner.kept_all:
+            # A long log: its samples were not all kept (memory stays bounded); its
+            # revolutions are found again by reading it once more with the guessed zero.
+            _, scan, _ = _read(probe, rig, located, jobs=jobs, check_crc=check_crc, warnings=[])
     warnings.extend(scan.warnings)
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)

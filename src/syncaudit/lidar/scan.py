@@ -24,6 +24,10 @@ from syncaudit.logs.parallel import WholeMessages, iter_items
 __all__ = ["LidarScan", "LidarScanner", "PacketExtractor", "packet_samples_of", "scan_lidar"]
 
 
+KEEP_PACKETS = 1_000_000
+"""Packets whose samples a `keep_samples` scanner keeps at most (~40 MB): the first ones
+(at least its first batch); past them it keeps none more and `kept_all` turns False
+(`retracked` then cannot)."""
 FEED_PACKETS = 4096
 """Packets gathered before the tracker and clock run: their numpy work per call is then
 amortised over several scans (or many single-packet messages), memory still bounded."""
@@ -48,8 +52,12 @@ class LidarScanner:
     product_id_model: str = ""
     notes: dict[str, None] = field(default_factory=dict)
     keep_samples: bool = False
-    """Keep every batch fed, so `retracked` can find the revolutions again at another zero
-    azimuth (the audit's guessed one) without reading the log twice: ~40 bytes a packet."""
+    """Keep the batches fed, so `retracked` can find the revolutions again at another zero
+    azimuth (the audit's guessed one) without reading the log twice: ~40 bytes a packet,
+    up to KEEP_PACKETS packets (a longer log is read again instead)."""
+    kept_all: bool = True
+    """Every batch fed is kept (False once KEEP_PACKETS was passed)."""
+    _kept_packets: int = 0
     _pending: list[PacketSamples] = field(default_factory=list)
     _pending_packets: int = 0
     _kept: list[PacketSamples] = field(default_factory=list)
@@ -103,8 +111,12 @@ class LidarScanner:
             return
         batch = concat_samples(self._pending)
         self._pending, self._pending_packets = [], 0
-        if self.keep_samples:
-            self._kept.append(batch)
+        if self.keep_samples and self.kept_all:
+            if not self._kept or self._kept_packets + batch.n_packets <= KEEP_PACKETS:
+                self._kept.append(batch)
+                self._kept_packets += batch.n_packets
+            else:
+                self.kept_all = False
         self.tracker.feed(batch)
         self.clock.feed(batch.driver_stamp_ns, batch.sensor_time_ns)
 
@@ -120,8 +132,8 @@ class LidarScanner:
         Needs `keep_samples`; the result is what a scanner created with that zero azimuth
         gives for the same packets (the same tracker fed the same batches).
         """
-        if not self.keep_samples:
-            raise ValueError("retracked needs a scanner created with keep_samples=True")
+        if not self.keep_samples or not self.kept_all:
+            raise ValueError("retracked needs a scanner that kept every batch (keep_samples)")
         tracker = RevolutionTracker(
             zero_azimuth_deg=zero_azimuth_deg,
             direction=self.tracker.direction,
@@ -132,7 +144,8 @@ class LidarScanner:
         return self._scan(tracker)
 
     def packet_azimuth_deg(self, sensor_ns: NDArray[np.int64]) -> NDArray[np.float64]:
-        """The packet azimuth at each sensor time, between the kept samples (NaN outside them).
+        """The packet azimuth at each sensor time, between the kept samples (NaN outside
+        them, e.g. past the first KEEP_PACKETS packets).
 
         The forward step between the two samples around a time is interpolated, so a
         time at a sample is that sample's azimuth; a step of 90 deg or more (a gap) is NaN.
