@@ -81,3 +81,52 @@ def test_replay_moves_the_base_by_the_window_median() -> None:
     assert replay.errors_ns[:5].tolist() == [300_000.0] * 5
     assert replay.errors_ns[5:].tolist() == [0.0] * (n - 5)
     assert replay.delays_ns[5] == 10_000_000.0 - 300_000.0
+
+
+def _exhaustive(
+    error: np.ndarray, applied: np.ndarray, exposure: np.ndarray
+) -> tuple[tuple[int, int, float], list[float]]:
+    """The grid's choice with every setting replayed in full (the rule as documented)."""
+    import itertools
+    import math
+
+    from syncaudit.analysis import feedforward as ff
+
+    best, best_key = None, (math.inf, math.inf, math.inf)
+    for setting in itertools.product(ff.WINDOWS, ff.DEADBANDS_NS, ff.TREND_GAINS):
+        replay = replay_feedforward(error, applied, exposure, FeedForwardConfig(*setting))
+        var = replay.error_var_ns2
+        key = (
+            round(replay.error_mean_ns, -2),
+            var if math.isfinite(var) else math.inf,
+            float(replay.adjustments),
+        )
+        if best is None or key < best_key:
+            best, best_key = (setting, replay.errors_ns.tolist()), key
+    assert best is not None
+    return best
+
+
+@pytest.mark.parametrize("case", ["tunnel", "calm", "constant", "step"])
+def test_the_pruned_grid_chooses_what_the_full_grid_chooses(case: str) -> None:
+    """Settings stopped early (Eq. 5 surely worse) never change the choice or its replay."""
+    from syncaudit.analysis.feedforward import best_feedforward
+
+    rng = np.random.default_rng(11)
+    n = 3000
+    t = np.arange(n, dtype=np.float64)
+    exposure = np.full(n, 2e6)
+    if case == "tunnel":
+        exposure += 10e6 * (np.clip((t - 900) / 60, 0, 1) - np.clip((t - 1800) / 60, 0, 1))
+    applied = np.full(n, 1e7)
+    error = {
+        "tunnel": exposure / 2 + rng.normal(size=n) * 6e4,
+        "calm": rng.normal(size=n) * 3e4,
+        "constant": np.full(n, 2.5e5),
+        "step": np.where(t > n / 3, 4e5, -1e5) + rng.normal(size=n) * 2e4,
+    }[case]
+    chosen = best_feedforward(error, applied, exposure)
+    setting, errors = _exhaustive(error, applied, exposure)
+    c = chosen.config
+    assert (c.window_frames, c.deadband_ns, c.trend_gain) == setting
+    assert chosen.errors_ns.tolist() == errors

@@ -87,6 +87,20 @@ def replay_feedforward(
     leave the dead band: at least half the window beyond the band on one side (counted as
     frames enter and leave), which most frames of a calm loop are not.
     """
+    replay = _replay(error_ns, applied_ns, exposure_ns, config, math.inf)
+    assert replay is not None
+    return replay
+
+
+def _replay(
+    error_ns: NDArray[np.float64],
+    applied_ns: NDArray[np.float64],
+    exposure_ns: NDArray[np.float64],
+    config: FeedForwardConfig,
+    give_up_above_ns: float,
+) -> FeedForwardReplay | None:
+    """`replay_feedforward`, or None as soon as the sum of |error| passes `give_up_above_ns`
+    (the replay can then no longer be the grid's best)."""
     n = len(error_ns)
     if not n:
         return FeedForwardReplay(config, np.empty(0), np.empty(0), 0)
@@ -100,11 +114,15 @@ def replay_feedforward(
     window: list[float] = []
     above = below = 0  # frames of the window past +band / -band
     adjustments = 0
+    total = 0.0
     for i in range(n):
         delay = applied[0] if i == 0 else base - feed[i]
         corrected = err[i] + (delay - applied[i])
         delays[i] = delay
         errors[i] = corrected
+        total += abs(corrected)
+        if total > give_up_above_ns:
+            return None
         if len(window) == size:
             old = window.pop(0)
             above -= old > band
@@ -154,13 +172,29 @@ def best_feedforward(
     exposure_ns: NDArray[np.float64],
 ) -> FeedForwardReplay:
     """Our controller with the parameters (of a small grid) that give this log the lowest
-    Eq. 5, ties broken by Eq. 6 then by the fewest bias changes."""
+    Eq. 5, ties broken by Eq. 6 then by the fewest bias changes.
+
+    A setting whose running sum of |error| shows its Eq. 5 more than 101 ns above a known
+    one's is stopped there: rounded to 0.1 us its Eq. 5 is then strictly worse, so it
+    cannot be chosen (the choice is the full grid's, in its order). The known one is first
+    PROBE, a usual winner, then the best so far.
+    """
+    n = len(error_ns)
+    settings = list(itertools.product(WINDOWS, DEADBANDS_NS, TREND_GAINS))
+    done: dict[tuple[int, int, float], FeedForwardReplay] = {}
+    bound = math.inf
+    if n:
+        probe = replay_feedforward(error_ns, applied_ns, exposure_ns, FeedForwardConfig(*PROBE))
+        done[PROBE] = probe
+        bound = (probe.error_mean_ns + PRUNE_MARGIN_NS) * n
     best: FeedForwardReplay | None = None
     best_key = (math.inf, math.inf, math.inf)
-    for window, band, gain in itertools.product(WINDOWS, DEADBANDS_NS, TREND_GAINS):
-        replay = replay_feedforward(
-            error_ns, applied_ns, exposure_ns, FeedForwardConfig(window, band, gain)
+    for setting in settings:
+        replay = done.get(setting) or _replay(
+            error_ns, applied_ns, exposure_ns, FeedForwardConfig(*setting), bound
         )
+        if replay is None:
+            continue
         var = replay.error_var_ns2
         key = (
             round(replay.error_mean_ns, -2),  # 0.1 us: prefer the calmer among equals
@@ -169,5 +203,13 @@ def best_feedforward(
         )
         if best is None or key < best_key:
             best, best_key = replay, key
+            if n:
+                bound = min(bound, (replay.error_mean_ns + PRUNE_MARGIN_NS) * n)
     assert best is not None
     return best
+
+
+PROBE = (10, 100_000, 0.5)
+"""The setting replayed first, to stop clearly worse ones early."""
+PRUNE_MARGIN_NS = 101.0
+"""Eq. 5 this far above a known setting's rounds (to 0.1 us) strictly above it."""
