@@ -57,6 +57,8 @@ class Ground:
     offset_m: float
     sigma_deg: float
     sigma_m: float
+    spread_deg: float = 0.0
+    """Median angle of the per-stop normals from `normal` (how flat the ground is)."""
 
 
 @dataclass(frozen=True)

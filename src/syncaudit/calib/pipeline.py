@@ -134,9 +134,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         joint, joint_extrinsics_out = joint_extrinsics(
             lidars, reference, recorded, baseline, odometry, config
         )
-    if joint.chosen:
-        extrinsics = joint_extrinsics_out
-    elif joint.reason:
+    extrinsics = joint_extrinsics_out
+    if joint.reason:
         notes.append(f"joint graph not used: {joint.reason}")
     with timer.stage("top_views"):
         tops = top_views(lidars, anchors, extrinsics, recorded)
