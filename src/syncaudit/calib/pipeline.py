@@ -28,8 +28,10 @@
 7. validate against the recorded extrinsic: rotation and translation difference, pass/fail;
 8. the joint estimate (`joint_estimate`): every LiDAR's stop alignments, the odometry and
    the ground planes in one graph with the extrinsics as unknowns (a stop one LiDAR saw
-   still places the vehicle), refined map to map on its poses; chosen over steps 5-6 (the
-   baseline, also reported) unless it leaves a direction free, which it then names.
+   still places the vehicle), cross-LiDAR stop pairs, map to map on its poses where a
+   direction is still free; per LiDAR, chosen over steps 5-6 (the baseline, also
+   reported) unless it leaves a direction free (which it then names) or the baseline's
+   maps agree clearly better on its own poses (`map_consistency`; never the truth).
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
