@@ -71,10 +71,10 @@ class SceneConfig(ConfigModel):
     corridor: flat ground between two long parallel walls (both degenerate); parking_lot:
     rows of parked cars with gaps, lamp posts and a building on one side, no enclosing walls;
     parking_lot_open: the same with cars on one side of the aisle only (the other LiDAR sees
-    open tarmac at several stops); parking_lot_facing: the one-sided lot laid along the
-    vehicle's start heading (not rotated at random) and, in `calib_scene_config`, driven with
-    8-16 deg turns, so one LiDAR faces the cars at every stop and a rear-facing one sees them
-    only at the first few (open tarmac at most stops)."""
+    open tarmac at several stops); parking_lot_facing: the one-sided lot with its aisle 30 deg
+    left of the vehicle's start heading (not rotated at random) and, in
+    `calib_scene_config`, driven with 8-16 deg left turns, so a front LiDAR sees the cars at
+    every stop and a rear-facing one only at the first few (open tarmac at most stops)."""
     yard_size_m: tuple[float, float] = (26.0, 20.0)
     n_boxes: int = Field(default=8, ge=0, le=200)
     n_poles: int = Field(default=10, ge=0, le=200)

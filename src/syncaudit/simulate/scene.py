@@ -241,6 +241,10 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
 _CAR_SLOT_M = 2.6
 _CAR_LENGTH_M = 4.6
 _CAR_OCCUPANCY = 0.7
+_FACING_YAW_DEG = 30.0
+"""`parking_lot_facing`: the aisle 30 deg left of the vehicle's start heading, so a
+rear-facing LiDAR sees the cars (obliquely, down the aisle) at the first few stops of a
+left-turning drive and the front one faces them from then on."""
 
 
 def _parking_lot(config: SceneConfig, rng: np.random.Generator) -> Scene:
@@ -248,14 +252,18 @@ def _parking_lot(config: SceneConfig, rng: np.random.Generator) -> Scene:
     vehicle drives in, back-to-back rows behind them, lamp posts between those, a
     building along one long side and nothing else (no enclosing walls: the far field is
     open tarmac). `parking_lot_open` keeps only the cars on one side (y > 0) of the aisle;
-    `parking_lot_facing` too, and is not rotated at random (its aisle along the world x
-    within a few degrees, the cars on the +y side).
+    `parking_lot_facing` too, and is not rotated at random (its aisle 30 deg left of the
+    world x within a few degrees, the cars on its +y side).
 
     The lot is rotated and shifted at random as a whole; the aisle runs along its x.
     """
     size_x, size_y = config.yard_size_m
     facing = config.kind == "parking_lot_facing"
-    lot_yaw = float(rng.normal(0.0, 0.05)) if facing else float(rng.uniform(-math.pi, math.pi))
+    lot_yaw = (
+        math.radians(_FACING_YAW_DEG) + float(rng.normal(0.0, 0.05))
+        if facing
+        else float(rng.uniform(-math.pi, math.pi))
+    )
     offset = rng.uniform(-0.5, 0.5, size=2)
     rot2 = rigid.yaw_matrix(lot_yaw)[:2, :2]
 
