@@ -38,11 +38,14 @@ stops (common to all LiDARs) cancels: the turntable angle is never needed, only
 estimated, to choose stops and seed registrations. The recorded extrinsics seed the
 coarse turn chain and the map-to-map GICP; the result does not otherwise depend on them.
 
-Each stage is a module of its own, and this one only calls them in order: `loading` (step
-1), `stops` and `degeneracy` (2), `turnchain` (3), `pairs` and `crosscheck` (4; the
-cross-LiDAR check compares the vehicle motions the LiDARs' pairs imply), `links` and
-`stopgraph` (5), `maptomap` (6, 7), `summary` and `outcome` (the result and its reasons).
-They share one `state.LidarState` per LiDAR.
+Each stage is a package of its own, and this module only calls them in order:
+`selection` (`loading`: step 1; `stops`, `stop_choice`, `degeneracy`: 2), `alignment`
+(`turnchain`: 3; `registration`, `pairs`, `crosscheck`, `consensus`: 4; `crosspairs`: 8),
+`graph` (`links`, `stopgraph`, `posegraph`, `lidar_summary`: 5; `jointgraph`,
+`vehicle_up`: 8), `refinement` (`maptomap`: 6-7; `joint_estimate`: 8) and `validation`
+(`map_consistency`: the choice in 8; `outcome`, `top_view_points`: the result and its
+reasons). They share one `state.LidarState` per LiDAR; `se3`, `io`, `extrinsics`,
+`settings` and `result` serve every stage.
 """
 
 from __future__ import annotations
@@ -51,13 +54,26 @@ from pathlib import Path
 
 import numpy as np
 
-from syncaudit.calib import io, posegraph
-from syncaudit.calib.crosscheck import cross_check
-from syncaudit.calib.degeneracy import degenerate_scene
-from syncaudit.calib.joint_estimate import joint_extrinsics
-from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
-from syncaudit.calib.maptomap import extrinsic, map_at
-from syncaudit.calib.outcome import (
+from syncaudit.calib import io
+from syncaudit.calib.alignment.crosscheck import cross_check
+from syncaudit.calib.alignment.pairs import align_pairs
+from syncaudit.calib.alignment.registration import backend
+from syncaudit.calib.alignment.turnchain import angular_chain
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.graph.stopgraph import graph_lidars
+from syncaudit.calib.refinement.joint_estimate import joint_extrinsics
+from syncaudit.calib.refinement.maptomap import extrinsic, map_at
+from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.selection.degeneracy import degenerate_scene
+from syncaudit.calib.selection.loading import (
+    choose_topics,
+    read_scans,
+    recorded_extrinsics,
+)
+from syncaudit.calib.selection.stops import find_stops, provisional_reference
+from syncaudit.calib.settings import CalibConfig
+from syncaudit.calib.state import LidarState
+from syncaudit.calib.validation.outcome import (
     Timer,
     library_versions,
     lidar_out,
@@ -67,14 +83,6 @@ from syncaudit.calib.outcome import (
     stops_out,
     top_views,
 )
-from syncaudit.calib.pairs import align_pairs
-from syncaudit.calib.registration import backend
-from syncaudit.calib.result import CalibrationResult
-from syncaudit.calib.settings import CalibConfig
-from syncaudit.calib.state import LidarState
-from syncaudit.calib.stopgraph import graph_lidars
-from syncaudit.calib.stops import find_stops, provisional_reference
-from syncaudit.calib.turnchain import angular_chain
 
 
 def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:

@@ -12,7 +12,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import Alignment, Conditioning, Fit
+from syncaudit.calib.alignment.registration import Alignment, Conditioning, Fit
 from syncaudit.calib.se3 import Mat
 
 
