@@ -104,6 +104,12 @@ def _run(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[st
             rot_deg, trans_m = se3.transform_difference(true, np.array(ext.result.matrix))
             row[f"{key}rot_deg"], row[f"{key}trans_cm"] = rot_deg, trans_m * 100.0
     row["method"] = "joint" if result.joint is not None and result.joint.chosen else "baseline"
+    selection = result.joint.selection if result.joint is not None else []
+    row["why"] = selection[0].criterion if selection else "no joint estimate"
+    costs = [selection[0].joint_map_cost_m2, selection[0].baseline_map_cost_m2] if selection else []
+    row["cost_ratio"] = costs[1] / costs[0] if len(costs) == 2 and None not in costs else None
+    up = result.joint.up if result.joint is not None else None
+    row["up"] = up.source if up is not None else None
     if not keep:
         for extra in path.parent.glob(path.name + "*"):
             extra.unlink()
@@ -135,7 +141,8 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
     print(
         f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
         f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s} "
-        f"{'base rot':>8s} {'base cm':>7s} {'worse':>5s}  target  verdict"
+        f"{'base rot':>8s} {'base cm':>7s} {'jnt rot':>8s} {'jnt cm':>7s} {'worse':>5s} "
+        f"{'chosen':>10s}  target  verdict"
     )
     for case in cases:
         mine = [r for r in rows if r["case"] == case]
@@ -149,6 +156,11 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
         base_rot = max((r["base_rot_deg"] for r in base), default=float("nan"))
         base_cm = max((r["base_trans_cm"] for r in base), default=float("nan"))
         worse = sum(1 for r in mine if _worse_than_baseline(r))
+        joint = [r for r in mine if r.get("joint_rot_deg") is not None]
+        joint_rot = max((r["joint_rot_deg"] for r in joint), default=float("nan"))
+        joint_cm = max((r["joint_trans_cm"] for r in joint), default=float("nan"))
+        picked = [r.get("method") for r in mine]
+        chosen = f"J{picked.count('joint')}/B{picked.count('baseline')}"
         good = (
             len(done) == len(mine)
             and max(rot) <= lim_rot
@@ -161,7 +173,8 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
             f"{case:24s} {len(mine):3d} {max(rot):8.4f} {statistics.median(rot):8.4f} "
             f"{max(cm):7.3f} {statistics.median(cm):7.3f} {max(walls):8.1f} "
             f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f} "
-            f"{base_rot:8.4f} {base_cm:7.3f} {worse:5d}  "
+            f"{base_rot:8.4f} {base_cm:7.3f} {joint_rot:8.4f} {joint_cm:7.3f} {worse:5d} "
+            f"{chosen:>10s}  "
             f"{lim_rot}/{lim_cm}  {'OK' if good else 'MISSED'}"
             + ("" if len(done) == len(mine) else f" ({len(mine) - len(done)} not calibrated)")
         )
@@ -298,7 +311,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(
                     f"{case} seed {seed}: wall {row['wall_s']:5.1f} s, cpu {row['cpu_s']:5.1f} s;"
                     f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f};"
-                    f" {row['method']}; baseline {base}",
+                    f" {row['method']} ({row['why']}; baseline/joint map cost"
+                    f" {row['cost_ratio'] if row['cost_ratio'] is None else round(row['cost_ratio'], 5)};"
+                    f" up from {row['up']}); baseline {base}",
                     flush=True,
                 )
                 for note in row["cross_check"]:

@@ -11,9 +11,6 @@ import pytest
 
 from syncaudit.calib import se3
 from syncaudit.calib.io import decode_xyz, pointcloud2_dtype
-from syncaudit.calib.registration import prepare
-from syncaudit.calib.settings import CalibConfig
-from syncaudit.calib.turnchain import verify_turn
 from syncaudit.errors import LogReadError, NoDataError
 
 
@@ -100,69 +97,3 @@ def test_decode_rejects_broken_clouds() -> None:
     with pytest.raises(NoDataError, match="x/y/z"):
         decode_xyz(_cloud([("a", 0, 7, 1)], bytes(4), 1, 1, 4, 4), "/t")
     assert decode_xyz(_cloud(fields, b"", 0, 1, 12, 0), "/t").shape == (0, 3)
-
-
-def test_a_coarse_turn_that_tilts_or_rises_is_not_a_drive_on_level_ground() -> None:
-    """The turn chain's second criterion refuses a motion no vehicle on level ground makes
-    (a yaw search that converged upside down: tilt 179 deg, as measured on a
-    diagonal-mount drive) before looking at the scans; a level turn is judged on them."""
-    rng = np.random.default_rng(5)
-    walls = [
-        np.column_stack([rng.uniform(-8, 8, 400), np.full(400, y), rng.uniform(0, 3, 400)])
-        for y in (-6.0, 6.0)
-    ] + [
-        np.column_stack([np.full(400, x), rng.uniform(-6, 6, 400), rng.uniform(0, 3, 400)])
-        for x in (-8.0, 8.0)
-    ]
-    cloud = prepare(np.concatenate(walls), 0.5, 20, 1)
-    config = CalibConfig()
-    flipped = se3.make_transform(se3.rpy_to_matrix(math.pi, 0.0, 0.4), (0.1, 0.6, 3.84))
-    why = verify_turn((cloud, cloud), (cloud, cloud), flipped, config)
-    assert why == "not a motion on level ground (the base tilts 180.0 deg)"
-    tilted = se3.make_transform(se3.rpy_to_matrix(0.0, math.radians(12.0), 0.5), (0.3, 0.1, 0.0))
-    assert verify_turn((cloud, cloud), (cloud, cloud), tilted, config) == (
-        "not a motion on level ground (the base tilts 12.0 deg)"
-    )
-    assert verify_turn((cloud, cloud), (cloud, cloud), np.eye(4), config) is None
-    free = config.model_copy(
-        update={"pose_graph": config.pose_graph.model_copy(update={"motion": "free"})}
-    )
-    assert not (verify_turn((cloud, cloud), (cloud, cloud), flipped, free) or "").startswith(
-        "not a motion on level ground"
-    )
-
-
-def test_turn_axis_leaves_out_an_alignment_that_tilts_out_of_the_plane() -> None:
-    """A planar vehicle's turns are rotations about one axis: an alignment tilted 0.9 deg
-    out of that plane (as an 11 %-overlap one on a bumper drive was) must not pull the
-    axis, while small per-alignment noise (0.03 deg) is averaged, not refused."""
-    from syncaudit.calib import posegraph
-
-    rng = np.random.default_rng(3)
-    tilt = se3.rpy_to_matrix(math.radians(0.4), math.radians(1.7), math.radians(0.9))
-    axis = tilt.T @ np.array([0.0, 0.0, 1.0])
-    yaws_deg = [0.0, 38.0, 71.0, 104.0, 140.0, 175.0, 212.0, 249.0]
-
-    def edge(a: int, b: int, extra_deg: float) -> posegraph.Edge:
-        turn = math.radians(yaws_deg[b] - yaws_deg[a])
-        noise = rng.normal(size=3)
-        noise *= math.radians(0.03) / float(np.linalg.norm(noise))
-        across = np.cross(axis, [1.0, 0.0, 0.0])
-        rot = (
-            se3.axis_angle_about(across, math.radians(extra_deg))
-            if extra_deg
-            else se3.axis_angle_about(noise, float(np.linalg.norm(noise)))
-        ) @ se3.axis_angle_about(axis, turn)
-        return posegraph.Edge(a, b, se3.make_transform(rot, (0.2, 0.1, 0.0)), np.eye(6), 1.0)
-
-    good = [edge(a, a + 1, 0.0) for a in range(7)] + [edge(a, a + 2, 0.0) for a in range(0, 6, 2)]
-    bad = edge(3, 5, 0.9)
-    hint = axis + np.array([0.05, 0.0, 0.0])
-
-    def error_deg(found: Any) -> float:
-        return math.degrees(math.acos(min(1.0, float(found @ axis))))
-
-    assert posegraph.tilting_edges(good, axis, hint) == []
-    assert error_deg(posegraph.turn_axis(good, hint)) < 0.01
-    assert posegraph.tilting_edges([*good, bad], axis, hint) == [(3, 5)]
-    assert error_deg(posegraph.turn_axis([*good, bad], hint)) < 0.01

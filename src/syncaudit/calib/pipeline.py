@@ -28,19 +28,24 @@
 7. validate against the recorded extrinsic: rotation and translation difference, pass/fail;
 8. the joint estimate (`joint_estimate`): every LiDAR's stop alignments, the odometry and
    the ground planes in one graph with the extrinsics as unknowns (a stop one LiDAR saw
-   still places the vehicle), refined map to map on its poses; chosen over steps 5-6 (the
-   baseline, also reported) unless it leaves a direction free, which it then names.
+   still places the vehicle), cross-LiDAR stop pairs, map to map on its poses where a
+   direction is still free; per LiDAR, chosen over steps 5-6 (the baseline, also
+   reported) unless it leaves a direction free (which it then names) or the baseline's
+   maps agree clearly better on its own poses (`map_consistency`; never the truth).
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
 estimated, to choose stops and seed registrations. The recorded extrinsics seed the
 coarse turn chain and the map-to-map GICP; the result does not otherwise depend on them.
 
-Each stage is a module of its own, and this one only calls them in order: `loading` (step
-1), `stops` and `degeneracy` (2), `turnchain` (3), `pairs` and `crosscheck` (4; the
-cross-LiDAR check compares the vehicle motions the LiDARs' pairs imply), `links` and
-`stopgraph` (5), `maptomap` (6, 7), `summary` and `outcome` (the result and its reasons).
-They share one `state.LidarState` per LiDAR.
+Each stage is a package of its own, and this module only calls them in order:
+`selection` (`loading`: step 1; `stops`, `stop_choice`, `degeneracy`: 2), `alignment`
+(`turnchain`: 3; `registration`, `pairs`, `crosscheck`, `consensus`: 4; `crosspairs`: 8),
+`graph` (`links`, `stopgraph`, `posegraph`, `lidar_summary`: 5; `jointgraph`,
+`vehicle_up`: 8), `refinement` (`maptomap`: 6-7; `joint_estimate`: 8) and `validation`
+(`map_consistency`: the choice in 8; `outcome`, `top_view_points`: the result and its
+reasons). They share one `state.LidarState` per LiDAR; `se3`, `io`, `extrinsics`,
+`settings` and `result` serve every stage.
 """
 
 from __future__ import annotations
@@ -49,13 +54,26 @@ from pathlib import Path
 
 import numpy as np
 
-from syncaudit.calib import io, posegraph
-from syncaudit.calib.crosscheck import cross_check
-from syncaudit.calib.degeneracy import degenerate_scene
-from syncaudit.calib.joint_estimate import joint_extrinsics
-from syncaudit.calib.loading import choose_topics, read_scans, recorded_extrinsics
-from syncaudit.calib.maptomap import extrinsic, map_at
-from syncaudit.calib.outcome import (
+from syncaudit.calib import io
+from syncaudit.calib.alignment.crosscheck import cross_check
+from syncaudit.calib.alignment.pairs import align_pairs
+from syncaudit.calib.alignment.registration import backend
+from syncaudit.calib.alignment.turnchain import angular_chain
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.graph.stopgraph import graph_lidars
+from syncaudit.calib.refinement.joint_estimate import joint_extrinsics
+from syncaudit.calib.refinement.maptomap import extrinsic, map_at
+from syncaudit.calib.result import CalibrationResult
+from syncaudit.calib.selection.degeneracy import degenerate_scene
+from syncaudit.calib.selection.loading import (
+    choose_topics,
+    read_scans,
+    recorded_extrinsics,
+)
+from syncaudit.calib.selection.stops import find_stops, provisional_reference
+from syncaudit.calib.settings import CalibConfig
+from syncaudit.calib.state import LidarState
+from syncaudit.calib.validation.outcome import (
     Timer,
     library_versions,
     lidar_out,
@@ -65,14 +83,6 @@ from syncaudit.calib.outcome import (
     stops_out,
     top_views,
 )
-from syncaudit.calib.pairs import align_pairs
-from syncaudit.calib.registration import backend
-from syncaudit.calib.result import CalibrationResult
-from syncaudit.calib.settings import CalibConfig
-from syncaudit.calib.state import LidarState
-from syncaudit.calib.stopgraph import graph_lidars
-from syncaudit.calib.stops import find_stops, provisional_reference
-from syncaudit.calib.turnchain import angular_chain
 
 
 def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
@@ -134,9 +144,8 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
         joint, joint_extrinsics_out = joint_extrinsics(
             lidars, reference, recorded, baseline, odometry, config
         )
-    if joint.chosen:
-        extrinsics = joint_extrinsics_out
-    elif joint.reason:
+    extrinsics = joint_extrinsics_out
+    if joint.reason:
         notes.append(f"joint graph not used: {joint.reason}")
     with timer.stage("top_views"):
         tops = top_views(lidars, anchors, extrinsics, recorded)

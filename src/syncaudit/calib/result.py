@@ -12,7 +12,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import Alignment, Conditioning, Fit
+from syncaudit.calib.alignment.registration import Alignment, Conditioning, Fit
 from syncaudit.calib.se3 import Mat
 
 
@@ -264,11 +264,37 @@ class JointLidarOut(_Out):
     accepted)."""
 
 
+class SelectionOut(_Out):
+    """Which estimate one LiDAR's extrinsic comes from, and the data that chose it."""
+
+    topic: str
+    method: str
+    """"joint" or "baseline"."""
+    criterion: str
+    """How the method was chosen (never from a truth: the map costs, or why not them)."""
+    joint_map_cost_m2: float | None
+    baseline_map_cost_m2: float | None
+    """Two-way truncated point-to-plane cost of the two LiDARs' maps on each estimate's
+    own poses, over the stops both estimates placed (`calib.map_consistency`)."""
+
+
+class VehicleUpOut(_Out):
+    """The axis the joint graph's planar prior keeps the vehicle turning about."""
+
+    source: str
+    """"turn axis", "ground plane" or "recorded" (`calib.vehicle_up`)."""
+    axis: tuple[float, float, float]
+    """Unit vector in the reference LiDAR's frame."""
+    turn_axis_error_deg: float | None
+    ground_spread_deg: float | None
+
+
 class JointOut(_Out):
     """The joint graph: every LiDAR's stop alignments and the extrinsics solved together."""
 
     chosen: bool
-    """Whether `extrinsics` holds this estimate (else the baseline's)."""
+    """Whether `extrinsics` holds this estimate for every LiDAR (`selection` says which
+    estimate each LiDAR's comes from)."""
     stops: list[int]
     """Vehicle stops the graph placed."""
     links: dict[str, int]
@@ -279,6 +305,12 @@ class JointOut(_Out):
     iterations: int
     reason: str | None
     """Why it could not calibrate (free directions, by which stops), or None."""
+    selection: list[SelectionOut] = []
+    """Per LiDAR, the estimate `extrinsics` holds and why."""
+    refinement_rounds: int = 0
+    up: VehicleUpOut | None = None
+    """The vehicle's up the planar prior used, and why."""
+    """Map-to-map refinements of the joint poses solved before they stopped moving."""
 
 
 class VehicleStopOut(_Out):

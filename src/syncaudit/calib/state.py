@@ -8,8 +8,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import posegraph, se3
-from syncaudit.calib.registration import Alignment, Cloud
+from syncaudit.calib import se3
+from syncaudit.calib.alignment.registration import Alignment, Cloud
+from syncaudit.calib.graph import posegraph
 from syncaudit.calib.result import PairOut, PoseGraphOut
 
 F64 = NDArray[np.float64]

@@ -59,12 +59,22 @@ class LidarSimConfig(ConfigModel):
 class SceneConfig(ConfigModel):
     """What the ray-cast calibration environment contains."""
 
-    kind: Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"] = "yard"
+    kind: Literal[
+        "yard",
+        "ground_and_wall",
+        "corridor",
+        "parking_lot",
+        "parking_lot_open",
+        "parking_lot_facing",
+    ] = "yard"
     """yard: walls, boxes and poles; ground_and_wall: flat ground and one long wall;
     corridor: flat ground between two long parallel walls (both degenerate); parking_lot:
     rows of parked cars with gaps, lamp posts and a building on one side, no enclosing walls;
     parking_lot_open: the same with cars on one side of the aisle only (the other LiDAR sees
-    open tarmac at most stops)."""
+    open tarmac at several stops); parking_lot_facing: the one-sided lot with its aisle 30 deg
+    left of the vehicle's start heading (not rotated at random) and, in
+    `calib_scene_config`, driven with 8-16 deg left turns, so a front LiDAR sees the cars at
+    every stop and a rear-facing one only at the first few (open tarmac at most stops)."""
     yard_size_m: tuple[float, float] = (26.0, 20.0)
     n_boxes: int = Field(default=8, ge=0, le=200)
     n_poles: int = Field(default=10, ge=0, le=200)
@@ -291,7 +301,9 @@ class CalibSceneConfig(ConfigModel):
         return self.sweep_deg / (self.n_stops - 1)
 
 
-SceneKind = Literal["yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open"]
+SceneKind = Literal[
+    "yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open", "parking_lot_facing"
+]
 """The scene kinds `SceneConfig.kind` accepts."""
 
 
@@ -329,6 +341,8 @@ def calib_scene_config(
         scene_config = SceneConfig(kind=scene, yard_size_m=(30.0, 24.0), clear_radius_m=6.0)
     else:
         scene_config = SceneConfig(kind=scene)
+    # The facing lot keeps the vehicle's heading within ~130 deg of its start over 12 stops.
+    path = {"turn_deg_range": (8.0, 16.0)} if scene == "parking_lot_facing" else {}
     return CalibSceneConfig(
         seed=seed,
         motion=motion,
@@ -337,4 +351,5 @@ def calib_scene_config(
         lidars=lidars,
         tf_chain=tf_chain,
         odometry=odometry,
+        **path,
     )

@@ -114,11 +114,20 @@ MATRIX: dict[str, dict[str, Any]] = {
         "scene": "parking_lot_open",
         "n_stops": 12,
     },
+    "parking-64-facing-bumper": {
+        "beams": 64,
+        "mount": "bumper_front_rear",
+        "motion": "drive",
+        "scene": "parking_lot_facing",
+        "n_stops": 15,
+    },
 }
 """The calibration test matrix: `calib_scene_config` arguments per case (add `seed`; a case
 naming `n_stops` keeps its own count). The parking-lot cases (issue 29) have no enclosing
-walls; in `parking-64-open-bumper` only one side of the aisle holds cars, so at most stops
-one LiDAR sees open tarmac."""
+walls; in `parking-64-open-bumper` only one side of the aisle holds cars, so at several
+stops one LiDAR sees open tarmac; in `parking-64-facing-bumper` the front LiDAR sees the
+cars at every stop and the rear one only at the first few (seed 0: its graph placed 5 of
+the 15 stops; open tarmac at the rest): most stops are seen well by one LiDAR only."""
 
 _NS = 1_000_000_000
 _LOG_LATENCY_NS = 4_000_000

@@ -197,7 +197,7 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
             center = (-side * half_m * math.sin(yaw), side * half_m * math.cos(yaw), 1.5)
             walls.append(Box(center, (80.0, 0.3, 3.0), yaw, "wall", 0.5))
         return Scene(boxes=tuple(walls), poles=())
-    if config.kind in ("parking_lot", "parking_lot_open"):
+    if config.kind in ("parking_lot", "parking_lot_open", "parking_lot_facing"):
         return _parking_lot(config, rng)
     size_x, size_y = config.yard_size_m
     yard_yaw = float(rng.uniform(-math.pi, math.pi))
@@ -241,18 +241,29 @@ def build_scene(config: SceneConfig, rng: np.random.Generator) -> Scene:
 _CAR_SLOT_M = 2.6
 _CAR_LENGTH_M = 4.6
 _CAR_OCCUPANCY = 0.7
+_FACING_YAW_DEG = 30.0
+"""`parking_lot_facing`: the aisle 30 deg left of the vehicle's start heading, so a
+rear-facing LiDAR sees the cars (obliquely, down the aisle) at the first few stops of a
+left-turning drive and the front one faces them from then on."""
 
 
 def _parking_lot(config: SceneConfig, rng: np.random.Generator) -> Scene:
     """Rows of nose-in parked cars (70 % of slots taken) either side of the aisle the
     vehicle drives in, back-to-back rows behind them, lamp posts between those, a
     building along one long side and nothing else (no enclosing walls: the far field is
-    open tarmac). `parking_lot_open` keeps only the cars on one side (y > 0) of the aisle.
+    open tarmac). `parking_lot_open` keeps only the cars on one side (y > 0) of the aisle;
+    `parking_lot_facing` too, and is not rotated at random (its aisle 30 deg left of the
+    world x within a few degrees, the cars on its +y side).
 
     The lot is rotated and shifted at random as a whole; the aisle runs along its x.
     """
     size_x, size_y = config.yard_size_m
-    lot_yaw = float(rng.uniform(-math.pi, math.pi))
+    facing = config.kind == "parking_lot_facing"
+    lot_yaw = (
+        math.radians(_FACING_YAW_DEG) + float(rng.normal(0.0, 0.05))
+        if facing
+        else float(rng.uniform(-math.pi, math.pi))
+    )
     offset = rng.uniform(-0.5, 0.5, size=2)
     rot2 = rigid.yaw_matrix(lot_yaw)[:2, :2]
 
@@ -263,7 +274,7 @@ def _parking_lot(config: SceneConfig, rng: np.random.Generator) -> Scene:
     boxes: list[Box] = []
     poles: list[Pole] = []
     first_row_m = config.clear_radius_m + 2.5 + _CAR_LENGTH_M / 2.0
-    sides = (1.0,) if config.kind == "parking_lot_open" else (1.0, -1.0)
+    sides = (1.0,) if config.kind in ("parking_lot_open", "parking_lot_facing") else (1.0, -1.0)
     n_slots = int((size_x - 4.0) // _CAR_SLOT_M)
     x0 = -n_slots * _CAR_SLOT_M / 2.0
     for side in sides:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.ground import off_ground
+from syncaudit.calib.alignment.ground import off_ground
 from syncaudit.calib.result import StopPointsOut, TopViewOut
 
 F64 = NDArray[np.float64]

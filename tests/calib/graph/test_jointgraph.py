@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from syncaudit.calib import se3
-from syncaudit.calib.jointgraph import Ground, Link, Problem, free_directions, solve
+from syncaudit.calib.graph.jointgraph import Ground, Link, Problem, free_directions, solve
 from syncaudit.calib.settings import PoseGraphConfig
 
 pytest.importorskip("gtsam")

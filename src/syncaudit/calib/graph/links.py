@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from syncaudit.calib import posegraph
-from syncaudit.calib.pairs import pair_edge
+from syncaudit.calib.alignment.pairs import pair_edge
+from syncaudit.calib.graph import posegraph
 from syncaudit.calib.state import LidarState
 
 

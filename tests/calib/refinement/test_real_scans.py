@@ -19,7 +19,7 @@ import pytest
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import align, prepare
+from syncaudit.calib.alignment.registration import align, prepare
 from syncaudit.calib.settings import CalibConfig
 
 pytest.importorskip("small_gicp")

@@ -38,3 +38,12 @@ def test_joint_estimate_is_reported_chosen_and_no_worse_than_the_baseline(tmp_pa
     assert errors["joint"][1] <= errors["baseline"][1]
     data = result.to_json_dict()
     assert data["joint"]["chosen"] is True and len(data["baseline"]) == 1
+    # The choice is the data's: both map costs reported, the joint kept within 1 %.
+    (selection,) = data["joint"]["selection"]
+    assert selection["method"] == "joint" and "map cost" in selection["criterion"]
+    joint_cost, base_cost = selection["joint_map_cost_m2"], selection["baseline_map_cost_m2"]
+    assert 0.0 < joint_cost < 0.04 and 0.0 < base_cost < 0.04
+    assert base_cost >= joint_cost * 0.99
+    # A turntable's alignments agree on the axis: the turn axis, not the ground, is the up.
+    assert data["joint"]["up"]["source"] == "turn axis"
+    assert data["joint"]["up"]["turn_axis_error_deg"] < 0.05

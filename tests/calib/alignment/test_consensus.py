@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from syncaudit.calib import se3
-from syncaudit.calib.consensus import Motion, consensus
+from syncaudit.calib.alignment.consensus import Motion, consensus
 
 BOUNDS = {"max_translation_m": 0.3, "max_rotation_deg": 3.0}
 

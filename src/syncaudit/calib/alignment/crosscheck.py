@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from syncaudit.calib import consensus, se3
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib.pairs import align_pair
-from syncaudit.calib.registration import Alignment
+from syncaudit.calib import se3
+from syncaudit.calib.alignment import consensus
+from syncaudit.calib.alignment.pairs import align_pair
+from syncaudit.calib.alignment.registration import Alignment
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from syncaudit.calib import selection
-from syncaudit.calib.registration import Cloud, backend
+from syncaudit.calib.alignment.registration import Cloud, backend
+from syncaudit.calib.selection import stop_choice
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 from syncaudit.errors import NoDataError
@@ -21,20 +21,20 @@ def _scan_changes(lidar: LidarState, config: CalibConfig) -> list[tuple[float, f
         raw = np.ascontiguousarray(scan.points_m, dtype=np.float64)
         cloud = Cloud(raw, np.zeros_like(raw), None, sg.KdTree(raw, num_threads=threads), 0.0)
         if previous is not None:
-            out.append(selection.scan_change(previous, cloud, threads))
+            out.append(stop_choice.scan_change(previous, cloud, threads))
         previous = cloud
     return out
 
 
 def find_stops(
     lidars: list[LidarState], config: CalibConfig, notes: list[str]
-) -> list[selection.VehicleStop]:
+) -> list[stop_choice.VehicleStop]:
     """Still runs per LiDAR (scan-to-scan change, no registration), merged across LiDARs
     into vehicle stops."""
     sel = config.selection
-    runs: list[selection.Run] = []
+    runs: list[stop_choice.Run] = []
     for lidar in lidars:
-        runs += selection.static_runs(
+        runs += stop_choice.static_runs(
             lidar.topic,
             [s.stamp_ns for s in lidar.scans],
             _scan_changes(lidar, config),
@@ -50,7 +50,7 @@ def find_stops(
         )
         for lidar in lidars:
             runs += [
-                selection.Run(lidar.topic, (i,), s.stamp_ns, s.stamp_ns)
+                stop_choice.Run(lidar.topic, (i,), s.stamp_ns, s.stamp_ns)
                 for i, s in enumerate(lidar.scans)
             ]
     moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
@@ -60,7 +60,7 @@ def find_stops(
             "only still scans are aligned"
         )
     tolerance_ns = round(sel.stop_match_tolerance_s * 1e9)
-    stops = selection.group_stops(runs, tolerance_ns)
+    stops = stop_choice.group_stops(runs, tolerance_ns)
     for stop in stops:
         for topic, run in stop.runs.items():
             lidar = next(lidar for lidar in lidars if lidar.topic == topic)
@@ -69,7 +69,7 @@ def find_stops(
 
 
 def provisional_reference(
-    stops: list[selection.VehicleStop], lidars: list[LidarState], config: CalibConfig
+    stops: list[stop_choice.VehicleStop], lidars: list[LidarState], config: CalibConfig
 ) -> int:
     """The configured reference stop, else the first stop every LiDAR has a static scan of."""
     topics = {lidar.topic for lidar in lidars}

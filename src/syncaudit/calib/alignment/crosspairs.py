@@ -14,9 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.calib import jointgraph, posegraph, se3
-from syncaudit.calib.pairs import pair_edge, unless_slid
-from syncaudit.calib.registration import Alignment, align, visible_fraction
+from syncaudit.calib import se3
+from syncaudit.calib.alignment.pairs import pair_edge, unless_slid
+from syncaudit.calib.alignment.registration import Alignment, align, visible_fraction
+from syncaudit.calib.graph import jointgraph, posegraph
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 

@@ -10,13 +10,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import posegraph, se3
-from syncaudit.calib.pairs import unless_slid
-from syncaudit.calib.registration import Alignment, Cloud, align, prepare
+from syncaudit.calib import se3
+from syncaudit.calib.alignment.pairs import unless_slid
+from syncaudit.calib.alignment.registration import Alignment, Cloud, align, prepare
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.graph.stopgraph import poses_at
 from syncaudit.calib.result import AlignmentOut, ExtrinsicOut, MapPairOut, TransformOut
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
-from syncaudit.calib.stopgraph import poses_at
 
 F64 = NDArray[np.float64]
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from syncaudit.calib import extrinsics as extr
 from syncaudit.calib import io
-from syncaudit.calib.registration import backend
+from syncaudit.calib.alignment.registration import backend
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import SampledScan
 from syncaudit.errors import NoDataError

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.registration import Cloud
+from syncaudit.calib.alignment.registration import Cloud
 
 F64 = NDArray[np.float64]
 

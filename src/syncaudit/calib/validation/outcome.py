@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import selection, top_view_points
+from syncaudit.calib.graph.stopgraph import poses_at
 from syncaudit.calib.result import (
     CalibrationResult,
     DegeneracyOut,
@@ -24,9 +24,10 @@ from syncaudit.calib.result import (
     TransformOut,
     VehicleStopOut,
 )
+from syncaudit.calib.selection import stop_choice
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
-from syncaudit.calib.stopgraph import poses_at
+from syncaudit.calib.validation import top_view_points
 
 
 class Timer:
@@ -70,7 +71,7 @@ def limits_out(config: CalibConfig) -> Limits:
     )
 
 
-def stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
+def stops_out(stops: list[stop_choice.VehicleStop]) -> list[VehicleStopOut]:
     """The vehicle's stops as the result reports them."""
     return [
         VehicleStopOut(index=s.index, start_ns=s.start_ns, end_ns=s.end_ns, topics=sorted(s.runs))
@@ -79,7 +80,7 @@ def stops_out(stops: list[selection.VehicleStop]) -> list[VehicleStopOut]:
 
 
 def lidar_out(
-    lidar: LidarState, stops: list[selection.VehicleStop], top: TopViewOut | None = None
+    lidar: LidarState, stops: list[stop_choice.VehicleStop], top: TopViewOut | None = None
 ) -> LidarOut:
     """One LiDAR as the result reports it: each stop used or why not, turn axis, pairs, graph."""
     uses = []
@@ -156,7 +157,7 @@ def refusal_result(
     path: Path,
     lidars: list[LidarState],
     recorded: extr.RecordedExtrinsics,
-    stops: list[selection.VehicleStop],
+    stops: list[stop_choice.VehicleStop],
     why: str,
     notes: list[str],
     timer: Timer,

@@ -8,9 +8,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib import io, se3, selection
-from syncaudit.calib.ground import remove_ground
-from syncaudit.calib.registration import Cloud, evaluate, gicp, prepare, yaw_search
+from syncaudit.calib import io, se3
+from syncaudit.calib.alignment.ground import remove_ground
+from syncaudit.calib.alignment.registration import Cloud, evaluate, gicp, prepare, yaw_search
+from syncaudit.calib.selection import stop_choice
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState, vehicle_points
 
@@ -167,7 +168,7 @@ def angular_chain(
             if segment_of[k] == home:
                 motion = ref_inv @ pose[k]
                 lidar.chain[k] = base_inv @ motion @ base
-                lidar.angles[k] = selection.signed_angle_deg(motion, up)
+                lidar.angles[k] = stop_choice.signed_angle_deg(motion, up)
             else:
                 lidar.angles[k] = None
                 starts = [j for j in broken if j <= k and segment_of[j] == segment_of[k]]

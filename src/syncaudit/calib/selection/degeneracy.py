@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
-from syncaudit.calib.registration import prepare
+from syncaudit.calib.alignment.registration import prepare
 from syncaudit.calib.result import DegeneracyOut
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState, vehicle_points

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.calib import posegraph, se3, selection
-from syncaudit.calib.lidar_summary import summarize_lidar
-from syncaudit.calib.links import accepted_edges, components, firm_edges
-from syncaudit.calib.pairs import align_pair
+from syncaudit.calib import se3
+from syncaudit.calib.alignment.pairs import align_pair
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.graph.lidar_summary import summarize_lidar
+from syncaudit.calib.graph.links import accepted_edges, components, firm_edges
+from syncaudit.calib.selection import stop_choice
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 
@@ -154,7 +156,7 @@ def graph_lidars(lidars: list[LidarState], config: CalibConfig) -> list[int]:
         ref_angle = lidar.angles.get(main)
         if ref_angle is not None:
             lidar.angles = {
-                k: None if v is None else selection.wrap_deg(v - ref_angle)
+                k: None if v is None else stop_choice.wrap_deg(v - ref_angle)
                 for k, v in lidar.angles.items()
             }
         summarize_lidar(lidar, main, config)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from syncaudit.calib import posegraph
-from syncaudit.calib.links import components
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.graph.links import components
 from syncaudit.calib.result import AlignmentOut, PairOut, PoseGraphOut
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState

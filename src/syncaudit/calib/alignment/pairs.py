@@ -8,8 +8,16 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
-from syncaudit.calib import posegraph, se3, selection
-from syncaudit.calib.registration import Alignment, Conditioning, align, prepare, visible_fraction
+from syncaudit.calib import se3
+from syncaudit.calib.alignment.registration import (
+    Alignment,
+    Conditioning,
+    align,
+    prepare,
+    visible_fraction,
+)
+from syncaudit.calib.graph import posegraph
+from syncaudit.calib.selection import stop_choice
 from syncaudit.calib.settings import CalibConfig
 from syncaudit.calib.state import LidarState
 
@@ -107,15 +115,15 @@ def align_pairs(lidar: LidarState, provisional: int, config: CalibConfig) -> Non
     sel, reg = config.selection, config.registration
     reference = provisional
     order = sorted(lidar.stop_scan)
-    choice = selection.choose_stops(order, lidar.angles, reference, sel.min_step_deg)
+    choice = stop_choice.choose_stops(order, lidar.angles, reference, sel.min_step_deg)
     lidar.dropped = {**choice.dropped, **lidar.dropped}
     lidar.kept = choice.kept
     for k in lidar.kept:
         lidar.fine[k] = prepare(
             lidar.scans[lidar.stop_scan[k]].points_m, reg.voxel_m, reg.neighbours, reg.num_threads
         )
-    lidar.hfov_deg = selection.horizontal_fov_deg(lidar.fine[reference].points_m, lidar.up)
-    candidates = selection.candidate_pairs(
+    lidar.hfov_deg = stop_choice.horizontal_fov_deg(lidar.fine[reference].points_m, lidar.up)
+    candidates = stop_choice.candidate_pairs(
         lidar.kept, lidar.angles, lidar.hfov_deg, sel.min_predicted_overlap, sel.max_pairs_per_scan
     )
     # Angularly adjacent pairs first; their fine results re-seed the chain for the rest.

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from syncaudit.calib import se3
-from syncaudit.calib.posegraph import backend
+from syncaudit.calib.graph.posegraph import backend
 from syncaudit.calib.settings import PoseGraphConfig
 
 F64 = NDArray[np.float64]
@@ -57,6 +57,8 @@ class Ground:
     offset_m: float
     sigma_deg: float
     sigma_m: float
+    spread_deg: float = 0.0
+    """Median angle of the per-stop normals from `normal` (how flat the ground is)."""
 
 
 @dataclass(frozen=True)
