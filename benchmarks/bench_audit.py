@@ -1394,6 +1394,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default="10,60,120",
         help="--dense: log lengths in minutes (the middle one is the timed log)",
     )
+    parser.add_argument(
+        "--dense-parts",
+        default="mcap,bag,memory,html",
+        help="--dense: what to run: mcap and bag (the rounds on the middle length), memory, "
+        "html (default all)",
+    )
     parser.add_argument("--generate-to", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--convert-to", choices=CONTAINERS, help=argparse.SUPPRESS)
     parser.add_argument("--convert-from", type=Path, help=argparse.SUPPRESS)
