@@ -114,7 +114,8 @@ def simulate_sync(
         ),
     ] = None,
     duration_s: Annotated[
-        float | None, typer.Option("--duration", min=0.001, max=14_400.0, help="Seconds of log (up to 4 h).")
+        float | None,
+        typer.Option("--duration", min=0.001, max=14_400.0, help="Seconds of log (up to 4 h)."),
     ] = None,
     seed: SeedOption = None,
     fmt: FormatOption = None,
@@ -381,7 +382,14 @@ MOTIONS = ("turntable", "drive")
 ORGANIZED = ("none", "second", "both")
 TF_CHAINS = ("direct", "sensor_kit")
 ODOMETRY = ("none", "odometry", "tf", "both")
-SCENES = ("yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open")
+SCENES = (
+    "yard",
+    "ground_and_wall",
+    "corridor",
+    "parking_lot",
+    "parking_lot_open",
+    "parking_lot_facing",
+)
 BEAMS = (16, 32, 64, 128)
 
 
@@ -447,8 +455,10 @@ def simulate_calib(
         typer.Option(
             "--scene",
             help="yard (walls, boxes, poles), ground_and_wall or corridor (both degenerate: "
-            "not calibratable), parking_lot (rows of parked cars, lamp posts, one building) or "
-            "parking_lot_open (cars on one side of the aisle only).",
+            "not calibratable), parking_lot (rows of parked cars, lamp posts, one building), "
+            "parking_lot_open (cars on one side of the aisle only) or parking_lot_facing (a "
+            "one-sided lot along the start heading: the rear LiDAR sees the cars at the first "
+            "stops only).",
         ),
     ] = None,
     range_noise_m: Annotated[
