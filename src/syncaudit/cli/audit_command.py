@@ -88,7 +88,10 @@ def audit(
     jobs: Annotated[
         int | None,
         typer.Option(
-            "--jobs", "-j", min=1, help="Worker processes for MCAP chunks (default: cores)."
+            "--jobs",
+            "-j",
+            min=1,
+            help="Worker processes reading the log's chunks and analysing the cameras (default: cores).",
         ),
     ] = None,
     overwrite: OverwriteFlag = False,
