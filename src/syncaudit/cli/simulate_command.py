@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, get_args
 
@@ -18,7 +19,7 @@ from syncaudit.cli.common import (
     run,
 )
 from syncaudit.errors import ConfigError, UsageError
-from syncaudit.simulate import LidarModel
+from syncaudit.simulate import LidarModel, SceneKind
 
 if TYPE_CHECKING:
     from syncaudit.analysis.controller import ControllerConfig
@@ -382,14 +383,7 @@ MOTIONS = ("turntable", "drive")
 ORGANIZED = ("none", "second", "both")
 TF_CHAINS = ("direct", "sensor_kit")
 ODOMETRY = ("none", "odometry", "tf", "both")
-SCENES = (
-    "yard",
-    "ground_and_wall",
-    "corridor",
-    "parking_lot",
-    "parking_lot_open",
-    "parking_lot_facing",
-)
+SCENES: tuple[str, ...] = typing.get_args(SceneKind)
 BEAMS = (16, 32, 64, 128)
 
 

@@ -13,3 +13,8 @@ LidarModel = Literal[
     "OS-1-64",
 ]
 """LiDAR models the sync simulator writes real-format packets for."""
+SceneKind = Literal[
+    "yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open", "parking_lot_facing"
+]
+"""The calibration scenes `simulate.calib_config.SceneConfig.kind` accepts (here, where the
+CLI reads them without importing the simulator)."""

@@ -13,6 +13,7 @@ from typing import Any, Literal
 from pydantic import Field, model_validator
 
 from syncaudit.config import ConfigModel
+from syncaudit.simulate import SceneKind
 
 
 class LidarSimConfig(ConfigModel):
@@ -59,14 +60,7 @@ class LidarSimConfig(ConfigModel):
 class SceneConfig(ConfigModel):
     """What the ray-cast calibration environment contains."""
 
-    kind: Literal[
-        "yard",
-        "ground_and_wall",
-        "corridor",
-        "parking_lot",
-        "parking_lot_open",
-        "parking_lot_facing",
-    ] = "yard"
+    kind: SceneKind = "yard"
     """yard: walls, boxes and poles; ground_and_wall: flat ground and one long wall;
     corridor: flat ground between two long parallel walls (both degenerate); parking_lot:
     rows of parked cars with gaps, lamp posts and a building on one side, no enclosing walls;
@@ -299,12 +293,6 @@ class CalibSceneConfig(ConfigModel):
         if math.isclose(self.sweep_deg, 360.0):
             return self.sweep_deg / self.n_stops
         return self.sweep_deg / (self.n_stops - 1)
-
-
-SceneKind = Literal[
-    "yard", "ground_and_wall", "corridor", "parking_lot", "parking_lot_open", "parking_lot_facing"
-]
-"""The scene kinds `SceneConfig.kind` accepts."""
 
 
 def calib_scene_config(

@@ -70,6 +70,7 @@ from syncaudit.simulate.trigger_designs import (
     TriggerDesignSim,
     design_times,
     locked_start_deg,
+    newton_time_ns,
 )
 from syncaudit.writers.log_writer import BagCompression, LogFormat, LogWriter, open_writer
 from syncaudit.writers.outputs import OutputSet
@@ -375,13 +376,7 @@ class Rotation:
     def time_at_ns(self, angle_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Solve A(t) = angle exactly (Newton; A is strictly increasing)."""
         target = np.asarray(angle_deg, dtype=np.float64)
-        t = (target - self.start_deg) / self.w0_deg_ns
-        for _ in range(50):
-            step = (self.angle_deg(t) - target) / self.rate_deg_ns(t)
-            t = t - step
-            if float(np.max(np.abs(step), initial=0.0)) < 1e-4:
-                break
-        return t
+        return newton_time_ns(self, target, (target - self.start_deg) / self.w0_deg_ns)
 
 
 # ============================================================================ LiDAR packets

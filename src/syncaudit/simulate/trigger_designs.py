@@ -103,13 +103,21 @@ class SlippingRotation:
     def time_at_ns(self, angle_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Solve A(t) = angle (Newton from the base's solution; A is strictly increasing)."""
         target = np.asarray(angle_deg, dtype=np.float64)
-        t = self.base.time_at_ns(target)
-        for _ in range(50):
-            step = (self.angle_deg(t) - target) / self.rate_deg_ns(t)
-            t = t - step
-            if float(np.max(np.abs(step), initial=0.0)) < 1e-4:
-                break
-        return t
+        return newton_time_ns(self, target, self.base.time_at_ns(target))
+
+
+def newton_time_ns(
+    rotation: RotationLike, target_deg: NDArray[np.float64], start_ns: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The times the rotation reaches `target_deg`, by Newton from `start_ns` (the angle is
+    strictly increasing; steps below 1e-4 ns stop it, 50 at most)."""
+    t = start_ns
+    for _ in range(50):
+        step = (rotation.angle_deg(t) - target_deg) / rotation.rate_deg_ns(t)
+        t = t - step
+        if float(np.max(np.abs(step), initial=0.0)) < 1e-4:
+            break
+    return t
 
 
 def locked_start_deg(lock_deg: float, w0_deg_ns: float, start_sensor_ns: int) -> float:
