@@ -573,17 +573,25 @@ class LogFacts:
     uncompressed_bytes: int
 
 
-def log_facts(path: Path) -> LogFacts:
-    """Counts from the MCAP summary and the audit's topics from the rig file."""
+def rig_topics(rig_file: Path) -> list[str]:
+    """The audit's topics by the rig file: the LiDAR's and each camera's image, exposure and
+    trigger topics, and /tf_static where a camera names a frame."""
     import yaml
-    from mcap.reader import make_reader
 
-    rig = yaml.safe_load(rig_path(path).read_text())
+    rig = yaml.safe_load(rig_file.read_text())
     topics = [rig["lidar"]["topic"]]
     for cam in rig.get("cameras", []):
         topics += [cam[k] for k in ("image_topic", "exposure_topic", "trigger_topic") if cam.get(k)]
     if any(cam.get("frame_id") for cam in rig.get("cameras", [])):
         topics.append("/tf_static")
+    return topics
+
+
+def log_facts(path: Path) -> LogFacts:
+    """Counts from the MCAP summary and the audit's topics from the rig file."""
+    from mcap.reader import make_reader
+
+    topics = rig_topics(rig_path(path))
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
     if summary is None or summary.statistics is None:

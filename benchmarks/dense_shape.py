@@ -31,10 +31,7 @@ import argparse
 import hashlib
 import json
 import os
-import statistics
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -259,20 +256,6 @@ def ensure_dense(
 # ============================================================================= contenders
 
 
-def _topics(rig_file: Path) -> list[str]:
-    """The audit's topics: the rig's LiDAR and every camera's image, exposure, trigger and
-    metadata topics (and /tf_static where a camera names a frame)."""
-    import yaml
-
-    rig = yaml.safe_load(rig_file.read_text())
-    topics = [rig["lidar"]["topic"]]
-    for cam in rig.get("cameras", []):
-        topics += [v for k, v in cam.items() if k.endswith("_topic") and v]
-    if any(cam.get("frame_id") for cam in rig.get("cameras", [])):
-        topics.append("/tf_static")
-    return list(dict.fromkeys(topics))
-
-
 def _audit_argv(log: Path, json_out: Path, *extra: str) -> list[str]:
     return [*ba.audit_argv(log, json_out), *extra]
 
@@ -297,7 +280,7 @@ def contenders(
         ),
         (
             f"decode limit: {os.cpu_count()} cores",
-            [py, "-c", DECODE_LIMIT, str(log), *_topics(ba.rig_path(log))],
+            [py, "-c", DECODE_LIMIT, str(log), *ba.rig_topics(ba.rig_path(log))],
             None,
         ),
     ]
@@ -330,33 +313,6 @@ def _frames(json_out: Path) -> int:
     return sum(int(cam.get("frames_total") or 0) for cam in result.get("cameras", []))
 
 
-def _chromium_load_s(page: Path, runs: int = 3) -> float:
-    """Median wall time of headless Chromium loading `page` to its DOM (start included)."""
-    sys.path.insert(0, str(ba.REPO / "tests"))
-    from browser import CHROMIUM, CHROMIUM_FLAGS
-
-    if CHROMIUM is None:
-        return float("nan")
-    times = []
-    for _ in range(runs):
-        with tempfile.TemporaryDirectory() as profile:
-            start = time.perf_counter()
-            subprocess.run(
-                [
-                    CHROMIUM,
-                    *CHROMIUM_FLAGS,
-                    f"--user-data-dir={profile}",
-                    "--dump-dom",
-                    page.as_uri(),
-                ],
-                capture_output=True,
-                timeout=300,
-                check=True,
-            )
-            times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
 # ================================================================================== report
 
 
@@ -387,8 +343,9 @@ def bench_dense(args: argparse.Namespace, cache: Path, scratch: Path) -> int:
         "(small CompressedImage, CameraExposure, ImageMetaData, TriggerEvent)"
     )
     logs = {m: ensure_dense(cache, m, ".mcap", scratch, args.timeout_s) for m in minutes}
-    bag = ensure_dense(cache, timed, ".bag", scratch, args.timeout_s)
-    for meta in [*logs.values(), bag]:
+    parts = {p.strip() for p in args.dense_parts.split(",") if p.strip()}
+    bag = ensure_dense(cache, timed, ".bag", scratch, args.timeout_s) if "bag" in parts else None
+    for meta in [*logs.values(), *([bag] if bag else [])]:
         gen = meta["generation"]
         ba._log(
             f"  {Path(meta['log']).name}: {meta['size_bytes'] / 1e9:.2f} GB (generated in "
@@ -404,10 +361,9 @@ def bench_dense(args: argparse.Namespace, cache: Path, scratch: Path) -> int:
     ba._log(f"bytecode {ba.warm_bytecode(*([args.baseline_src] if args.baseline_src else []))}")
     repeat = max(1, args.repeat)
 
-    parts = {p.strip() for p in args.dense_parts.split(",") if p.strip()}
     verdicts: list[str] = []
     timed_logs = [Path(logs[timed]["log"])] if "mcap" in parts else []
-    timed_logs += [Path(bag["log"])] if "bag" in parts else []
+    timed_logs += [Path(bag["log"])] if bag else []
     for log in timed_logs:
         ba._log("")
         ba._log(f"{log.name}: {repeat} interleaved round(s), medians (page cache warm):")
@@ -519,7 +475,9 @@ def _html(args: argparse.Namespace, longest: Path, last: int, scratch: Path) -> 
     if run.ok and page.exists():
         empty = scratch / "empty.html"
         empty.write_text("<!doctype html><title>empty</title>")
-        load_s = _chromium_load_s(page) - _chromium_load_s(empty)
+        from bench_report import CHROMIUM, _median_s  # Chromium's load time, as bench_report
+
+        load_s = _median_s(page, 3) - _median_s(empty, 3) if CHROMIUM else float("nan")
         size_mb = page.stat().st_size / ba.MB
         ba._log(
             f"--html on {last} min: {size_mb:.2f} MB, Chromium load {load_s:.2f} s (minus an empty page)"
