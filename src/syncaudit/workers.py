@@ -61,10 +61,16 @@ def return_large_frees() -> None:
     10-minute log the parent's peak RSS went from 188 to 145 MB with the threshold fixed
     at glibc's own default of 128 KiB (which fixing it keeps from moving).
     """
+    _mallopt((_M_MMAP_THRESHOLD, PARENT_MMAP_BYTES))
+
+
+def _mallopt(*settings: tuple[int, int]) -> None:
+    """Set glibc `mallopt` parameters (Linux; best effort: nothing where there is none)."""
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
-            libc.mallopt(_M_MMAP_THRESHOLD, PARENT_MMAP_BYTES)
+            for parameter, value in settings:
+                libc.mallopt(parameter, value)
         except (OSError, AttributeError):  # pragma: no cover - no mallopt: best effort
             pass
 
@@ -73,13 +79,7 @@ def _init_worker(parent_pid: int) -> None:
     """Worker start: ignore Ctrl-C, die with the parent, then accept signals again."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.mallopt(_M_MMAP_THRESHOLD, KEEP_HEAP_BYTES)
-            libc.mallopt(_M_TRIM_THRESHOLD, KEEP_HEAP_BYTES)
-        except (OSError, AttributeError):  # pragma: no cover - no mallopt: best effort
-            pass
+    _mallopt((_M_MMAP_THRESHOLD, KEEP_HEAP_BYTES), (_M_TRIM_THRESHOLD, KEEP_HEAP_BYTES))
     die_with_parent(parent_pid)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
