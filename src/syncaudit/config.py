@@ -355,7 +355,7 @@ def _parse_yaml(text: str, max_values: int) -> Any:
         loader.dispose()
 
 
-def _unique_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+def unique_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     """A JSON object's pairs as a dict, refusing a key given twice or too many keys."""
     if len(pairs) > MAX_KEYS:
         raise ConfigError(f"an object of {len(pairs)} keys (more than {MAX_KEYS})")
@@ -419,7 +419,7 @@ def parse_text(text: str, kind: str, *, max_values: int = MAX_VALUES) -> Any:
         if kind == "TOML":
             raw: Any = tomllib.loads(text)  # refuses duplicate keys itself
         elif kind == "JSON":
-            raw = json.loads(text, object_pairs_hook=_unique_pairs)
+            raw = json.loads(text, object_pairs_hook=unique_pairs)
         else:
             return _parse_yaml(text, max_values)
     except RecursionError:

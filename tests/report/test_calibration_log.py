@@ -76,3 +76,22 @@ def test_cli_takes_the_calibration_of_a_moved_copy(tmp_path: Path, calibration: 
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "mounts" in html.read_text()
+
+
+def test_cli_refuses_a_calibration_that_gives_a_key_twice(
+    tmp_path: Path, calibration: Load
+) -> None:
+    """Two values for one key: pydantic would keep the last silently, a reader the first."""
+    cal = _calibration_of(THREE_CAMERAS, tmp_path, calibration)
+    text = cal.read_text()
+    assert text.startswith("{") and '"passed": ' in text
+    cal.write_text('{"passed": true, ' + text[1:])  # `passed` appears again further on
+    html = tmp_path / "r.html"
+    result = CliRunner().invoke(
+        app,
+        ["audit", str(THREE_CAMERAS), "--rig", f"{THREE_CAMERAS}.rig.yaml", "--html", str(html),
+         "--calibration", str(cal)],
+    )  # fmt: skip
+    assert result.exit_code == 6, result.output
+    assert "key 'passed' given twice" in result.output and "Traceback" not in result.output
+    assert not html.exists()

@@ -305,6 +305,7 @@ def _load_calibration(path: Path, log: str | Path, *, any_log: bool) -> Calibrat
     from pydantic import ValidationError
 
     from syncaudit.calib.result import CalibrationResult
+    from syncaudit.config import unique_pairs
     from syncaudit.errors import ConfigError, InputOpenError, SyncauditError
     from syncaudit.fleet.inputs import fingerprint
     from syncaudit.report.calibration_log import calibration_mismatch
@@ -312,18 +313,21 @@ def _load_calibration(path: Path, log: str | Path, *, any_log: bool) -> Calibrat
     try:
         raw = path.read_bytes()
         result = CalibrationResult.model_validate_json(raw)
+        tree = json.loads(raw, object_pairs_hook=unique_pairs)  # a key twice: which is meant?
     except OSError as exc:  # cannot be opened: exit 2, as any missing input
         raise InputOpenError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "document"
         raise ConfigError(f"{path}: not a calibration result ({where}: {first['msg']})") from exc
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: not a calibration result ({exc})") from None
     if not any_log:
         try:
             log_fp: str | None = fingerprint(log)
         except (OSError, SyncauditError):
             log_fp = None
-        why = calibration_mismatch(json.loads(raw), log, log_fp)
+        why = calibration_mismatch(tree, log, log_fp)
         if why is not None:
             raise ConfigError(f"{path}: {why}; pass --calibration-any-log to add it anyway")
     return result
