@@ -508,7 +508,9 @@ def _analyse_cameras(
     try:
         context = multiprocessing.get_context("fork")
         with worker_pool(
-            min(jobs, len(located)), context, label="a camera analysis process"
+            min(jobs, len(located)),
+            context,
+            label=f"{log.summary.path}: a camera analysis process",
         ) as pool:
             return list(pool.map(_audit_camera, [token] * len(indexes), indexes))
     finally:
