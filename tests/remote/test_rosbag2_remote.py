@@ -154,3 +154,43 @@ def test_the_gate_reads_an_mcap_bag_prefix_by_ranges(
     assert read["size_bytes"] == sum(f.stat().st_size for f in folder.glob("*.mcap"))
     files = [r for r in state.requests if r.split()[0].endswith((".mcap", ".yaml"))]
     assert files and all(" bytes=" in r for r in files)  # (the rest: folder listings)
+
+
+@pytest.mark.parametrize(
+    ("edit", "words"),
+    [
+        (("version: ", "version: 99 #"), "rosbag2 metadata version 99 is newer than this tool"),
+        (("storage_identifier: mcap", "storage_identifier: ''"), None),
+    ],
+)
+def test_a_remote_prefix_follows_the_local_readers_metadata_rules(
+    http_root: tuple[str, ServerState],
+    split_bag: tuple[Path, Rig],
+    tmp_path: Path,
+    edit: tuple[str, str],
+    words: str | None,
+) -> None:
+    """One parser for metadata.yaml: a version newer than the tool reads is refused, and a
+    blank storage (some rosbag2 versions) is read from the files' names, with a warning."""
+    from syncaudit.errors import LogOpenError
+
+    base, state = http_root
+    folder = tmp_path / "edited"
+    folder.mkdir()
+    source, _ = split_bag
+    for file in source.iterdir():
+        (folder / file.name).symlink_to(file)
+    (folder / "metadata.yaml").unlink()
+    text = (source / "metadata.yaml").read_text()
+    assert edit[0] in text
+    (folder / "metadata.yaml").write_text(text.replace(edit[0], edit[1], 1))
+    _serve(folder, state.root)
+    url = f"{base}/bags/{folder.name}"
+    if words is not None:
+        with pytest.raises(LogOpenError, match=words):
+            open_log(url)
+        return
+    with open_log(url) as log:
+        assert isinstance(log, RemoteMcapBag)
+        assert [w.code for w in log.warnings] == ["rosbag2-storage-inferred"]
+        assert "read by their names" in log.warnings[0].message

@@ -74,6 +74,11 @@ def sniff_storage(path: Path) -> str | None:
         return "sqlite3"
     if head.startswith(MCAP_MAGIC):
         return "mcap"
+    return storage_by_name(path)
+
+
+def storage_by_name(path: PurePath) -> str | None:
+    """'sqlite3' or 'mcap' from a storage file's extension (past a `.zstd`), else None."""
     suffixes = [s for s in path.suffixes if s != ".zstd"]
     if suffixes and suffixes[-1] == ".db3":
         return "sqlite3"
@@ -104,8 +109,17 @@ def read_metadata(folder: Path) -> BagMetadata:
         doc = parse_text(text, "YAML", max_values=MAX_METADATA_VALUES)
     except ConfigError as exc:
         raise LogOpenError(f"{folder}: metadata.yaml is {_why(exc)}") from None
+    return parse_metadata(folder, doc)
+
+
+def parse_metadata(folder: Path, doc: Any, *, local: bool = True) -> BagMetadata:
+    """A parsed metadata.yaml of the bag at `folder`; LogOpenError (one line) where unusable.
+
+    `local`: the storage files are checked on disk and a blank storage is read from their
+    magic bytes; otherwise (a bag prefix behind a URL) it is read from their names.
+    """
     try:
-        return _parse(folder, doc)
+        return _parse(folder, doc, local)
     except LogOpenError:
         raise
     except KeyError as exc:
@@ -130,7 +144,7 @@ def _str(value: Any) -> str:
     return "" if value is None else str(value)
 
 
-def _parse(folder: Path, doc: Any) -> BagMetadata:
+def _parse(folder: Path, doc: Any, local: bool) -> BagMetadata:
     if not isinstance(doc, dict) or not isinstance(
         info := doc.get("rosbag2_bagfile_information"), dict
     ):
@@ -143,7 +157,7 @@ def _parse(folder: Path, doc: Any) -> BagMetadata:
         )
     warnings: list[LogWarning] = []
     files = [folder / PurePath(str(x)).name for x in info["relative_file_paths"]]
-    missing = [p.name for p in files if not p.is_file()]
+    missing = [p.name for p in files if local and not p.is_file()]
     if missing:
         raise LogOpenError(
             f"{folder}: storage files listed in metadata.yaml are missing: {missing}"
@@ -152,18 +166,19 @@ def _parse(folder: Path, doc: Any) -> BagMetadata:
         raise LogOpenError(f"{folder}: metadata.yaml lists no storage files")
     storage = _str(info["storage_identifier"])
     if storage not in STORAGES:
-        found = {sniff_storage(p) for p in files}
+        found = {sniff_storage(p) if local else storage_by_name(p) for p in files}
         if len(found) != 1 or None in found:
             raise LogOpenError(
                 f"{folder}: metadata.yaml names storage {storage!r} and the files do not tell "
                 "(expected SQLite .db3 or MCAP files)"
             )
         inferred = str(found.pop())
+        how = "their magic bytes" if local else "their names"
         warnings.append(
             LogWarning(
                 "rosbag2-storage-inferred",
                 f"{folder}: metadata.yaml names storage {storage!r}; the files are {inferred} "
-                "(read by their magic bytes)",
+                f"(read by {how})",
             )
         )
         storage = inferred

@@ -17,16 +17,14 @@ those through rosbags, from files).
 
 from __future__ import annotations
 
-from pathlib import PurePosixPath
 from urllib.parse import urlsplit, urlunsplit
 
 from syncaudit.config import parse_text
 from syncaudit.errors import ConfigError, LogOpenError, SyncauditError
 from syncaudit.logs.mcap.reader import McapLog
 from syncaudit.logs.mcap.remote import RemoteMcapLog
-from syncaudit.logs.model import LogWarning
 from syncaudit.logs.ros2.mcap_storage import McapBag
-from syncaudit.logs.ros2.metadata import MAX_METADATA_VALUES
+from syncaudit.logs.ros2.metadata import MAX_METADATA_VALUES, parse_metadata
 from syncaudit.logs.typesys import one_line
 from syncaudit.remote.file import RemoteFile, RemoteUnindexedError
 from syncaudit.remote.ranges import FetchStats
@@ -99,38 +97,19 @@ class RemoteMcapBag(McapBag):
             doc = parse_text(
                 data.decode("utf-8"), "YAML", max_values=MAX_METADATA_VALUES
             )  # bounded like every config
-            info = doc["rosbag2_bagfile_information"]
-            names = [PurePosixPath(str(x)).name for x in info["relative_file_paths"]]
-            storage = str(info.get("storage_identifier") or "")
-            mode = str(info.get("compression_mode") or "").lower()
-        except (ConfigError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
+        except (ConfigError, UnicodeDecodeError) as exc:
             raise LogOpenError(f"{where}: not a rosbag2 metadata file: {one_line(exc)}") from None
-        if not names:
-            raise LogOpenError(f"{where}: metadata.yaml lists no storage files")
-        if storage not in ("sqlite3", "mcap"):
-            # Blank in some rosbag2 versions: the files' names tell (their magic is
-            # checked when each MCAP file is opened).
-            inferred = {"mcap" if n.endswith(".mcap") else "sqlite3" for n in names}
-            if len(inferred) != 1 or not all(n.endswith((".mcap", ".db3")) for n in names):
-                raise LogOpenError(
-                    f"{where}: storage {storage!r} and files {names} do not say SQLite or MCAP"
-                )
-            self.warnings.append(
-                LogWarning(
-                    "rosbag2-storage-inferred",
-                    f"{self.path}: metadata.yaml names storage {storage!r}; the files are "
-                    f"{next(iter(inferred))} (read by their names)",
-                )
-            )
-            storage = inferred.pop()
+        meta = parse_metadata(self.path, doc, local=False)  # the local reader's rules
+        self.warnings.extend(meta.warnings)
+        storage, mode = meta.storage, meta.compression_mode
         if storage == "sqlite3":
             self._refuse(SQLITE_REASON)
-        if mode not in ("", "none"):
+        if mode:
             self._refuse(
                 f"rosbag2 {mode} compression is read through rosbags from files, so the bag "
                 "is downloaded whole"
             )
-        return names
+        return [file.name for file in meta.files]
 
     def _refuse(self, reason: str) -> None:
         raise RemoteUnindexedError(f"{self.path}: ROS 2 bag not read by ranges: {reason}", reason)
