@@ -244,6 +244,14 @@ def read_text(path: Path, *, what: str = "config file", max_bytes: int = MAX_CON
             data = b"".join(parts)
     except OSError as exc:  # missing, a directory, no permission: cannot be opened (exit 2)
         raise InputOpenError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    return decode_text(data, path, what=what, max_bytes=max_bytes)
+
+
+def decode_text(
+    data: bytes, path: str | Path, *, what: str = "config file", max_bytes: int = MAX_CONFIG_BYTES
+) -> str:
+    """A config's bytes as text (from a file or a URL): size-capped, UTF-8 or UTF-16/32 with
+    a byte-order mark; ConfigError naming `path` otherwise."""
     if len(data) > max_bytes:
         raise ConfigError(
             f"{path}: {what} larger than {max_bytes // 1024} KiB; refusing to read it"
@@ -445,9 +453,14 @@ def load_mapping(path: str | Path, *, what: str = "config file") -> dict[str, An
             bounds of `parse_text`.
     """
     path = Path(path)
-    text = read_text(path, what=what)
+    return mapping_from_text(read_text(path, what=what), path, what=what)
+
+
+def mapping_from_text(text: str, path: str | Path, *, what: str = "config file") -> dict[str, Any]:
+    """Parse config text read from `path` (its suffix names the format) into a dict;
+    ConfigError naming `path`, as `load_mapping`."""
     try:
-        raw = parse_text(text, kind_of(path))
+        raw = parse_text(text, kind_of(Path(path)))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {_refused(exc, what)}") from None
     if raw is None:

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from syncaudit.config import ConfigModel, load_mapping, validate_mapping
+from syncaudit.config import ConfigModel, mapping_from_text, read_text, validate_mapping
 from syncaudit.errors import ConfigError
 
 StampSemantics = Literal["exposure_start", "exposure_middle", "exposure_end", "trigger"]
@@ -204,7 +204,13 @@ def load_rig(path: str | Path) -> Rig:
             a typo), for unreadable, oversized, non-UTF-8, too deeply nested or invalid rigs.
     """
     path = Path(path)
-    raw = load_mapping(path, what="rig file")
+    return rig_from_text(read_text(path, what="rig file"), path)
+
+
+def rig_from_text(text: str, path: str | Path) -> Rig:
+    """Validate a rig's text read from `path` (a file or a URL: its suffix names the
+    format); ConfigError as `load_rig`."""
+    raw = mapping_from_text(text, path, what="rig file")
     if "lidar" not in raw:
         raise ConfigError(f"{path}: a rig file needs a 'lidar' mapping (with its 'topic')")
     return validate_mapping(path, raw, Rig, what="rig file")

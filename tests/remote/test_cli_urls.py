@@ -14,7 +14,7 @@ from .conftest import SAMPLES, ServerState
 
 runner = CliRunner()
 LOGS = ("vlp16_three_cameras.mcap", "vlp16_short.bag")
-# --no-rig: the local file has its rig beside it, which a URL's audit does not look for.
+# --no-rig: the rig beside the log is tested on its own below.
 COMMANDS = (["audit", "--json", "--no-rig"], ["info", "--json"], ["rig"])
 
 
@@ -67,4 +67,47 @@ def test_cli_on_a_bag_that_cannot_be_read_by_ranges_says_why_in_one_line(
     result = runner.invoke(app, ["info", f"{base}/bag", "--json"])
     assert result.exit_code == 2
     assert "not read by ranges: SQLite storage" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
+
+
+def test_audit_of_a_url_takes_the_rig_beside_it_as_for_the_file(
+    http_root: tuple[str, ServerState],
+) -> None:
+    """`LOG.rig.yaml` beside a remote log is asked for (one request) and used, said on
+    stderr, the query string kept (a container's token covers the rig too)."""
+    base, state = http_root
+    name = LOGS[0]
+    for file in (name, f"{name}.rig.yaml"):
+        (state.root / file).symlink_to(SAMPLES / file)
+    local = runner.invoke(app, ["audit", str(SAMPLES / name), "--json"])
+    remote = runner.invoke(app, ["audit", f"{base}/{name}?sig=t0ken", "--json"])
+    assert remote.exit_code == local.exit_code, remote.output
+    assert remote.stdout == local.stdout.replace(str(SAMPLES / name), f"{base}/{name}")
+    assert f"using rig {name}.rig.yaml beside the log" in remote.stderr
+    assert f"/{name}.rig.yaml?sig=t0ken bytes=0-" in " ".join(state.requests)
+
+
+def test_audit_of_a_url_with_no_rig_beside_guesses_and_a_refused_one_is_said(
+    http_root: tuple[str, ServerState],
+) -> None:
+    base, state = http_root
+    name = LOGS[0]
+    (state.root / name).symlink_to(SAMPLES / name)
+    guessed = _output(["audit", f"{base}/{name}", "--json"])
+    assert guessed == _output(["audit", f"{base}/{name}", "--json", "--no-rig"])
+    state.redirects[f"/{name}.rig.yaml"] = (403, "")  # a URL signed for the log alone
+    refused = runner.invoke(app, ["audit", f"{base}/{name}", "--json"])
+    assert refused.exit_code == 0 and refused.stdout == guessed
+    assert "cannot read the rig beside the log" in refused.stderr
+    assert "HTTP 403" in refused.stderr and "--rig to give one" in refused.stderr
+
+
+def test_a_bad_rig_beside_a_url_is_exit_6_naming_it(http_root: tuple[str, ServerState]) -> None:
+    base, state = http_root
+    name = LOGS[0]
+    (state.root / name).symlink_to(SAMPLES / name)
+    (state.root / f"{name}.rig.yaml").write_text("lidar: {topic: 3, rpm: fast}\n")
+    result = runner.invoke(app, ["audit", f"{base}/{name}?sig=secret"])
+    assert result.exit_code == 6, result.output
+    assert f"{base}/{name}.rig.yaml" in result.output and "sig=secret" not in result.output
     assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output

@@ -34,6 +34,7 @@ from syncaudit.cli.startup import one_blas_thread
 if TYPE_CHECKING:
     from syncaudit.audit.run import AuditResult
     from syncaudit.calib.result import CalibrationResult
+    from syncaudit.rig import Rig
     from syncaudit.writers.outputs import OutputSet
 
 
@@ -116,6 +117,7 @@ def audit(
 
             raise UsageError("--rig and --no-rig: give one")
         rig_path = rig or (None if no_rig else rig_beside(source))
+        beside_url = None if rig or no_rig else _remote_rig(source)
         targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
         calibration = (
             _load_calibration(calibration_json, source, any_log=calibration_any_log)
@@ -136,7 +138,7 @@ def audit(
             targets.claim_pairings(outputs)
             result = _audit(
                 source,
-                rig_path,
+                beside_url or rig_path,
                 jobs=jobs,
                 check_crc=check_crc,
                 tables=not as_json,
@@ -238,9 +240,21 @@ def rig_beside(source: str | Path) -> Path | None:
     return beside
 
 
+def _remote_rig(source: str | Path) -> Rig | None:
+    """The rig beside a remote log (None for a local log, or none there), said on stderr."""
+    if isinstance(source, Path):
+        return None
+    from syncaudit.audit.rig_beside import remote_rig_beside
+
+    found = remote_rig_beside(source)
+    if found.said:
+        say(found.said)
+    return found.rig
+
+
 def _audit(
     log: str | Path,
-    rig: Path | None,
+    rig: Path | Rig | None,
     *,
     jobs: int | None,
     check_crc: bool,
@@ -253,7 +267,7 @@ def _audit(
 
     return audit_log(
         log,
-        load_rig(rig) if rig else None,
+        load_rig(rig) if isinstance(rig, Path) else rig,
         jobs=jobs,
         check_crc=check_crc,
         meanwhile=_import_tables if tables else None,

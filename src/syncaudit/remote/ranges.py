@@ -59,6 +59,11 @@ class _FatalReplyError(Exception):
     """A reply no retry can change (404, 403, a server ignoring Range)."""
 
 
+class RefusedReplyError(_FatalReplyError):
+    """HTTP 401 or 403: the server refuses this object to these credentials (a signed URL
+    covers only its own object; S3 answers 403 for a missing key without list rights)."""
+
+
 class FetchCounter:
     """Bytes and requests fetched for one URL by every process of an audit (shared memory,
     created before the chunk workers fork)."""
@@ -278,6 +283,8 @@ class HttpObject:
                 raise FileNotFoundError(status)
             if response.status == 200:
                 raise _FatalReplyError(f"{status}: the server does not honour Range requests")
+            if response.status in (401, 403):
+                raise RefusedReplyError(f"{status} {body[:200]!r}")
             if response.status == 416:
                 raise _FatalReplyError(f"{status}: range past the end of the object")
             if response.status < 500:

@@ -1,0 +1,49 @@
+"""The rig kept beside a remote log (`LOG.rig.yaml` next to `LOG`), as beside a local one.
+
+A local audit without `--rig` uses `LOG.rig.yaml` when it lies beside the log; a fleet
+that uploads logs with their rigs expects the same of `syncaudit audit s3://.../LOG`. The
+rig is asked for in one request (`remote.sidecar`): none there, the rig is guessed as for
+a local log without one; refused (a URL signed for the log alone), it is guessed and the
+refusal said, so the user knows to pass `--rig`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from syncaudit.config import decode_text
+from syncaudit.remote.sidecar import beside, read_small
+from syncaudit.rig import Rig, rig_from_text
+
+RIG_SUFFIX = ".rig.yaml"
+
+
+@dataclass(frozen=True, slots=True)
+class RigBeside:
+    """The rig found beside a remote log (None: guess it) and one line saying what was done."""
+
+    rig: Rig | None
+    said: str | None
+
+
+def remote_rig_beside(log_url: str) -> RigBeside:
+    """The rig `LOG.rig.yaml` beside the log at `log_url`, validated like a rig file.
+
+    Raises:
+        ConfigError: the rig there is not a valid rig file (exit 6, naming its URL).
+        LogReadError: the server failed to answer for it.
+    """
+    found = read_small(beside(log_url, RIG_SUFFIX))
+    if found.data is None:
+        if found.refused is None:
+            return RigBeside(None, None)
+        return RigBeside(
+            None,
+            f"cannot read the rig beside the log ({found.name}: {found.refused}): guessing it "
+            "(--rig to give one)",
+        )
+    rig = rig_from_text(decode_text(found.data, found.name, what="rig file"), found.name)
+    name = found.name.rsplit("/", 1)[-1]
+    return RigBeside(
+        rig, f"using rig {name} beside the log (--rig to choose another, --no-rig to guess)"
+    )
