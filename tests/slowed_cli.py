@@ -7,9 +7,13 @@ a command) with one chunk per task and each task held `sleep_s` in its worker.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 _SCRIPT = """
@@ -121,3 +125,23 @@ def wait_for_workers(
             break
         time.sleep(poll_s)
     return workers
+
+
+@contextlib.contextmanager
+def reaped(proc: subprocess.Popen[str]) -> Iterator[subprocess.Popen[str]]:
+    """`proc`, its process group killed on the way out if it still runs (a failed test
+    leaves no CLI or worker behind)."""
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def worker_killed_line(log: Path, who: str) -> str:
+    """The one line the CLI prints when the OOM killer's SIGKILL ends one of its workers."""
+    return (
+        f"error: {log}: {who} died (killed by signal 9 — out of memory? fewer jobs or more "
+        "free memory may help)"
+    )

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from slowed_cli import start, survivors, wait_for_workers
+from slowed_cli import reaped, start, survivors, wait_for_workers, worker_killed_line
 from syncaudit.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, WorkerDiedError
 from syncaudit.workers import death_cause
 
@@ -35,22 +35,14 @@ def test_worker_killed_mid_read_is_one_line_and_exit_130(tmp_path: Path) -> None
         sleep_s=0.5,  # the read lasts seconds: a worker can be killed while it runs
         tasks_per_worker=1,
     )
-    try:
+    with reaped(proc):
         workers = wait_for_workers(proc, 2, poll_s=0.02)
         assert len(workers) == 2, "the pool's two workers never started"
         time.sleep(0.3)  # both are now inside their first task
         os.kill(workers[0], signal.SIGKILL)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
     assert proc.returncode == EXIT_INTERRUPTED, err
-    lines = err.strip().splitlines()
-    assert lines == [
-        f"error: {LOG}: a reader worker process died (killed by signal 9 — out of memory? "
-        "fewer jobs or more free memory may help)"
-    ]
+    assert err.strip().splitlines() == [worker_killed_line(LOG, "a reader worker process")]
     assert not json_out.exists()
     assert not list(tmp_path.iterdir())  # no temporary left either
     assert survivors(workers) == []

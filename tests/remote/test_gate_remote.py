@@ -80,3 +80,29 @@ def test_slow_server_hits_the_per_log_timeout(
     assert run.exit_code == 3
     (log,) = run.logs
     assert log.verdict == "error" and log.error is not None and "timed out" in log.error
+
+
+def test_gate_takes_the_rig_beside_a_remote_log_as_beside_a_local_one(
+    http_root: tuple[str, ServerState], tmp_path: Path
+) -> None:
+    """`LOG.rig.yaml` beside an uploaded log is its rig by URL as by path: the same checks,
+    the same rig fingerprint, and a different result from the guess."""
+    base, state = http_root
+    _uploads(state.root)
+    name = "vlp16_three_cameras.mcap"
+    rig = state.root / "uploads" / "car1" / f"{name}.rig.yaml"
+    rig.write_text((SAMPLES / f"{name}.rig.yaml").read_text())
+    policy = parse_policy(POLICY, "policy.yaml")
+    outs = {}
+    for where, inputs in (("remote", f"{base}/uploads/car1/"), ("local", str(rig.parent))):
+        run_gate([inputs], policy, GateOptions(db=None, json_out=tmp_path / where, jobs=1))
+        outs[where] = json.loads((tmp_path / where).read_text())["logs"]
+    (remote,), (local,) = outs["remote"], outs["local"]
+    assert remote["rig_fingerprint"] is not None
+    assert remote["rig_fingerprint"] == local["rig_fingerprint"]
+    assert remote["checks"] == local["checks"]
+    assert f"/uploads/car1/{name}.rig.yaml" in " ".join(state.requests)
+    rig.unlink()
+    run_gate([f"{base}/uploads/car1/"], policy, GateOptions(db=None, json_out=tmp_path / "g"))
+    (guessed,) = json.loads((tmp_path / "g").read_text())["logs"]
+    assert guessed["rig_fingerprint"] is None and guessed["checks"] != remote["checks"]

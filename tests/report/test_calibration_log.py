@@ -7,7 +7,7 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
-from typer.testing import CliRunner
+from typer.testing import CliRunner, Result
 
 from syncaudit.calib.result import CalibrationResult
 from syncaudit.cli import app
@@ -64,16 +64,21 @@ def test_cli_refuses_another_logs_calibration_unless_told(
     assert html.is_file()
 
 
+def _audit_with(log: Path, html: Path, calibration: Path) -> Result:
+    """`audit LOG --html H --calibration C` with the three-camera rig."""
+    return CliRunner().invoke(
+        app,
+        ["audit", str(log), "--rig", f"{THREE_CAMERAS}.rig.yaml", "--html", str(html),
+         "--calibration", str(calibration)],
+    )  # fmt: skip
+
+
 def test_cli_takes_the_calibration_of_a_moved_copy(tmp_path: Path, calibration: Load) -> None:
     cal = _calibration_of(THREE_CAMERAS, tmp_path, calibration)
     moved = tmp_path / "moved.mcap"
     shutil.copyfile(THREE_CAMERAS, moved)
     html = tmp_path / "r.html"
-    result = CliRunner().invoke(
-        app,
-        ["audit", str(moved), "--rig", f"{THREE_CAMERAS}.rig.yaml", "--html", str(html),
-         "--calibration", str(cal)],
-    )  # fmt: skip
+    result = _audit_with(moved, html, cal)
     assert result.exit_code == 0, result.output
     assert "mounts" in html.read_text()
 
@@ -87,11 +92,7 @@ def test_cli_refuses_a_calibration_that_gives_a_key_twice(
     assert text.startswith("{") and '"passed": ' in text
     cal.write_text('{"passed": true, ' + text[1:])  # `passed` appears again further on
     html = tmp_path / "r.html"
-    result = CliRunner().invoke(
-        app,
-        ["audit", str(THREE_CAMERAS), "--rig", f"{THREE_CAMERAS}.rig.yaml", "--html", str(html),
-         "--calibration", str(cal)],
-    )  # fmt: skip
+    result = _audit_with(THREE_CAMERAS, html, cal)
     assert result.exit_code == 6, result.output
     assert "key 'passed' given twice" in result.output and "Traceback" not in result.output
     assert not html.exists()

@@ -10,10 +10,13 @@ refusal said, so the user knows to pass `--rig`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 from syncaudit.config import decode_text
-from syncaudit.remote.sidecar import beside, read_small
-from syncaudit.rig import Rig, rig_from_text
+from syncaudit.errors import InputOpenError
+from syncaudit.remote.sidecar import Sidecar, beside, read_small
+from syncaudit.remote.urls import is_url
+from syncaudit.rig import Rig, load_rig, rig_from_text
 
 RIG_SUFFIX = ".rig.yaml"
 
@@ -33,7 +36,7 @@ def remote_rig_beside(log_url: str) -> RigBeside:
         ConfigError: the rig there is not a valid rig file (exit 6, naming its URL).
         LogReadError: the server failed to answer for it.
     """
-    found = read_small(beside(log_url, RIG_SUFFIX))
+    found = rig_sidecar(log_url)
     if found.data is None:
         if found.refused is None:
             return RigBeside(None, None)
@@ -42,8 +45,33 @@ def remote_rig_beside(log_url: str) -> RigBeside:
             f"cannot read the rig beside the log ({found.name}: {found.refused}): guessing it "
             "(--rig to give one)",
         )
-    rig = rig_from_text(decode_text(found.data, found.name, what="rig file"), found.name)
+    rig = _rig(found.data, found.name)
     name = found.name.rsplit("/", 1)[-1]
     return RigBeside(
         rig, f"using rig {name} beside the log (--rig to choose another, --no-rig to guess)"
     )
+
+
+def rig_sidecar(log_url: str) -> Sidecar:
+    """What lies at `LOG.rig.yaml` beside the remote log (its bytes, or None and why)."""
+    return read_small(beside(log_url, RIG_SUFFIX))
+
+
+def load_rig_at(location: str | Path) -> Rig:
+    """A rig file by path or URL (the gate's jobs name a remote log's rig by its URL).
+
+    Raises:
+        InputOpenError: nothing readable there (exit 2).
+        ConfigError: not a valid rig file.
+    """
+    if isinstance(location, Path) or not is_url(location):
+        return load_rig(location)
+    found = read_small(location)
+    if found.data is None:
+        why = found.refused or "no such object"
+        raise InputOpenError(f"{found.name}: cannot read rig file ({why})")
+    return _rig(found.data, found.name)
+
+
+def _rig(data: bytes, name: str) -> Rig:
+    return rig_from_text(decode_text(data, name, what="rig file"), name)

@@ -62,7 +62,8 @@ def _absolute(job: LogJob) -> LogJob:
     """The job with absolute local paths: workers do not share the driver's directory."""
     if "://" in job.path:
         return job
-    rig = os.path.abspath(job.rig_path) if job.rig_path else None
+    rig = job.rig_path
+    rig = os.path.abspath(rig) if rig and "://" not in rig else rig
     return replace(job, path=os.path.abspath(job.path), rig_path=rig)
 
 

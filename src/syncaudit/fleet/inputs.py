@@ -5,7 +5,8 @@ order: the manifest, the log's own metadata (an MCAP metadata record or a ROS 2 
 `custom_data` with key `vehicle_id` or `vehicle`), the policy's `vehicle_pattern` on the
 path. A ROS 1 bag (or a bare .db3) records no vehicle: only a manifest or the pattern can
 name it. A log left without a vehicle while the policy refers to vehicles gets a warning
-saying which of these to use (it is judged with the defaults). The rig comes from the manifest, a `<log>.rig.yaml` beside the log, the policy's
+saying which of these to use (it is judged with the defaults). The rig comes from the
+manifest, a `<log>.rig.yaml` beside the log (a remote log's by its URL), the policy's
 `rigs` for the vehicle, then its `default_rig`; without any the audit guesses topics.
 """
 
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from syncaudit.config import parse_text, read_text
-from syncaudit.errors import ConfigError, LogOpenError
+from syncaudit.errors import ConfigError, LogOpenError, LogReadError
 from syncaudit.fleet.policy import Policy
 from syncaudit.remote.listing import list_logs, remote_fingerprint
 from syncaudit.remote.urls import is_url, public_url
@@ -265,8 +266,10 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
         if vehicle is None and policy.uses_vehicles():
             found.warnings.append(no_vehicle_warning(job.path, policy))
         rig = job.rig_path
+        if rig is None and remote:
+            rig = _remote_rig(job.path, found)
         beside = Path(str(path) + ".rig.yaml")
-        if rig is None and beside.is_file():
+        if rig is None and not remote and beside.is_file():
             rig = str(beside)
         if rig is None and vehicle is not None:
             rig = policy.rigs.get(vehicle)
@@ -311,11 +314,34 @@ def fingerprint(path: str | Path) -> str:
     return digest.hexdigest()
 
 
+def _remote_rig(log_url: str, found: Discovery) -> str | None:
+    """The URL of the rig beside a remote log, as for a local one (one request); a refusal
+    is a warning (the log is judged with the policy's rig), a failing server a problem."""
+    from syncaudit.audit.rig_beside import rig_sidecar
+
+    try:
+        sidecar = rig_sidecar(log_url)
+    except LogReadError as exc:
+        found.problems.append(f"{exc}: the log is judged without its rig")
+        return None
+    if sidecar.refused is not None:
+        found.warnings.append(
+            f"{sidecar.name}: cannot read the rig beside the log ({sidecar.refused}); judged "
+            "with the manifest's or the policy's rig"
+        )
+    return sidecar.url if sidecar.data is not None else None
+
+
 def file_fingerprint(path: str | Path | None) -> str | None:
-    """Hash of a small config file's bytes (rig), None when there is none."""
+    """Hash of a small config file's bytes (rig, local or by URL), None when there is none."""
     if path is None:
         return None
     try:
+        if isinstance(path, str) and is_url(path):
+            from syncaudit.remote.sidecar import read_small
+
+            data = read_small(path).data
+            return None if data is None else hashlib.sha256(data).hexdigest()[:16]
         return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
-    except OSError:
+    except (OSError, LogReadError):
         return None

@@ -117,11 +117,11 @@ def wants_calibration(options: JobOptions, job: LogJob) -> bool:
 
 def _audit_into(outcome: LogOutcome, job: LogJob, options: JobOptions) -> None:
     from syncaudit.audit.probe import lidar_family
+    from syncaudit.audit.rig_beside import load_rig_at
     from syncaudit.audit.run import audit_log
     from syncaudit.logs import open_log
-    from syncaudit.rig import load_rig
 
-    rig = load_rig(job.rig_path) if job.rig_path else None
+    rig = load_rig_at(job.rig_path) if job.rig_path else None
     with open_log(job.path) as log:
         outcome.topics = sorted(log.topics)
         outcome.start_ns = log.summary.start_ns

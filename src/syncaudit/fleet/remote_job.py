@@ -30,9 +30,9 @@ def rig_topics(rig_path: str | None) -> frozenset[str] | None:
     (camera yaws); None without a rig (then every chunk is fetched)."""
     if rig_path is None:
         return None
-    from syncaudit.rig import load_rig
+    from syncaudit.audit.rig_beside import load_rig_at
 
-    rig = load_rig(rig_path)
+    rig = load_rig_at(rig_path)
     topics: set[str] = {"/tf_static", "/tf"}
     for part in (rig.lidar, *rig.cameras):
         for name in type(part).model_fields:
