@@ -24,6 +24,7 @@ from syncaudit.config import parse_text, read_text
 from syncaudit.errors import ConfigError, LogOpenError, LogReadError
 from syncaudit.fleet.policy import Policy
 from syncaudit.remote.listing import list_logs, remote_fingerprint
+from syncaudit.remote.sidecar import Sidecar
 from syncaudit.remote.urls import is_url, public_url
 
 LOG_SUFFIXES = (".mcap", ".bag", ".db3")
@@ -251,6 +252,9 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
             found.problems.append(f"{item}: matches no log")
         raw.extend(LogJob(path=str(p)) for p in paths)
     pattern = re.compile(policy.vehicle_pattern) if policy.vehicle_pattern else None
+    remote_rigs = _remote_rigs(
+        list(dict.fromkeys(j.path for j in raw if j.rig_path is None and is_url(j.path))), found
+    )
     seen: set[str] = set()
     for job in raw:
         remote = is_url(job.path)
@@ -267,7 +271,7 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
             found.warnings.append(no_vehicle_warning(job.path, policy))
         rig = job.rig_path
         if rig is None and remote:
-            rig = _remote_rig(job.path, found)
+            rig = remote_rigs.get(job.path)
         beside = Path(str(path) + ".rig.yaml")
         if rig is None and not remote and beside.is_file():
             rig = str(beside)
@@ -314,22 +318,40 @@ def fingerprint(path: str | Path) -> str:
     return digest.hexdigest()
 
 
-def _remote_rig(log_url: str, found: Discovery) -> str | None:
-    """The URL of the rig beside a remote log, as for a local one (one request); a refusal
-    is a warning (the log is judged with the policy's rig), a failing server a problem."""
+RIG_LOOKUPS_IN_FLIGHT = 16
+"""Remote logs whose rig beside them is asked for at once (one small request each)."""
+
+
+def _remote_rigs(log_urls: list[str], found: Discovery) -> dict[str, str]:
+    """The URL of the rig beside each remote log that has one, as beside a local log (one
+    request each, `RIG_LOOKUPS_IN_FLIGHT` at once); a refusal is a warning (the log is
+    judged with the policy's rig), a failing server a problem."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from syncaudit.audit.rig_beside import rig_sidecar
 
-    try:
-        sidecar = rig_sidecar(log_url)
-    except LogReadError as exc:
-        found.problems.append(f"{exc}: the log is judged without its rig")
-        return None
-    if sidecar.refused is not None:
-        found.warnings.append(
-            f"{sidecar.name}: cannot read the rig beside the log ({sidecar.refused}); judged "
-            "with the manifest's or the policy's rig"
-        )
-    return sidecar.url if sidecar.data is not None else None
+    def look(url: str) -> Sidecar | LogReadError:
+        try:
+            return rig_sidecar(url)
+        except LogReadError as exc:
+            return exc
+
+    if not log_urls:
+        return {}
+    with ThreadPoolExecutor(min(RIG_LOOKUPS_IN_FLIGHT, len(log_urls))) as pool:
+        answers = list(pool.map(look, log_urls))
+    rigs: dict[str, str] = {}
+    for url, answer in zip(log_urls, answers, strict=True):
+        if isinstance(answer, LogReadError):
+            found.problems.append(f"{answer}: the log is judged without its rig")
+        elif answer.refused is not None:
+            found.warnings.append(
+                f"{answer.name}: cannot read the rig beside the log ({answer.refused}); "
+                "judged with the manifest's or the policy's rig"
+            )
+        elif answer.data is not None:
+            rigs[url] = answer.url
+    return rigs
 
 
 def file_fingerprint(path: str | Path | None) -> str | None:
