@@ -273,8 +273,11 @@ def _read(
     check_crc: bool,
     warnings: list[str],
     meanwhile: Callable[[], object] | None = None,
+    cameras: bool = True,
 ) -> tuple[LidarScanner, LidarScan, list[CameraTables]]:
-    """One pass over the log: the LiDAR's reduced timing and every camera's tables.
+    """One pass over the log: the LiDAR's reduced timing and every camera's tables (none
+    without `cameras`: the LiDAR's topics alone are read, its revolutions still timed at
+    every camera's azimuth).
 
     What could not be given to a camera from a topic cameras share is added to `warnings`.
     Where the rig does not state the zero azimuth the scanner keeps its samples, to track
@@ -289,7 +292,7 @@ def _read(
         clock_tolerance_ns=round(rig.analysis.clock_sync_tolerance_ms * 1e6),
         keep_samples=_zero_unstated(rig) and bool(located),
     )
-    plan, router = read_plan(probe, rig, [c for c, _, _ in located])
+    plan, router = read_plan(probe, rig, [c for c, _, _ in located] if cameras else [])
     clouds = None if plan.cloud is None else CloudFeeder(scanner, plan.cloud)
     feed = scanner.feed if clouds is None else clouds.feed
     items = iter_items(probe.log, plan, jobs, check_crc=check_crc, meanwhile=_meanwhile(meanwhile))
@@ -303,7 +306,7 @@ def _read(
     if scan.packets == 0:
         raise no_packets_error(probe.log, lidar_cfg.topic)  # names a cut or damage it saw
     warnings.extend(router.finish())
-    tables = [router.builders[c.name].build() for c, _, _ in located]
+    tables = [router.builders[c.name].build() for c, _, _ in located] if cameras else []
     return scanner, scan, tables
 
 
@@ -417,8 +420,11 @@ def _audit(
         guessed = guessed if note is None else [*guessed, note]
         if note is not None and not scanner.kept_all:
             # A long log: its samples were not all kept (memory stays bounded); its
-            # revolutions are found again by reading it once more with the guessed zero.
-            _, scan, _ = _read(probe, rig, located, jobs=jobs, check_crc=check_crc, warnings=[])
+            # revolutions are found again by reading its LiDAR once more with the guessed
+            # zero (the cameras' tables are kept from the first pass).
+            _, scan, _ = _read(
+                probe, rig, located, jobs=jobs, check_crc=check_crc, warnings=[], cameras=False
+            )
     warnings.extend(scan.warnings)
     missing = _missing_inputs(rig, scan)
     offset = _clock_offset(scan, all_tables, warnings)
