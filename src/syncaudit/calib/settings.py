@@ -141,7 +141,7 @@ class MovingScansConfig(ConfigModel):
     the default because, measured, they did not make a calibration better: on seed 0 of
     the matrix, added at half the limits (8 of 13 sessions), they moved the error by
     -0.008 to +0.177 cm and -0.0004 to +0.0053 deg and cost 4-12 CPU s; at the limits
-    (parking-64-facing-bumper seeds 0-2, the only case over them) seed 0 went from
+    (run on parking-64-facing-bumper seeds 0-2, the loosest case) seed 0 went from
     1.006 to 1.183 cm, seeds 1 and 2 kept their free direction (benchmarks/README.md).
     A deskewed scan's pose is only as good as the estimated motion."""
     weak_share: float = Field(default=1.0, gt=0.0, le=10.0)
