@@ -87,6 +87,9 @@ def _run(root: Path, case: str, seed: int, stops: int, *, keep: bool) -> dict[st
         "calibratable": result.calibratable,
         "reason": result.reason,
         "stops_used": [sum(s.used for s in lidar.stops) for lidar in result.lidars],
+        "moving_used": [
+            0 if lidar.moving_scans is None else lidar.moving_scans.used for lidar in result.lidars
+        ],
         "cross_check": [n for n in result.notes if n.startswith("cross-LiDAR check")],
         "rot_deg": None,
         "trans_cm": None,
@@ -142,7 +145,7 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
         f"{'case':24s} {'n':>3s} {'rot max':>8s} {'rot med':>8s} {'cm max':>7s} {'cm med':>7s} "
         f"{'wall max':>8s} {'wall med':>8s} {'cpu max':>7s} {'cpu med':>7s} "
         f"{'base rot':>8s} {'base cm':>7s} {'jnt rot':>8s} {'jnt cm':>7s} {'worse':>5s} "
-        f"{'chosen':>10s}  target  verdict"
+        f"{'chosen':>10s} {'moving':>6s}  target  verdict"
     )
     for case in cases:
         mine = [r for r in rows if r["case"] == case]
@@ -161,6 +164,7 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
         joint_cm = max((r["joint_trans_cm"] for r in joint), default=float("nan"))
         picked = [r.get("method") for r in mine]
         chosen = f"J{picked.count('joint')}/B{picked.count('baseline')}"
+        moving = sum(sum(r.get("moving_used") or []) for r in mine)
         good = (
             len(done) == len(mine)
             and max(rot) <= lim_rot
@@ -174,7 +178,7 @@ def _table(rows: list[dict[str, Any]], cases: list[str]) -> bool:
             f"{max(cm):7.3f} {statistics.median(cm):7.3f} {max(walls):8.1f} "
             f"{statistics.median(walls):8.1f} {max(cpus):7.1f} {statistics.median(cpus):7.1f} "
             f"{base_rot:8.4f} {base_cm:7.3f} {joint_rot:8.4f} {joint_cm:7.3f} {worse:5d} "
-            f"{chosen:>10s}  "
+            f"{chosen:>10s} {moving:6d}  "
             f"{lim_rot}/{lim_cm}  {'OK' if good else 'MISSED'}"
             + ("" if len(done) == len(mine) else f" ({len(mine) - len(done)} not calibrated)")
         )
@@ -310,7 +314,8 @@ def main(argv: list[str] | None = None) -> int:
                 )
                 print(
                     f"{case} seed {seed}: wall {row['wall_s']:5.1f} s, cpu {row['cpu_s']:5.1f} s;"
-                    f" {err}; stops used {row['stops_used']}; load {os.getloadavg()[0]:.1f};"
+                    f" {err}; stops used {row['stops_used']};"
+                    f" moving scans used {row.get('moving_used')}; load {os.getloadavg()[0]:.1f};"
                     f" {row['method']} ({row['why']}; baseline/joint map cost"
                     f" {row['cost_ratio'] if row['cost_ratio'] is None else round(row['cost_ratio'], 5)};"
                     f" up from {row['up']}); baseline {base}",

@@ -3,8 +3,8 @@
 1. read the LiDARs' PointCloud2 scans (organised or not), the recorded extrinsics (any
    depth of /tf_static chain) and, when the log has it, the vehicle's odometry;
 2. find still stops from scan-to-scan change (nearest-neighbour residuals, no
-   registration, so low and sparse LiDARs work); scans taken while moving are skipped,
-   not deskewed. Refuse a degenerate scene (a direction no stop constrains: corridor,
+   registration, so low and sparse LiDARs work); scans taken while moving wait for step
+   8 (each keeps its per-azimuth firing times). Refuse a degenerate scene (a direction no stop constrains: corridor,
    ground plus one wall) before any registration, naming the free direction; a log
    with too few stops gets a not-calibratable result saying why, never "nothing to audit";
 3. the vehicle's motion between stops (all LiDARs merged in the base frame): seeded by
@@ -28,7 +28,12 @@
 7. validate against the recorded extrinsic: rotation and translation difference, pass/fail;
 8. the joint estimate (`joint_estimate`): every LiDAR's stop alignments, the odometry and
    the ground planes in one graph with the extrinsics as unknowns (a stop one LiDAR saw
-   still places the vehicle), cross-LiDAR stop pairs, map to map on its poses where a
+   still places the vehicle), cross-LiDAR stop pairs, then the scans taken while moving
+   (`moving_scans`: one inside another LiDAR's still run shares that stop's pose; the
+   others are deskewed with the odometry's or the neighbouring stops' motion and become
+   poses of their own, each registered to the same LiDAR's stops before and after and
+   kept where as sharp as a stop pair -- only when `moving_scans.use` asks: off by
+   default, as they did not improve the matrix), map to map on its poses where a
    direction is still free; per LiDAR, chosen over steps 5-6 (the baseline, also
    reported) unless it leaves a direction free (which it then names) or the baseline's
    maps agree clearly better on its own poses (`map_consistency`; never the truth).
@@ -40,7 +45,8 @@ coarse turn chain and the map-to-map GICP; the result does not otherwise depend 
 
 Each stage is a package of its own, and this module only calls them in order:
 `selection` (`loading`: step 1; `stops`, `stop_choice`, `degeneracy`: 2), `alignment`
-(`turnchain`: 3; `registration`, `pairs`, `crosscheck`, `consensus`: 4; `crosspairs`: 8),
+(`turnchain`: 3; `registration`, `pairs`, `crosscheck`, `consensus`: 4; `crosspairs`,
+`deskew`, `moving_scans`: 8),
 `graph` (`links`, `stopgraph`, `posegraph`, `lidar_summary`: 5; `jointgraph`,
 `vehicle_up`: 8), `refinement` (`maptomap`: 6-7; `joint_estimate`: 8) and `validation`
 (`map_consistency`: the choice in 8; `outcome`, `top_view_points`: the result and its
@@ -50,12 +56,14 @@ reasons). They share one `state.LidarState` per LiDAR; `se3`, `io`, `extrinsics`
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from syncaudit.calib import io
 from syncaudit.calib.alignment.crosscheck import cross_check
+from syncaudit.calib.alignment.moving_scans import moving_links
 from syncaudit.calib.alignment.pairs import align_pairs
 from syncaudit.calib.alignment.registration import backend
 from syncaudit.calib.alignment.turnchain import angular_chain
@@ -141,8 +149,9 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
             lidar.map_points = 0 if local is None else local[0].size
     baseline = extrinsics
     with timer.stage("joint"):
+        moving = partial(moving_links, lidars, stops, recorded, odometry, config, notes)
         joint, joint_extrinsics_out = joint_extrinsics(
-            lidars, reference, recorded, baseline, odometry, config
+            lidars, reference, recorded, baseline, odometry, config, moving
         )
     extrinsics = joint_extrinsics_out
     if joint.reason:

@@ -175,6 +175,26 @@ class DegeneracyOut(_Out):
     limit: float
 
 
+class MovingScansOut(_Out):
+    """What became of one LiDAR's scans taken while moving (`alignment.moving_scans`)."""
+
+    seen: int
+    """Scans of this LiDAR outside its still runs."""
+    deskewed: int
+    """Of those, the ones deskewed and registered (the still ones at another LiDAR's stop
+    need no deskew and are counted in `still_at_stop`)."""
+    still_at_stop: int
+    """Scans taken inside another LiDAR's still run (the vehicle stood) that this LiDAR's
+    run detection missed: they place that stop for this LiDAR."""
+    used: int
+    """Scans whose alignments joined the joint graph."""
+    motion_source: str | None
+    """Where the motion over a sweep came from: odometry, or the neighbouring stops'
+    poses refined by the moving scans' own registrations."""
+    rejected: dict[str, int]
+    """Why the others were not used: reason -> scans."""
+
+
 class LidarOut(_Out):
     """Per-LiDAR part of the result: scans, stops, pairs, pose graph, local map."""
 
@@ -195,6 +215,8 @@ class LidarOut(_Out):
     reason: str | None
     top_view: TopViewOut | None = None
     """This LiDAR's used stops from above (None when no stop was placed)."""
+    moving_scans: MovingScansOut | None = None
+    """Its scans taken while moving: seen, deskewed, used, rejected (None: not reached)."""
 
 
 class MapPairOut(_Out):

@@ -130,6 +130,29 @@ class ValidationConfig(ConfigModel):
     max_translation_cm: float = Field(default=2.0, gt=0.0)
 
 
+class MovingScansConfig(ConfigModel):
+    """Scans taken while moving (`alignment.moving_scans`): when they join the joint graph."""
+
+    use: Literal["auto", "always", "never"] = "never"
+    """never (the default): none join, each LiDAR's report still says how many there were;
+    always: every moving scan that passes the tests; auto: the still scans a LiDAR's run
+    detection missed at another LiDAR's stop, and the deskewed ones only where the stops
+    alone leave some extrinsic's 1-sigma above `weak_share` of the validation limits. Not
+    the default because, measured, they did not make a calibration better: on seed 0 of
+    the matrix, added at half the limits (8 of 13 sessions), they moved the error by
+    -0.008 to +0.177 cm and -0.0004 to +0.0053 deg and cost 4-12 CPU s; at the limits
+    (run on parking-64-facing-bumper seeds 0-2, the loosest case) seed 0 went from
+    1.006 to 1.183 cm, seeds 1 and 2 kept their free direction (benchmarks/README.md).
+    A deskewed scan's pose is only as good as the estimated motion."""
+    weak_share: float = Field(default=1.0, gt=0.0, le=10.0)
+    max_per_gap: int = Field(default=3, ge=1, le=50)
+    """Moving scans tried per LiDAR between two consecutive stops (evenly spread in time)."""
+    sharp_ratio: float = Field(default=1.5, ge=1.0)
+    """A moving scan's fit error may be at most this many times the stop pairs' median."""
+    velocity_uncertainty: float = Field(default=0.2, ge=0.0)
+    """Share of the deskew's correction taken as its uncertainty in the links' weight."""
+
+
 class CalibConfig(ConfigModel):
     """Everything `calibrate_log` needs besides the log."""
 
@@ -142,6 +165,7 @@ class CalibConfig(ConfigModel):
     pose_graph: PoseGraphConfig = PoseGraphConfig()
     map_to_map: MapToMapConfig = MapToMapConfig()
     validation: ValidationConfig = ValidationConfig()
+    moving_scans: MovingScansConfig = MovingScansConfig()
 
     @model_validator(mode="after")
     def _check(self) -> CalibConfig:

@@ -9,19 +9,22 @@ from numpy.typing import NDArray
 
 from syncaudit.calib import extrinsics as extr
 from syncaudit.calib import se3
+from syncaudit.calib.alignment.deskew import SweepTimes
 from syncaudit.calib.alignment.registration import Alignment, Cloud
 from syncaudit.calib.graph import posegraph
-from syncaudit.calib.result import PairOut, PoseGraphOut
+from syncaudit.calib.result import MovingScansOut, PairOut, PoseGraphOut
 
 F64 = NDArray[np.float64]
 
 
 @dataclass
 class SampledScan:
-    """A scan kept in memory: points at the finest voxel used (float32)."""
+    """A scan kept in memory: points at the finest voxel used (float32), and when each
+    azimuth was fired (None: the cloud has no time field) so a moving scan can be deskewed."""
 
     stamp_ns: int
     points_m: NDArray[np.float32]
+    sweep: SweepTimes | None = None
 
 
 @dataclass
@@ -48,6 +51,7 @@ class LidarState:
     results: dict[tuple[int, int], Alignment] = field(default_factory=dict)
     turn_axis: F64 | None = None
     reason: str | None = None
+    moving: MovingScansOut | None = None
 
 
 def vehicle_points(lidars: list[LidarState], stop: int, recorded: extr.RecordedExtrinsics) -> F64:

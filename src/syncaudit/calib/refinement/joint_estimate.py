@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,8 @@ from syncaudit.calib.state import LidarState
 from syncaudit.calib.validation import map_consistency
 
 F64 = NDArray[np.float64]
+MovingHook = Callable[[jointgraph.JointSolution], tuple[list[jointgraph.Link], dict[int, F64]]]
+"""Links and new poses from the scans taken while moving, given the solved graph."""
 
 _ODOM_SIGMA_M = 0.02
 _ODOM_SIGMA_FRACTION = 0.02
@@ -365,8 +368,13 @@ def joint_extrinsics(
     baseline: list[ExtrinsicOut],
     odometry: io.Odometry | None,
     config: CalibConfig,
+    moving: MovingHook | None = None,
 ) -> tuple[JointOut, list[ExtrinsicOut]]:
-    """Solve the joint graph, refine it map to map, and judge every LiDAR's extrinsic."""
+    """Solve the joint graph, refine it map to map, and judge every LiDAR's extrinsic.
+
+    `moving` (`alignment.moving_scans`) adds the scans taken while moving, registered on
+    the poses solved with the cross-LiDAR pairs, as links and poses (judged on that
+    solution's covariances), before the map-to-map refinement."""
     ref = lidars[0]
     seeds: dict[int, F64] = {}
     for j, (lidar, base) in enumerate(zip(lidars[1:], baseline, strict=True), start=1):
@@ -415,6 +423,19 @@ def joint_extrinsics(
             anchor, solution.poses, solution.extrinsics, links, kept, planar
         )
         solution = jointgraph.solve(problem, config.pose_graph)
+    if moving is not None:
+        added_links, added_poses = moving(solution)
+        if added_links:
+            links = links + added_links
+            problem = jointgraph.Problem(
+                anchor,
+                {**solution.poses, **added_poses},
+                solution.extrinsics,
+                links,
+                grounds if not cross or up.source == "ground plane" else [],
+                planar,
+            )
+            solution = jointgraph.solve(problem, config.pose_graph)
     solution, map_links, refinements, rounds = _refine_to_convergence(
         lidars, anchor, solution, links, planar, config
     )
@@ -488,6 +509,7 @@ def joint_extrinsics(
             "cross": sum(1 for link in cross if link.kind == "cross"),
             "map": kinds.count("map"),
             "odometry": kinds.count("odometry"),
+            "moving": kinds.count("moving"),
             "ground": max(len(grounds) - 1, 0) if any(g.lidar == 0 for g in grounds) else 0,
         },
         lidars=outs,

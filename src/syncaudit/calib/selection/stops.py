@@ -56,8 +56,9 @@ def find_stops(
     moving = sum(len(lidar.scans) for lidar in lidars) - sum(len(r.indices) for r in runs)
     if moving:
         notes.append(
-            f"{moving} scan(s) taken while moving (or isolated) were skipped, not deskewed: "
-            "only still scans are aligned"
+            f"{moving} scan(s) taken while moving (or isolated): not used to find stops; "
+            "once the stops are placed they are deskewed and registered if moving_scans.use "
+            "asks (each LiDAR's moving_scans says how many there were and were used)"
         )
     tolerance_ns = round(sel.stop_match_tolerance_s * 1e9)
     stops = stop_choice.group_stops(runs, tolerance_ns)

@@ -119,6 +119,7 @@ def lidar_out(
         aligned=bool(lidar.graphs),
         reason=lidar.reason,
         top_view=top,
+        moving_scans=lidar.moving,
     )
 
 
