@@ -94,7 +94,7 @@ def _scan_links(lidars: list[LidarState], config: CalibConfig) -> list[jointgrap
                     j,
                     edge.second,
                     edge.first_from_second,
-                    posegraph.information(edge, config.pose_graph.edge_sigma_m),
+                    posegraph.information(edge, config.pose_graph.joint_link_sigma_m),
                     "scan",
                 )
             )
@@ -218,8 +218,8 @@ def _map_link(
 ) -> jointgraph.Link:
     """A map-to-map alignment as a factor on the extrinsic, weighted as `stops` cross-scan
     alignments of its mean Hessian (the convention of every scan link: Hessian over the
-    edge sigma squared), `stops` being the smaller map's stop count."""
-    info = m2m.after.hessian * stops / config.pose_graph.edge_sigma_m**2
+    joint link sigma squared), `stops` being the smaller map's stop count."""
+    info = m2m.after.hessian * stops / config.pose_graph.joint_link_sigma_m**2
     return jointgraph.Link(0, anchor, j, anchor, m2m.target_from_source, info, "map")
 
 
