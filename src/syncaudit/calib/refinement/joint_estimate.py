@@ -320,8 +320,15 @@ def _select(
     calibrated: bool,
     config: CalibConfig,
 ) -> SelectionOut:
-    """Joint or baseline for LiDAR j, by the map cost of each on its own poses
-    (`map_consistency`): a data criterion, never the truth."""
+    """Joint or baseline for LiDAR j: the joint estimate unless its graph leaves a
+    direction free. Both estimates' map costs on their own poses (`map_consistency`) are
+    reported but no longer decide: the baseline is the minimiser of much the same cost
+    (map-to-map point-to-plane GICP on its own maps), so the cost leans its way. Measured
+    (issue 29, seeds 0-2 of the matrix): with the links weighted as they measure, the
+    joint estimate was at least as near the truth as the baseline in both rotation and
+    translation on 37 of the 38 sessions both calibrated, and the cost picked the
+    baseline (lower by 1.02 %, margin 1 %) only on parking-64-facing-bumper seed 0,
+    where it was 0.27 deg / 23 cm off against the joint 0.029 deg / 0.94 cm."""
     ref, other = lidars[0], lidars[j]
 
     def out(method: str, criterion: str, costs: dict[str, float] | None = None) -> SelectionOut:
@@ -353,9 +360,7 @@ def _select(
     costs = map_consistency.map_costs(ref.fine, other.fine, estimates, config)
     if costs is None:
         return out("joint", "the estimates share fewer than two stops to compare maps on")
-    if costs["baseline"] < costs["joint"] * (1.0 - map_consistency.CLEAR_MARGIN):
-        return out("baseline", "the baseline's maps agree clearly better (map cost)", costs)
-    return out("joint", "the joint maps agree as well or better (map cost)", costs)
+    return out("joint", "the joint graph pins every direction (map costs reported)", costs)
 
 
 def joint_extrinsics(
