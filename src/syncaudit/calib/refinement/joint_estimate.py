@@ -83,7 +83,8 @@ def _initial_poses(
     return {k: v for k, v in out.items() if k in stops}
 
 
-def _scan_links(lidars: list[LidarState], config: CalibConfig) -> list[jointgraph.Link]:
+def _scan_links(lidars: list[LidarState], sigma_m: float) -> list[jointgraph.Link]:
+    """Every LiDAR's accepted cross-scan alignments as links, information at `sigma_m`."""
     links = []
     for j, lidar in enumerate(lidars):
         for edge in accepted_edges(lidar):
@@ -94,7 +95,7 @@ def _scan_links(lidars: list[LidarState], config: CalibConfig) -> list[jointgrap
                     j,
                     edge.second,
                     edge.first_from_second,
-                    posegraph.information(edge, config.pose_graph.joint_link_sigma_m),
+                    posegraph.information(edge, sigma_m),
                     "scan",
                 )
             )
@@ -213,13 +214,11 @@ _SETTLED_M = 1e-5
 """The refinement stops when no extrinsic moved more than 0.001 deg / 0.001 cm in a round."""
 
 
-def _map_link(
-    m2m: Alignment, j: int, anchor: int, stops: int, config: CalibConfig
-) -> jointgraph.Link:
+def _map_link(m2m: Alignment, j: int, anchor: int, stops: int, sigma_m: float) -> jointgraph.Link:
     """A map-to-map alignment as a factor on the extrinsic, weighted as `stops` cross-scan
     alignments of its mean Hessian (the convention of every scan link: Hessian over the
-    joint link sigma squared), `stops` being the smaller map's stop count."""
-    info = m2m.after.hessian * stops / config.pose_graph.joint_link_sigma_m**2
+    links' sigma squared), `stops` being the smaller map's stop count."""
+    info = m2m.after.hessian * stops / sigma_m**2
     return jointgraph.Link(0, anchor, j, anchor, m2m.target_from_source, info, "map")
 
 
@@ -230,6 +229,7 @@ def _refine_to_convergence(
     links: list[jointgraph.Link],
     planar: F64 | None,
     config: CalibConfig,
+    sigma_m: float,
 ) -> tuple[jointgraph.JointSolution, list[jointgraph.Link], dict[int, Alignment | None], int]:
     """Map-to-map GICP of a LiDAR's whole map onto the reference's on the joint poses
     (what the baseline uses, over every stop), as a factor in the graph, solved again,
@@ -259,7 +259,7 @@ def _refine_to_convergence(
                     sum(1 for k in ref.fine if k in solution.poses),
                     sum(1 for k in lidar.fine if k in solution.poses),
                 )
-                round_links.append(_map_link(m2m, j, anchor, stops, config))
+                round_links.append(_map_link(m2m, j, anchor, stops, sigma_m))
         if not round_links:
             break
         problem = jointgraph.Problem(
@@ -379,7 +379,13 @@ def joint_extrinsics(
     for j, (lidar, base) in enumerate(zip(lidars[1:], baseline, strict=True), start=1):
         rec = recorded.relative(ref.frame_id, lidar.frame_id)
         seeds[j] = np.array(base.result.matrix) if base.result is not None else rec
-    scan_links = _scan_links(lidars, config)
+    # The first solve only seeds the cross-pair search; its links keep the per-LiDAR
+    # graphs' weight (edge_sigma_m). At the final weight, with few links and one bad
+    # alignment, the robust kernel let it settle in a wrong minimum: parking-64-open-bumper
+    # seed 4, 10 scan links, 49.8 deg off, no cross pair found, the joint 48.5 deg off; at
+    # 1 cm 3.9 deg off, five cross pairs, then at 0.6 mm 0.005 deg / 0.15 cm.
+    link_sigma_m = config.pose_graph.edge_sigma_m
+    scan_links = _scan_links(lidars, link_sigma_m)
     placed = {
         j: sorted(
             {k for link in scan_links if link.lidar_a == j for k in (link.stop_a, link.stop_b)}
@@ -409,7 +415,9 @@ def joint_extrinsics(
         # and the structure themselves, and a flat-ground assumption would bias them. So
         # does odometry (1-2 % scale error) where alignments place the stops: it stays
         # only for the stops no alignment reaches.
-        aligned = [link for link in links if link.kind != "odometry"] + cross
+        link_sigma_m = config.pose_graph.joint_link_sigma_m
+        firm = _scan_links(lidars, link_sigma_m)
+        aligned = [x for x in firm if x.stop_a in initial and x.stop_b in initial] + cross
         links = aligned + [
             link
             for link in links
@@ -428,7 +436,7 @@ def joint_extrinsics(
         )
         solution = jointgraph.solve(problem, config.pose_graph)
     solution, map_links, refinements, rounds = _refine_to_convergence(
-        lidars, anchor, solution, links, planar, config
+        lidars, anchor, solution, links, planar, config, link_sigma_m
     )
     limits = config.validation
     names = [lidar.topic for lidar in lidars]
