@@ -35,8 +35,8 @@
    kept where as sharp as a stop pair -- only when `moving_scans.use` asks: off by
    default, as they did not improve the matrix), map to map on its poses where a
    direction is still free; per LiDAR, chosen over steps 5-6 (the baseline, also
-   reported) unless it leaves a direction free (which it then names) or the baseline's
-   maps agree clearly better on its own poses (`map_consistency`; never the truth).
+   reported) unless it leaves a direction free (which it then names); both estimates'
+   map costs on their own poses are reported (`map_consistency`).
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only

@@ -1,4 +1,4 @@
-"""The data's judge between estimates (calib.map_consistency): maps that agree cost less."""
+"""The map cost reported beside the choice (calib.map_consistency): maps that agree cost less."""
 
 from __future__ import annotations
 

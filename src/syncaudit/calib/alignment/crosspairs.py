@@ -61,6 +61,6 @@ def cross_links(
         tried.append((a, b, result))
         if result.accepted:
             edge = pair_edge(a, b, result)
-            info = posegraph.information(edge, config.pose_graph.edge_sigma_m)
+            info = posegraph.information(edge, config.pose_graph.joint_link_sigma_m)
             links.append(jointgraph.Link(0, a, j, b, result.target_from_source, info, "cross"))
     return links, tried

@@ -1,22 +1,22 @@
-"""How well two LiDARs' maps agree on estimated poses: the data's judge between estimates.
+"""How well two LiDARs' maps agree on estimated poses: evidence reported beside the choice.
 
 The joint estimate and the per-LiDAR baseline each give every stop's pose and the
-extrinsic. Either can be the better one on a given session, and the truth is not known
-when calibrating a real log, so the choice between them is made from the data alone: both
-LiDARs' maps are built from the same stop scans on each estimate's own poses, and each map
-is scored against the other LiDAR's (both ways). The score is a truncated point-to-plane
-cost per point: the squared distance to the other map's nearest plane, capped at the
-overlap distance squared for a point with no neighbour (so an estimate cannot win by
-pushing its maps apart).
+extrinsic, and the truth is not known when calibrating a real log. To show how each
+estimate's maps fit together, both LiDARs' maps are built from the same stop scans on each
+estimate's own poses, and each map is scored against the other LiDAR's (both ways). The
+score is a truncated point-to-plane cost per point: the squared distance to the other map's
+nearest plane, capped at the overlap distance squared for a point with no neighbour (so an
+estimate cannot win by pushing its maps apart).
 
-The joint estimate uses more of the data (every stop of both LiDARs, cross-LiDAR pairs),
-so it is kept unless the baseline's maps agree clearly better: a cost lower by more than
-`CLEAR_MARGIN`. Smaller differences are noise: measured on seed 0 of the matrix (11
-sessions besides the one below), the costs differed by 0.001-0.15 %, the baseline's lower
-on 5, although on none of those 5 was the baseline nearer the truth in both rotation and
-translation (on a 64-beam bumper drive it was lower by 0.09 % while 0.019 deg / 0.31 cm
-off against the joint 0.015 / 0.08). On a 16-beam parking lot where the joint estimate was
-0.3 deg / 1.7 cm nearer the truth, the baseline's cost was 3.5 % higher.
+The costs are reported beside the choice (`SelectionOut`) and decide it only against a
+joint graph that converged wrong (`GROSS_MARGIN`): the baseline is the minimiser of much the same cost (map-to-map GICP on its own maps), so the
+comparison leans its way. Measured on seed 0 of the matrix before issue 29's last round,
+the costs differed by 0.001-0.15 % on 11 sessions in either direction whichever estimate
+was nearer the truth, and on a 16-beam parking lot where the joint estimate was 0.3 deg /
+1.7 cm nearer the baseline's cost was 3.5 % higher; after it (the joint graph's links
+weighted as they measure), the baseline's cost was lower by 1.02 % on
+parking-64-facing-bumper, where it was 0.27 deg / 23 cm off and the joint 0.029 deg /
+0.94 cm.
 """
 
 from __future__ import annotations
@@ -31,8 +31,14 @@ from syncaudit.calib.alignment.registration import Cloud, evaluate, prepare
 from syncaudit.calib.settings import CalibConfig
 
 F64 = NDArray[np.float64]
-CLEAR_MARGIN = 0.01
-"""Relative cost difference below which two estimates' maps agree equally well."""
+
+
+GROSS_MARGIN = 0.1
+"""The baseline replaces the joint estimate only when its cost is lower by more than this.
+Measured on the matrix, seeds 0-4: the baseline/joint cost ratio was 0.969-1.167 on every
+session both calibrated but one, whichever estimate was nearer the truth (0.969 on
+parking-64-open-bumper seed 3: joint 0.034 deg / 0.36 cm, baseline 0.26 / 7.5), and 0.628
+on that one, whose joint graph converged 48.5 deg off."""
 
 
 @dataclass(frozen=True)
