@@ -363,7 +363,7 @@ def _select(
     costs = map_consistency.map_costs(ref.fine, other.fine, estimates, config)
     if costs is None:
         return out("joint", "the estimates share fewer than two stops to compare maps on")
-    if costs["baseline"] < costs["joint"] * (1.0 - map_consistency.GROSS_MARGIN):
+    if map_consistency.baseline_far_better(costs):
         return out("baseline", "the baseline's maps agree far better (map cost)", costs)
     return out("joint", "the joint graph pins every direction (map costs reported)", costs)
 

@@ -90,3 +90,9 @@ def map_costs(
         other_map = _map(other_clouds, est.other, other_stops, config)
         out[name] = 0.5 * (_cost(ref_map, other_map, config) + _cost(other_map, ref_map, config))
     return out
+
+
+def baseline_far_better(costs: dict[str, float]) -> bool:
+    """Whether the baseline's maps agree more than `GROSS_MARGIN` better than the joint
+    estimate's: the one cost difference that hands the choice to the baseline."""
+    return costs["baseline"] < costs["joint"] * (1.0 - GROSS_MARGIN)
