@@ -64,6 +64,18 @@ class RefusedReplyError(_FatalReplyError):
     covers only its own object; S3 answers 403 for a missing key without list rights)."""
 
 
+class RefusedReadError(LogReadError):
+    """A read the store refused (HTTP 401/403, an object store's PermissionError): no
+    retry can change it. `reason` is the refusal in a few words."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+    def __reduce__(self) -> tuple[type[RefusedReadError], tuple[str, str]]:
+        return type(self), (str(self), self.reason)
+
+
 class FetchCounter:
     """Bytes and requests fetched for one URL by every process of an audit (shared memory,
     created before the chunk workers fork)."""
@@ -392,6 +404,11 @@ class RangeStream:
         self.close()
         if isinstance(exc, FileNotFoundError):
             raise LogOpenError(f"{self.obj.name}: no such log ({_one_line(exc)})") from None
+        if isinstance(exc, RefusedReplyError | PermissionError):
+            raise RefusedReadError(
+                f"{self.obj.name}: reading bytes {self.start}-{self.end}: {_one_line(exc)}",
+                " ".join(_one_line(exc).split()[:3]),
+            ) from None
         if isinstance(exc, _FatalReplyError | LogReadError):
             raise LogReadError(
                 f"{self.obj.name}: reading bytes {self.start}-{self.end}: {_one_line(exc)}"

@@ -10,18 +10,11 @@ audit would silently run on another rig.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from urllib.parse import urlsplit, urlunsplit
 
-from syncaudit.errors import LogReadError
-from syncaudit.remote.ranges import (
-    RETRY_PAUSE_S,
-    TRIES,
-    RefusedReplyError,
-    RemoteObject,
-    open_object,
-)
+from syncaudit.errors import LogOpenError, LogReadError
+from syncaudit.remote.ranges import RefusedReadError, open_object, read_head
 from syncaudit.remote.urls import public_url
 
 MAX_SIDECAR_BYTES = 1 << 20
@@ -49,41 +42,19 @@ def beside(url: str, suffix: str) -> str:
 
 
 def read_small(url: str, max_bytes: int = MAX_SIDECAR_BYTES) -> Sidecar:
-    """The object at `url` whole, if it exists and has at most `max_bytes` bytes.
+    """The object at `url` whole, if it exists and has at most `max_bytes` bytes (read as
+    every remote range is, `ranges.read_head`: retried where a retry can help).
 
     Raises:
         LogReadError: the object is larger than `max_bytes`, or the read failed otherwise
             than by its absence or a refusal.
     """
-    obj = open_object(url)
-    for attempt in range(TRIES):
-        try:
-            return _read(obj, url, max_bytes)
-        except FileNotFoundError:
-            return Sidecar(url, None)
-        except (RefusedReplyError, PermissionError) as exc:
-            return Sidecar(url, None, refused=" ".join(str(exc).split()[:3]) or "refused")
-        except LogReadError:
-            raise
-        except Exception as exc:
-            if attempt + 1 == TRIES:
-                why = " ".join(str(exc).split()) or type(exc).__name__
-                raise LogReadError(f"{public_url(url)}: cannot read: {why}") from None
-            time.sleep(RETRY_PAUSE_S * 2**attempt)
-    raise AssertionError("unreachable")
-
-
-def _read(obj: RemoteObject, url: str, max_bytes: int) -> Sidecar:
-    body, size = obj.open(0, max_bytes + 1)
     try:
-        if size > max_bytes:
-            raise LogReadError(f"{public_url(url)}: {size} bytes, more than {max_bytes}")
-        buffer = bytearray(size)
-        view, held = memoryview(buffer), 0
-        while held < size and (n := body.readinto(view[held:])):
-            held += n
-    finally:
-        body.close()
-    if held < size:
-        raise ConnectionError(f"the reply ended after {held} of {size} bytes")
-    return Sidecar(url, bytes(buffer))
+        data, size = read_head(open_object(url), max_bytes + 1, None)
+    except LogOpenError:  # no such object
+        return Sidecar(url, None)
+    except RefusedReadError as exc:
+        return Sidecar(url, None, refused=exc.reason or "refused")
+    if size > max_bytes:
+        raise LogReadError(f"{public_url(url)}: {size} bytes, more than {max_bytes}")
+    return Sidecar(url, data)
