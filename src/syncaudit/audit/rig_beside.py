@@ -52,6 +52,12 @@ def remote_rig_beside(log_url: str) -> RigBeside:
     )
 
 
+def local_rig_beside(log: Path) -> Path | None:
+    """The file `LOG.rig.yaml` beside a local log, where there is one."""
+    beside_log = log.with_name(log.name + RIG_SUFFIX)
+    return beside_log if beside_log.is_file() else None
+
+
 def rig_sidecar(log_url: str) -> Sidecar:
     """What lies at `LOG.rig.yaml` beside the remote log (its bytes, or None and why)."""
     return read_small(beside(log_url, RIG_SUFFIX))

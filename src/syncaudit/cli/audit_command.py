@@ -117,7 +117,7 @@ def audit(
 
             raise UsageError("--rig and --no-rig: give one")
         rig_path = rig or (None if no_rig else rig_beside(source))
-        beside_url = None if rig or no_rig else _remote_rig(source)
+        remote_rig = None if rig or no_rig else _remote_rig(source)
         targets = _Targets.of(json_out, pairings_out, html_out, csv_out, parquet_out)
         calibration = (
             _load_calibration(calibration_json, source, any_log=calibration_any_log)
@@ -138,7 +138,7 @@ def audit(
             targets.claim_pairings(outputs)
             result = _audit(
                 source,
-                beside_url or rig_path,
+                remote_rig or rig_path,
                 jobs=jobs,
                 check_crc=check_crc,
                 tables=not as_json,
@@ -233,8 +233,10 @@ def rig_beside(source: str | Path) -> Path | None:
     """
     if not isinstance(source, Path):
         return None
-    beside = source.with_name(source.name + ".rig.yaml")
-    if not beside.is_file():
+    from syncaudit.audit.rig_beside import local_rig_beside
+
+    beside = local_rig_beside(source)
+    if beside is None:
         return None
     say(f"using rig {beside.name} beside the log (--rig to choose another, --no-rig to guess)")
     return beside

@@ -20,6 +20,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from syncaudit.audit.rig_beside import local_rig_beside, rig_sidecar
 from syncaudit.config import parse_text, read_text
 from syncaudit.errors import ConfigError, LogOpenError, LogReadError
 from syncaudit.fleet.policy import Policy
@@ -272,9 +273,9 @@ def discover(inputs: list[str], policy: Policy) -> Discovery:
         rig = job.rig_path
         if rig is None and remote:
             rig = remote_rigs.get(job.path)
-        beside = Path(str(path) + ".rig.yaml")
-        if rig is None and not remote and beside.is_file():
-            rig = str(beside)
+        if rig is None and not remote:
+            beside = local_rig_beside(path)
+            rig = None if beside is None else str(beside)
         if rig is None and vehicle is not None:
             rig = policy.rigs.get(vehicle)
         rig = rig or policy.default_rig
@@ -327,8 +328,6 @@ def _remote_rigs(log_urls: list[str], found: Discovery) -> dict[str, str]:
     request each, `RIG_LOOKUPS_IN_FLIGHT` at once); a refusal is a warning (the log is
     judged with the policy's rig), a failing server a problem."""
     from concurrent.futures import ThreadPoolExecutor
-
-    from syncaudit.audit.rig_beside import rig_sidecar
 
     def look(url: str) -> Sidecar | LogReadError:
         try:
