@@ -9,7 +9,8 @@ import pytest
 
 from syncaudit.calib import se3
 from syncaudit.calib.graph.jointgraph import Ground, Link, Problem, free_directions, solve
-from syncaudit.calib.settings import PoseGraphConfig
+from syncaudit.calib.refinement.joint_estimate import pinned_by_grounds
+from syncaudit.calib.settings import CalibConfig, PoseGraphConfig
 
 pytest.importorskip("gtsam")
 
@@ -82,16 +83,19 @@ def test_hand_eye_recovers_the_extrinsic_but_its_height_without_ground() -> None
     assert abs(float(axis @ (TRUE_EXT[:3, :3].T @ np.array([0.0, 0.0, 1.0])))) > 0.99
 
 
-def test_ground_planes_fix_the_height() -> None:
+def _grounds() -> list[Ground]:
+    """Ground 1.9 m below the reference: n.p + d = 0 with n up, d = 1.9; the rear's is the
+    same plane in its own frame."""
     up_rear = TRUE_EXT[:3, :3].T @ np.array([0.0, 0.0, 1.0])
-    # Ground 1.9 m below the reference: n.p + d = 0 with n up, d = 1.9; the rear's is the same
-    # plane in its own frame.
     offset_rear = 1.9 + float(np.array([0.0, 0.0, 1.0]) @ TRUE_EXT[:3, 3])
-    grounds = [
+    return [
         Ground(0, np.array([0.0, 0.0, 1.0]), 1.9, 0.05, 0.002),
         Ground(1, up_rear, offset_rear, 0.05, 0.002),
     ]
-    solution = solve(_problem(grounds), PoseGraphConfig())
+
+
+def test_ground_planes_fix_the_height() -> None:
+    solution = solve(_problem(_grounds()), PoseGraphConfig())
     rot_deg, trans_m = se3.transform_difference(TRUE_EXT, solution.extrinsics[1])
     assert rot_deg < 0.01 and trans_m < 0.002
     assert free_directions(solution.covariances[1], 0.1, 1.0) == []
@@ -104,3 +108,21 @@ def test_one_motion_seen_by_both_leaves_the_yaw_free_and_says_so() -> None:
     solution = solve(_problem([], shared=False), PoseGraphConfig())
     kinds = [kind for kind, _axis, _sigma in free_directions(solution.covariances[1], 0.1, 1.0)]
     assert "rotation" in kinds
+
+
+def test_ground_planes_come_back_where_the_graph_leaves_the_height_free() -> None:
+    """The final solve leaves the ground planes out where the turn axis is the up; where
+    the graph then cannot see the height, they come back (not the map-to-map refinement)."""
+    problem = _problem([])
+    loose = solve(problem, PoseGraphConfig())
+    grounds = _grounds()
+    pinned, used = pinned_by_grounds(problem, loose, grounds, CalibConfig())
+    assert used is grounds
+    diff = se3.invert(TRUE_EXT) @ pinned.extrinsics[1]
+    assert abs(diff[2, 3]) < 0.002  # the seed's 3 cm gone
+    assert free_directions(pinned.covariances[1], 0.25, 2.0) == []
+    # A graph that holds them already is left as it was.
+    held = _problem(grounds)
+    solution = solve(held, PoseGraphConfig())
+    again, used = pinned_by_grounds(held, solution, _grounds(), CalibConfig())
+    assert again is solution and used is held.grounds
