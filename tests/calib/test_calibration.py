@@ -256,6 +256,11 @@ def test_result_json_html_and_console(matrix_runs: dict[str, Any], tmp_path: Pat
     buffer = io.StringIO()
     render_calibration(result, Console(file=buffer, width=160))
     assert "PASS" in buffer.getvalue() and "lidar_rear" in buffer.getvalue()
+    # Which estimate it is, with the joint graph's 1-sigma, in both renderings.
+    assert result.joint is not None and result.joint.chosen
+    sigma = result.joint.lidars[0]
+    said = f"joint graph, 1-sigma {sigma.sigma_deg:.3f} deg / {sigma.sigma_cm:.2f} cm"
+    assert said in buffer.getvalue().replace("\n", " ") and said in html
 
 
 @pytest.fixture(scope="module")

@@ -35,8 +35,9 @@
    kept where as sharp as a stop pair -- only when `moving_scans.use` asks: off by
    default, as they did not improve the matrix), map to map on its poses where a
    direction is still free; per LiDAR, chosen over steps 5-6 (the baseline, also
-   reported) unless it leaves a direction free (which it then names); both estimates'
-   map costs on their own poses are reported (`map_consistency`).
+   reported) unless it leaves a direction free (which it then names; with the two maps'
+   alignment in the graph, the baseline's only bridge, neither is chosen); both
+   estimates' map costs on their own poses are reported (`map_consistency`).
 
 Both maps are anchored at the *same* vehicle stop, so the vehicle's unknown motion between
 stops (common to all LiDARs) cancels: the turntable angle is never needed, only
@@ -154,7 +155,7 @@ def calibrate_log(path: Path, config: CalibConfig) -> CalibrationResult:
             lidars, reference, recorded, baseline, odometry, config, moving
         )
     extrinsics = joint_extrinsics_out
-    if joint.reason:
+    if joint.reason and any(sel.method == "baseline" for sel in joint.selection):
         notes.append(f"joint graph not used: {joint.reason}")
     with timer.stage("top_views"):
         tops = top_views(lidars, anchors, extrinsics, recorded)

@@ -291,7 +291,8 @@ class SelectionOut(_Out):
 
     topic: str
     method: str
-    """"joint" or "baseline"."""
+    """"joint", "baseline" or "none" (the joint graph, with the two maps' alignment in it,
+    leaves a direction free: the LiDAR is not calibrated)."""
     criterion: str
     """How the method was chosen (never from a truth: the map costs, or why not them)."""
     joint_map_cost_m2: float | None

@@ -59,6 +59,21 @@ def _xyz_rpy(values: tuple[float, float, float], digits: int) -> str:
     return ", ".join(f"{v:.{digits}f}" for v in values)
 
 
+def estimate_source(result: CalibrationResult, ext: ExtrinsicOut) -> str:
+    """Which estimate a calibrated extrinsic is, and the joint graph's 1-sigma (its
+    largest, rotation and translation) where it is the joint one."""
+    joint = result.joint
+    if joint is None:
+        return "per-LiDAR graphs and map-to-map alignment"
+    method = next((s.method for s in joint.selection if s.topic == ext.topic), "joint")
+    if method == "baseline":
+        return "per-LiDAR graphs and map-to-map alignment (the baseline)"
+    out = next((x for x in joint.lidars if x.extrinsic.topic == ext.topic), None)
+    if out is None:
+        return "joint graph"
+    return f"joint graph, 1-sigma {out.sigma_deg:.3f} deg / {out.sigma_cm:.2f} cm"
+
+
 def _extrinsic_rows(result: CalibrationResult) -> str:
     rows = []
     for ext in result.extrinsics:
@@ -83,6 +98,11 @@ def _extrinsic_rows(result: CalibrationResult) -> str:
             f"<td>{overlap}</td><td>{rmse}</td>"
             f"<td>{_num(ext.hand_eye_rotation_residual_deg)}</td>"
             f'<td class="l">{verdict}'
+            + (
+                f'<br><span class="muted">{escape(estimate_source(result, ext))}</span>'
+                if calibrated
+                else ""
+            )
             + (f'<br><span class="muted">{escape(ext.reason)}</span>' if ext.reason else "")
             + "</td></tr>"
         )
@@ -246,7 +266,7 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
                 f"{ext.frame_id}: calibrated xyz {_xyz_rpy(ext.result.translation_m, 4)} m, "
                 f"rpy {_xyz_rpy(ext.result.rpy_deg, 3)} deg; recorded xyz "
                 f"{_xyz_rpy(ext.recorded.translation_m, 4)} m, rpy "
-                f"{_xyz_rpy(ext.recorded.rpy_deg, 3)} deg"
+                f"{_xyz_rpy(ext.recorded.rpy_deg, 3)} deg; estimate: {estimate_source(result, ext)}"
             )
         elif ext.reason:
             console.print(f"[yellow]{ext.frame_id}: {ext.reason}[/]")

@@ -323,7 +323,11 @@ def _free(solution: jointgraph.JointSolution, j: int, config: CalibConfig) -> bo
 
 
 def _free_reason(
-    lidar: LidarState, free: list[FreeDirectionOut], stops: dict[int, list[int]], names: list[str]
+    lidar: LidarState,
+    free: list[FreeDirectionOut],
+    stops: dict[int, list[int]],
+    names: list[str],
+    mapped: Alignment | None,
 ) -> str:
     parts = [
         f"{d.kind} {'about' if d.kind == 'rotation' else 'along'} "
@@ -332,6 +336,13 @@ def _free_reason(
         for d in free
     ]
     seen = "; ".join(f"{name} placed stops {stops[j]}" for j, name in enumerate(names))
+    if mapped is not None:
+        return (
+            f"{lidar.topic}: the joint graph leaves {', '.join(parts)} unconstrained: {seen}; "
+            "neither the motions both LiDARs saw nor the two maps, aligned on the joint poses "
+            f"(overlap {100.0 * mapped.after.overlap:.0f} %) and in the graph, pin it: record "
+            "more stops at which both LiDARs see structure"
+        )
     return (
         f"{lidar.topic}: the joint graph leaves {', '.join(parts)} unconstrained: {seen}; "
         "the motions both LiDARs saw (and the map-to-map refinement) do not pin it"
@@ -346,11 +357,16 @@ def _select(
     base: ExtrinsicOut,
     *,
     calibrated: bool,
+    mapped: bool,
     config: CalibConfig,
 ) -> SelectionOut:
-    """Joint or baseline for LiDAR j: the joint estimate unless its graph leaves a
-    direction free or the baseline's maps agree far better on its own poses
-    (`map_consistency.GROSS_MARGIN`: a joint graph that converged wrong). Smaller cost
+    """Joint, baseline or none for LiDAR j: the joint estimate unless its graph leaves a
+    direction free (then the baseline, unless the graph held the two maps' alignment -- the
+    baseline's only bridge between the LiDARs -- and still left it free: none; on
+    parking-64-facing-bumper seed 4 the joint graph, maps in, left 2.04 cm free, its
+    estimate 2.7 cm off, the baseline 3.2 cm) or the baseline's maps agree far better on
+    its own poses (`map_consistency.GROSS_MARGIN`: a joint graph that converged wrong).
+    Smaller cost
     differences do not decide: the baseline is the minimiser of much the same cost
     (map-to-map GICP on its own maps), so the cost leans its way. Measured (issue 29):
     at a 1 % margin the cost picked the baseline on parking-64-facing-bumper seed 0
@@ -369,6 +385,12 @@ def _select(
             baseline_map_cost_m2=costs.get("baseline"),
         )
 
+    if not calibrated and mapped:
+        return out(
+            "none",
+            "the joint graph leaves a direction free with the two maps' alignment in it; the "
+            "baseline bridges the LiDARs by such an alignment alone",
+        )
     if not calibrated:
         return out("baseline", "the joint graph leaves a direction free")
     ref_poses, other_poses = poses_at(ref, anchor), poses_at(other, anchor)
@@ -487,6 +509,11 @@ def joint_extrinsics(
     solution, map_links, refinements, rounds = _refine_to_convergence(
         lidars, anchor, solution, links, kept, planar, config, link_sigma_m
     )
+    mapped = {
+        link.lidar_b: alignment
+        for link in map_links
+        if (alignment := refinements.get(link.lidar_b)) is not None
+    }
     limits = config.validation
     names = [lidar.topic for lidar in lidars]
     outs: list[JointLidarOut] = []
@@ -513,7 +540,7 @@ def joint_extrinsics(
         }
         m2m = refinements.get(j)
         if free:
-            reason = _free_reason(lidar, free, placed, names)
+            reason = _free_reason(lidar, free, placed, names, mapped.get(j))
             reasons.append(reason)
             ext_out = ExtrinsicOut(
                 **fields,
@@ -532,9 +559,18 @@ def joint_extrinsics(
                 map_to_map=None if m2m is None else AlignmentOut.of(m2m),
             )
         base = baseline[j - 1]
-        selection = _select(lidars, j, anchor, solution, base, calibrated=not free, config=config)
+        selection = _select(
+            lidars,
+            j,
+            anchor,
+            solution,
+            base,
+            calibrated=not free,
+            mapped=j in mapped,
+            config=config,
+        )
         selections.append(selection)
-        chosen.append(ext_out if selection.method == "joint" else base)
+        chosen.append(base if selection.method == "baseline" else ext_out)
         outs.append(
             JointLidarOut(
                 extrinsic=ext_out,
