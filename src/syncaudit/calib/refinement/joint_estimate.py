@@ -4,9 +4,9 @@ Built after the per-LiDAR pose graphs (the baseline), from what the earlier stag
 each LiDAR's accepted cross-scan alignments (hand-eye links through the vehicle's motion),
 the odometry between consecutive stops when the log has it, and each LiDAR's ground plane.
 The extrinsics are seeded by the baseline's estimate when it calibrated, else by the
-recorded ones. Where a direction is still free, the ground planes come back, then map-to-
-map GICP on the joint poses (all stops each LiDAR placed, so the maps cover the whole
-drive) refines: when accepted it joins the graph as one more factor on the extrinsic and
+recorded ones. Where a direction is still free, the ground planes come back; where one is
+still loose (1-sigma over half the validation limits), map-to-map GICP on the joint poses
+(all stops each LiDAR placed, so the maps cover the whole drive) refines: when accepted it joins the graph as one more factor on the extrinsic and
 the graph is solved again. A direction the graph leaves looser than the validation limits
 (1-sigma) makes the LiDAR not calibratable, naming the direction and the stops each LiDAR
 placed.
@@ -213,6 +213,13 @@ def _refine(
     return unless_slid(m2m, ext, "the joint estimate")
 
 
+REFINE_SHARE = 0.5
+"""The map-to-map refinement runs where some 1-sigma exceeds half the validation limits,
+not only where a direction is free: on parking-64-facing-bumper seed 3 the graph left
+0.173 deg / 1.56 cm (under the limits) and its estimate was 0.113 deg / 0.905 cm off;
+refined, 0.023 deg / 0.53 cm at 0.030 deg / 0.59 cm. On seeds 0-4 of the matrix no other
+session that pins every direction is that loose (the next, 0.022 deg / 0.64 cm)."""
+
 _MAX_ROUNDS = 4
 _SETTLED_DEG = 1e-3
 _SETTLED_M = 1e-5
@@ -240,8 +247,9 @@ def _refine_to_convergence(
     """Map-to-map GICP of a LiDAR's whole map onto the reference's on the joint poses
     (what the baseline uses, over every stop), as a factor in the graph, solved again,
     until the extrinsics stop moving (the maps are rebuilt on each round's poses) -- for
-    the LiDARs whose extrinsic the graph leaves free in some direction only. `grounds`
-    and `planar` are the priors the graph being refined holds; each round keeps them.
+    the LiDARs whose extrinsic the graph leaves weak in some direction only (1-sigma over
+    `REFINE_SHARE` of the validation limits). `grounds` and `planar` are the priors the
+    graph being refined holds; each round keeps them.
 
     Run everywhere, it added nothing the cross-LiDAR pairs do not hold and cost 2-5 CPU s:
     measured on seed 0 of the matrix, weighted as one cross pair it changed 11 sessions'
@@ -254,7 +262,7 @@ def _refine_to_convergence(
     refinements: dict[int, Alignment | None] = {}
     map_links: list[jointgraph.Link] = []
     rounds = 0
-    loose = [j for j in range(1, len(lidars)) if _free(solution, j, config)]
+    loose = [j for j in range(1, len(lidars)) if _free(solution, j, config, REFINE_SHARE)]
     for _ in range(_MAX_ROUNDS if loose else 0):
         round_links = []
         for j in loose:
@@ -313,11 +321,16 @@ def _reached(link: jointgraph.Link, aligned: list[jointgraph.Link], anchor: int)
     return link.stop_a in reached and link.stop_b in reached
 
 
-def _free(solution: jointgraph.JointSolution, j: int, config: CalibConfig) -> bool:
+def _free(
+    solution: jointgraph.JointSolution, j: int, config: CalibConfig, share: float = 1.0
+) -> bool:
+    """Whether LiDAR j's extrinsic has a direction looser than `share` of the limits."""
     limits = config.validation
     return bool(
         jointgraph.free_directions(
-            solution.covariances[j], limits.max_rotation_deg, limits.max_translation_cm
+            solution.covariances[j],
+            share * limits.max_rotation_deg,
+            share * limits.max_translation_cm,
         )
     )
 
