@@ -266,7 +266,8 @@ def render_calibration(result: CalibrationResult, console: Console) -> None:
                 f"{ext.frame_id}: calibrated xyz {_xyz_rpy(ext.result.translation_m, 4)} m, "
                 f"rpy {_xyz_rpy(ext.result.rpy_deg, 3)} deg; recorded xyz "
                 f"{_xyz_rpy(ext.recorded.translation_m, 4)} m, rpy "
-                f"{_xyz_rpy(ext.recorded.rpy_deg, 3)} deg; estimate: {estimate_source(result, ext)}"
+                f"{_xyz_rpy(ext.recorded.rpy_deg, 3)} deg; "
+                f"estimate: {estimate_source(result, ext)}"
             )
         elif ext.reason:
             console.print(f"[yellow]{ext.frame_id}: {ext.reason}[/]")

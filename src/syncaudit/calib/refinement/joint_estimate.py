@@ -6,10 +6,10 @@ the odometry between consecutive stops when the log has it, and each LiDAR's gro
 The extrinsics are seeded by the baseline's estimate when it calibrated, else by the
 recorded ones. Where a direction is still free, the ground planes come back; where one is
 still loose (1-sigma over half the validation limits), map-to-map GICP on the joint poses
-(all stops each LiDAR placed, so the maps cover the whole drive) refines: when accepted it joins the graph as one more factor on the extrinsic and
-the graph is solved again. A direction the graph leaves looser than the validation limits
-(1-sigma) makes the LiDAR not calibratable, naming the direction and the stops each LiDAR
-placed.
+(all stops each LiDAR placed, so the maps cover the whole drive) refines: when accepted
+it joins the graph as one more factor on the extrinsic and the graph is solved again. A
+direction the graph leaves looser than the validation limits (1-sigma) makes the LiDAR
+not calibratable, naming the direction and the stops each LiDAR placed.
 """
 
 from __future__ import annotations
@@ -306,8 +306,9 @@ def pinned_by_grounds(
     the map-to-map refinement: on maps that barely overlap that pinned the height 4.3 cm
     off at a 1-sigma of 0.15 cm (parking-64-facing-bumper seed 3; with the ground planes
     0.06 cm)."""
-    free = any(_free(solution, j, config) for j in problem.initial_extrinsics)
-    if problem.grounds or not grounds or not free:
+    if problem.grounds or not grounds:
+        return solution, problem.grounds
+    if not any(_free(solution, j, config) for j in problem.initial_extrinsics):
         return solution, problem.grounds
     again = dataclasses.replace(problem, grounds=grounds)
     return jointgraph.solve(again, config.pose_graph), grounds
@@ -349,17 +350,14 @@ def _free_reason(
         for d in free
     ]
     seen = "; ".join(f"{name} placed stops {stops[j]}" for j, name in enumerate(names))
-    if mapped is not None:
-        return (
-            f"{lidar.topic}: the joint graph leaves {', '.join(parts)} unconstrained: {seen}; "
-            "neither the motions both LiDARs saw nor the two maps, aligned on the joint poses "
-            f"(overlap {100.0 * mapped.after.overlap:.0f} %) and in the graph, pin it: record "
-            "more stops at which both LiDARs see structure"
-        )
-    return (
-        f"{lidar.topic}: the joint graph leaves {', '.join(parts)} unconstrained: {seen}; "
+    why = (
         "the motions both LiDARs saw (and the map-to-map refinement) do not pin it"
+        if mapped is None
+        else "neither the motions both LiDARs saw nor the two maps, aligned on the joint "
+        f"poses (overlap {100.0 * mapped.after.overlap:.0f} %) and in the graph, pin it: "
+        "record more stops at which both LiDARs see structure"
     )
+    return f"{lidar.topic}: the joint graph leaves {', '.join(parts)} unconstrained: {seen}; {why}"
 
 
 def _select(
@@ -379,8 +377,7 @@ def _select(
     parking-64-facing-bumper seed 4 the joint graph, maps in, left 2.04 cm free, its
     estimate 2.7 cm off, the baseline 3.2 cm) or the baseline's maps agree far better on
     its own poses (`map_consistency.GROSS_MARGIN`: a joint graph that converged wrong).
-    Smaller cost
-    differences do not decide: the baseline is the minimiser of much the same cost
+    Smaller cost differences do not decide: the baseline is the minimiser of much the same cost
     (map-to-map GICP on its own maps), so the cost leans its way. Measured (issue 29):
     at a 1 % margin the cost picked the baseline on parking-64-facing-bumper seed 0
     (lower by 1.02 %; 0.27 deg / 23 cm off against the joint 0.029 deg / 0.94 cm); on
